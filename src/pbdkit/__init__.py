@@ -1,0 +1,37 @@
+"""pbdkit: probabilistic Programming by Demonstration with constraints in joint and task space.
+
+Implements Calinon & Billard, "A Probabilistic Programming by Demonstration Framework Handling
+Constraints in Joint Space and Task Space" (IROS 2008): demonstrations are encoded by Gaussian
+mixture models (GMM), generalized by Gaussian mixture regression (GMR), and reproduced for new
+object positions by probabilistic inverse kinematics that fuses every constraint as a product of
+Gaussians.
+
+Notation (used in names and docstrings throughout)
+--------------------------------------------------
+=============  ==============================================================================
+symbol         meaning
+=============  ==============================================================================
+t              time (rescaled so that every demonstration has ``n_steps`` steps)
+theta          joint angles, shape (n,); ``joints`` in the API
+x              hand (tool point) position in the robot's base frame, shape (3,)
+o, o(n)        position of object n in the base frame, shape (3,)
+x - o(n)       hand position relative to object n: the task space of object n
+xi             a data point {t, xi^S} of a GMM (time first, then the spatial part)
+pi_k           prior (weight) of GMM component k
+mu_k, Sigma_k  mean and covariance of GMM component k
+beta_k         responsibility of component k for a query (GMR)
+J, J+          position Jacobian dx/dtheta (3, n) and its (damped) right pseudo-inverse
+Lambda, eta    precision Sigma^-1 and information vector Sigma^-1 mu of a Gaussian
+T, D, K, M     number of time steps, of dimensions, of components, batch size
+=============  ==============================================================================
+
+Arrays have rows = samples and are float64: a trajectory is (T, D), a batch leads: (M, ...).
+"""
+
+from __future__ import annotations
+
+from . import gaussian
+from .gmm import GMM
+
+__all__ = ["GMM", "gaussian"]
+__version__ = "0.1.0"

@@ -1,0 +1,101 @@
+"""Input validation shared by every public entry point.
+
+Each ``check_*`` function returns the cleaned array (float64, C-contiguous) or raises a
+``ValueError`` that names the argument, the expected value and the actual one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+__all__ = ["check_array", "check_int", "check_positive_float", "shape_str"]
+
+
+def shape_str(shape: Sequence[int | str | None]) -> str:
+    """Format a shape for an error message: ``(T, 3)``; ``None`` entries print as ``*``."""
+    parts = ["*" if s is None else str(s) for s in shape]
+    if len(parts) == 1:
+        return f"({parts[0]},)"
+    return "(" + ", ".join(parts) + ")"
+
+
+def check_array(
+    x: npt.ArrayLike,
+    name: str,
+    *,
+    ndim: int | tuple[int, ...] | None = None,
+    shape: Sequence[int | None] | None = None,
+    finite: bool = True,
+    min_rows: int | None = None,
+) -> NDArray[np.float64]:
+    """Convert ``x`` to a float64 array and check its shape and values.
+
+    Parameters
+    ----------
+    x : array-like
+        The value given by the user.
+    name : str
+        The argument's name, used in error messages.
+    ndim : int or tuple of int, optional
+        Allowed numbers of dimensions.
+    shape : sequence of int or None, optional
+        Expected shape; ``None`` entries match any size. Implies ``ndim``.
+    finite : bool
+        Reject NaN and infinite values.
+    min_rows : int, optional
+        Minimum size of the first axis.
+
+    Returns
+    -------
+    arr : ndarray of float64
+    """
+    try:
+        arr = np.ascontiguousarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+    if shape is not None:
+        expected = tuple(shape)
+        ok = arr.ndim == len(expected) and all(
+            e is None or e == a for e, a in zip(expected, arr.shape, strict=False)
+        )
+        if not ok:
+            raise ValueError(
+                f"{name} must have shape {shape_str(expected)}, got {shape_str(arr.shape)}"
+            )
+    elif ndim is not None:
+        allowed = (ndim,) if isinstance(ndim, int) else tuple(ndim)
+        if arr.ndim not in allowed:
+            want = " or ".join(f"{d}-D" for d in allowed)
+            raise ValueError(f"{name} must be {want}, got {arr.ndim}-D with shape {arr.shape}")
+    if min_rows is not None and (arr.ndim == 0 or arr.shape[0] < min_rows):
+        got = 0 if arr.ndim == 0 else arr.shape[0]
+        raise ValueError(f"{name} must have at least {min_rows} rows, got {got}")
+    if finite and arr.size and not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise ValueError(f"{name} must be finite, got {bad} NaN or infinite value(s)")
+    return arr
+
+
+def check_int(value: object, name: str, *, minimum: int | None = None) -> int:
+    """Check that ``value`` is an integer (not a bool) at least ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    v = int(value)
+    if minimum is not None and v < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {v}")
+    return v
+
+
+def check_positive_float(value: object, name: str, *, allow_zero: bool = False) -> float:
+    """Check that ``value`` is a finite real number > 0 (or >= 0 with ``allow_zero``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
+    return v

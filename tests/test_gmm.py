@@ -1,0 +1,165 @@
+"""GMM: EM through scikit-learn with time-based initialisation, BIC selection, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.mixture import GaussianMixture
+
+from pbdkit import GMM
+from pbdkit.datasets import load_lasa
+from pbdkit.gmm import count_sequences, effective_bic, n_parameters, time_based_init
+
+
+def _trajectories(rng: np.random.Generator, n_demos: int = 5, n_steps: int = 400) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n_steps)
+    rows = []
+    for _ in range(n_demos):
+        phase = rng.normal(0.0, 0.03)
+        y = np.column_stack(
+            [np.sin(2 * np.pi * (t + phase)), np.cos(np.pi * t) + rng.normal(0, 0.05)]
+        )
+        rows.append(np.column_stack([t, y + rng.normal(0.0, 0.01, y.shape)]))
+    return np.vstack(rows)
+
+
+def test_fit_sets_learned_attributes_with_shapes() -> None:
+    rng = np.random.default_rng(0)
+    x = _trajectories(rng)
+    gmm = GMM(4).fit(x)
+    assert gmm.n_components_ == 4
+    assert gmm.weights_.shape == (4,)
+    assert gmm.means_.shape == (4, 3)
+    assert gmm.covariances_.shape == (4, 3, 3)
+    np.testing.assert_allclose(gmm.weights_.sum(), 1.0, atol=1e-12)
+    np.testing.assert_allclose(gmm.covariances_, np.swapaxes(gmm.covariances_, 1, 2))
+    assert gmm.converged_
+    # Time-based initialisation: components ordered along time.
+    assert np.all(np.diff(gmm.means_[:, 0]) > 0)
+
+
+def test_init_stores_arguments_only() -> None:
+    gmm = GMM("bic", max_components=3, reg_covar=1e-4, random_state=3)
+    assert gmm.n_components == "bic" and gmm.max_components == 3 and gmm.random_state == 3
+    assert not hasattr(gmm, "weights_")
+
+
+def test_time_based_fit_is_deterministic() -> None:
+    rng = np.random.default_rng(1)
+    x = _trajectories(rng)
+    a = GMM(5, random_state=0).fit(x)
+    b = GMM(5, random_state=123).fit(x)
+    np.testing.assert_array_equal(a.means_, b.means_)
+
+
+def test_time_based_init_bins_along_time() -> None:
+    rng = np.random.default_rng(2)
+    x = rng.random((100, 3))
+    w, m, p = time_based_init(x, 4, 0, 1e-6)
+    np.testing.assert_allclose(w, 0.25)
+    order = np.argsort(x[:, 0])
+    np.testing.assert_allclose(m[0], x[order[:25]].mean(axis=0))
+    assert np.all(np.linalg.eigvalsh(p) > 0)
+
+
+def test_score_samples_and_bic_equal_scikit_learn() -> None:
+    rng = np.random.default_rng(3)
+    x = _trajectories(rng)
+    gmm = GMM(3).fit(x)
+    sk = GaussianMixture(3, covariance_type="full")
+    sk.weights_, sk.means_, sk.covariances_ = gmm.weights_, gmm.means_, gmm.covariances_
+    sk.precisions_cholesky_ = np.linalg.cholesky(np.linalg.inv(gmm.covariances_))
+    np.testing.assert_allclose(gmm.score_samples(x), sk.score_samples(x), rtol=1e-10)
+    np.testing.assert_allclose(gmm.bic(x), sk.bic(x), rtol=1e-10)
+    resp = gmm.predict_proba(x)
+    np.testing.assert_allclose(resp, sk.predict_proba(x), atol=1e-10)
+
+
+def test_bic_recovers_known_number_of_clusters_on_independent_data() -> None:
+    # Independent samples from 3 separated clusters: plain BIC (n_eff = N) must find K = 3.
+    rng = np.random.default_rng(4)
+    centers = np.array([[0.0, 0.0, 0.0], [1.0, 3.0, -2.0], [2.0, -3.0, 2.0]])
+    x = np.vstack([c + 0.3 * rng.normal(size=(300, 3)) for c in centers])
+    gmm = GMM("bic", max_components=6, bic_samples=len(x), time_dim=None, random_state=0)
+    gmm.fit(x)
+    assert gmm.n_components_ == 3
+    assert set(gmm.bic_scores_) == set(range(1, 7))
+    assert min(gmm.bic_scores_, key=gmm.bic_scores_.__getitem__) == 3
+
+
+def test_effective_bic_with_n_eff_equal_n_is_standard_bic() -> None:
+    rng = np.random.default_rng(5)
+    x = _trajectories(rng, n_demos=2, n_steps=100)
+    gmm = GMM(2).fit(x)
+    log_l = float(gmm.score_samples(x).sum())
+    assert effective_bic(log_l, len(x), len(x), n_parameters(2, 3)) == pytest.approx(gmm.bic(x))
+
+
+def test_count_sequences() -> None:
+    t = np.concatenate([np.linspace(0, 1, 10)] * 4)
+    assert count_sequences(t) == 4
+
+
+def test_bic_on_lasa_picks_interior_k_where_plain_bic_hits_the_cap() -> None:
+    # Real data: two LASA shapes (7 demos), subsampled to 250 steps for speed.
+    # Plain BIC keeps decreasing up to the cap; the effective-sample-size BIC does not.
+    for name, k_range in [("Angle", (2, 5)), ("Snake", (3, 8))]:
+        demos = load_lasa(name)
+        t = np.linspace(0.0, 1.0, 1000)[::4]
+        x = np.vstack([np.column_stack([t, d.pos[::4]]) for d in demos])
+        chosen = GMM("bic", max_components=10).fit(x)
+        assert k_range[0] <= chosen.n_components_ <= k_range[1], name
+        plain = GMM("bic", max_components=10, bic_samples=len(x)).fit(x)
+        assert plain.n_components_ >= 9, name
+
+
+def test_from_params_round_trip_and_errors() -> None:
+    rng = np.random.default_rng(6)
+    x = _trajectories(rng)
+    gmm = GMM(3).fit(x)
+    copy = GMM.from_params(gmm.weights_, gmm.means_, gmm.covariances_)
+    np.testing.assert_array_equal(copy.score_samples(x), gmm.score_samples(x))
+    bad = gmm.covariances_.copy()
+    bad[1] = np.diag([1.0, 1.0, 0.0])
+    with pytest.raises(ValueError, match=r"covariances\[1\] must be positive definite"):
+        GMM.from_params(gmm.weights_, gmm.means_, bad)
+    with pytest.raises(ValueError, match="weights must sum to 1"):
+        GMM.from_params(gmm.weights_ * 2, gmm.means_, gmm.covariances_)
+    with pytest.raises(ValueError, match="weights must be >= 0"):
+        GMM.from_params([1.5, -0.5, 0.0], gmm.means_, gmm.covariances_)
+    with pytest.raises(ValueError, match=r"means must have shape \(3, \*\)"):
+        GMM.from_params(gmm.weights_, gmm.means_[:2], gmm.covariances_)
+    with pytest.raises(ValueError, match=r"covariances must have shape \(3, 3, 3\)"):
+        GMM.from_params(gmm.weights_, gmm.means_, gmm.covariances_[:, :2, :2])
+    asym = gmm.covariances_.copy()
+    asym[0, 0, 1] += 1.0
+    with pytest.raises(ValueError, match=r"covariances\[0\] must be symmetric"):
+        GMM.from_params(gmm.weights_, gmm.means_, asym)
+
+
+def test_fit_bad_input() -> None:
+    with pytest.raises(ValueError, match="X must be 2-D"):
+        GMM(2).fit(np.zeros(10))
+    with pytest.raises(ValueError, match="X must be finite"):
+        GMM(2).fit(np.array([[0.0, 1.0], [np.inf, 2.0], [1.0, 2.0]]))
+    with pytest.raises(ValueError, match="too few samples for n_components=5"):
+        GMM(5).fit(np.random.default_rng(0).random((3, 2)))
+    with pytest.raises(ValueError, match="X must have at least 2 rows"):
+        GMM(1).fit(np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="n_components must be a positive integer or 'bic'"):
+        GMM("aic").fit(np.zeros((5, 2)))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="n_components must be >= 1"):
+        GMM(0).fit(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match=r"time_dim must be in \[0, 2\)"):
+        GMM(1, time_dim=2).fit(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="reg_covar must be finite and >= 0"):
+        GMM(1, reg_covar=-1.0).fit(np.zeros((5, 2)))
+    gmm = GMM(1).fit(np.random.default_rng(0).random((10, 2)))
+    with pytest.raises(ValueError, match=r"X must have shape \(\*, 2\)"):
+        gmm.score_samples(np.zeros((3, 3)))
+
+
+def test_bic_cap_is_limited_by_sample_count() -> None:
+    x = np.random.default_rng(7).random((4, 2))
+    gmm = GMM("bic", max_components=10, reg_covar=1e-3).fit(x)
+    assert set(gmm.bic_scores_) == {1, 2, 3, 4}
