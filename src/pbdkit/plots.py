@@ -22,9 +22,28 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
+    from .demos import Demonstration
     from .gmm import GMM
+    from .reproduce import ReproductionResult
+    from .skill import Skill
 
-__all__ = ["plot_gmm_ellipses", "plot_gmr_tube", "plot_lasa_summary", "save_figure"]
+__all__ = [
+    "plot_constraints",
+    "plot_demonstrations_3d",
+    "plot_gmm_ellipses",
+    "plot_gmr_tube",
+    "plot_influence",
+    "plot_lasa_summary",
+    "plot_reproductions",
+    "save_figure",
+    "space_data",
+]
+
+# Line styles of the paper's Fig. 6: fused solid, object 1 dash-dot, object 2 dotted, joint dashed.
+CONTROLLER_STYLES = {"fused": "-", "joint": "--"}
+OBJECT_STYLES = ["-.", ":", (0, (5, 1, 1, 1, 1, 1)), (0, (1, 3))]
+SPACE_COLORS = ["tab:red", "tab:blue", "tab:purple", "tab:brown"]
+JOINT_COLOR = "tab:green"
 
 Float = NDArray[np.float64]
 
@@ -152,6 +171,255 @@ def plot_lasa_summary(
         ax.set_ylabel(f"x{dim + 1}")
         ax.set_title(f"x{dim + 1} over time")
         ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+def _space_color(skill: Skill, name: str) -> str:
+    if name == "joint":
+        return JOINT_COLOR
+    return SPACE_COLORS[skill.object_names.index(name) % len(SPACE_COLORS)]
+
+
+def space_data(skill: Skill, demos: Sequence[Demonstration]) -> dict[str, Float]:
+    """The data each GMM of ``skill`` was fitted on, recomputed from the demonstrations.
+
+    Returns
+    -------
+    data : dict str -> ndarray, shape (M, T, D)
+        ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of T steps.
+    """
+    out: dict[str, Float] = {}
+    t = np.arange(skill.n_steps, dtype=np.float64)
+    joint_rows: list[Float] = []
+    task_rows: dict[str, list[Float]] = {k: [] for k in skill.object_names}
+    for demo in demos:
+        r = demo.rescaled(skill.n_steps)
+        cols = [t[:, None], r.joints]
+        if skill.has_gripper and r.gripper is not None:
+            cols.append(r.gripper[:, None])
+        joint_rows.append(np.hstack(cols))
+        x = np.asarray(skill.robot.fk(r.joints), dtype=np.float64)
+        for k in skill.object_names:
+            task_rows[k].append(np.hstack([t[:, None], x - r.objects[k]]))
+    out["joint"] = np.stack(joint_rows)
+    for k in skill.object_names:
+        out[k] = np.stack(task_rows[k])
+    return out
+
+
+def _dim_labels(skill: Skill, name: str) -> list[str]:
+    if name == "joint":
+        names = getattr(skill.robot, "joint_names", None) or [
+            f"q{i}" for i in range(skill.robot.n_joints)
+        ]
+        labels = [f"theta{i + 1} ({j}) [rad]" for i, j in enumerate(names)]
+        if skill.has_gripper:
+            labels.append("gripper")
+        return labels
+    return [f"x{i + 1} - o{i + 1} ({name}) [m]" for i in range(3)]
+
+
+def plot_constraints(
+    skill: Skill,
+    demos: Sequence[Demonstration],
+    *,
+    covariance: str = "exact",
+) -> Figure:
+    """The paper's Figs. 4-5: per space, demonstrations over time, GMM ellipses, GMR tube.
+
+    One column per space (each object's frame, then joint space), one row per dimension. A
+    narrow tube means the demonstrations agreed: that constraint matters at that time.
+    """
+    plt = _pyplot()
+    data = space_data(skill, demos)
+    names = [*skill.object_names, "joint"]
+    n_rows = max(d.shape[2] - 1 for d in data.values())
+    fig, axes = plt.subplots(
+        n_rows, len(names), figsize=(4.2 * len(names), 1.9 * n_rows), sharex=True, squeeze=False
+    )
+    t = np.arange(skill.n_steps, dtype=np.float64)
+    for col, name in enumerate(names):
+        gmm = skill.gmms[name]
+        mean, cov = gmm.regress(t[:, None], in_dims=[0], covariance=covariance)  # type: ignore[arg-type]
+        labels = _dim_labels(skill, name)
+        color = _space_color(skill, name)
+        d_out = mean.shape[1]
+        for row in range(n_rows):
+            ax = axes[row, col]
+            if row >= d_out:
+                ax.set_visible(False)
+                continue
+            for demo in data[name]:
+                ax.plot(demo[:, 0], demo[:, row + 1], color="0.65", lw=0.7)
+            plot_gmm_ellipses(ax, gmm, (0, row + 1), color=color, alpha=0.25)
+            plot_gmr_tube(ax, t, mean[:, row], np.sqrt(cov[:, row, row]), color=color, label=None)
+            ax.set_ylabel(labels[row], fontsize=7)
+            ax.tick_params(labelsize=7)
+            if row == 0:
+                title = "joint space" if name == "joint" else f"relative to the {name}"
+                ax.set_title(f"{title}: K = {gmm.n_components_}", fontsize=9)
+            if row == d_out - 1:
+                ax.set_xlabel("time step", fontsize=8)
+    fig.suptitle("Constraints extracted from the demonstrations (GMM, and GMR mean +- 2 sd)")
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+def plot_demonstrations_3d(
+    skill: Skill,
+    demos: Sequence[Demonstration],
+    *,
+    objects: dict[str, Float] | None = None,
+    reproduction: ReproductionResult | None = None,
+) -> Figure:
+    """The paper's Fig. 3: demonstrated hand paths in 3-D with the objects' positions (left) and
+    the reproduction for a new situation (right)."""
+    plt = _pyplot()
+    markers = ["+", "x", "^", "s"]
+    ncols = 2 if reproduction is not None else 1
+    fig = plt.figure(figsize=(6.0 * ncols, 5.2))
+    ax = fig.add_subplot(1, ncols, 1, projection="3d")
+    for k, demo in enumerate(demos):
+        x = np.asarray(skill.robot.fk(demo.joints), dtype=np.float64)
+        ax.plot(
+            x[:, 0],
+            x[:, 1],
+            x[:, 2],
+            color="0.45",
+            lw=1,
+            label="demonstrations" if k == 0 else None,
+        )
+        ax.scatter(*x[0], color="k", s=12)
+        for i, name in enumerate(skill.object_names):
+            o = demo.objects[name]
+            ax.scatter(
+                *o,
+                marker=markers[i % 4],
+                color=_space_color(skill, name),
+                s=50,
+                label=name if k == 0 else None,
+            )
+    ax.set_title(f"{len(demos)} demonstrations (dots: start)")
+    _label_3d(ax)
+    ax.legend(fontsize=8, loc="upper left")
+    if reproduction is not None:
+        ax2 = fig.add_subplot(1, 2, 2, projection="3d")
+        p = reproduction.positions
+        ax2.plot(p[:, 0], p[:, 1], p[:, 2], color="k", lw=2, label="reproduction")
+        ax2.scatter(*p[0], color="k", s=12)
+        for i, name in enumerate(skill.object_names):
+            if objects is not None and name in objects:
+                ax2.scatter(
+                    *objects[name],
+                    marker=markers[i % 4],
+                    color=_space_color(skill, name),
+                    s=90,
+                    linewidths=2.5,
+                    label=f"{name} (new)",
+                )
+        ax2.set_title("reproduction for a new situation")
+        _label_3d(ax2)
+        ax2.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+def _label_3d(ax: Any) -> None:
+    ax.set_xlabel("x1 [m]", fontsize=8)
+    ax.set_ylabel("x2 [m]", fontsize=8)
+    ax.set_zlabel("x3 [m]", fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
+def plot_influence(ax: Axes, skill: Skill, result: ReproductionResult) -> None:
+    """Stacked shares of each constraint in the fused controller over time."""
+    names = [n for n in ("joint", *skill.object_names) if n in result.influence]
+    shares = np.stack([result.influence[n] for n in names])
+    colors = [_space_color(skill, n) for n in names]
+    labels = ["joint space" if n == "joint" else f"relative to the {n}" for n in names]
+    ax.stackplot(result.t, shares, labels=labels, colors=colors, alpha=0.6)
+    ax.set_ylim(0.0, 1.0)
+    ax.set_ylabel("influence", fontsize=8)
+    ax.set_xlabel("time step", fontsize=8)
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("which constraint drives the fused controller", fontsize=9)
+
+
+def plot_reproductions(
+    skill: Skill,
+    results: dict[str, ReproductionResult],
+) -> Figure:
+    """The paper's Fig. 6: joint angles and hand position of each controller, and the
+    influence of each constraint over time in the fused one.
+
+    ``results`` maps a controller name ("fused", "joint", or an object name for its task-only
+    controller) to its reproduction. Line styles follow the paper: fused solid, task-only
+    dash-dot (first object) and dotted (second), joint-only dashed.
+    """
+    plt = _pyplot()
+    n = skill.robot.n_joints
+    rows = max(n, 3) + 1
+    fig, axes = plt.subplots(rows, 2, figsize=(11, 1.7 * rows), squeeze=False)
+
+    def style(name: str) -> Any:
+        if name in CONTROLLER_STYLES:
+            return CONTROLLER_STYLES[name]
+        return OBJECT_STYLES[skill.object_names.index(name) % len(OBJECT_STYLES)]
+
+    def label(name: str) -> str:
+        if name == "fused":
+            return "fused (all constraints)"
+        if name == "joint":
+            return "joint space only"
+        return f"task space only ({name})"
+
+    for name, res in results.items():
+        color = "k" if name == "fused" else _space_color(skill, name)
+        lw = 2.0 if name == "fused" else 1.2
+        for j in range(n):
+            axes[j, 0].plot(
+                res.t,
+                res.joints[:, j],
+                linestyle=style(name),
+                color=color,
+                lw=lw,
+                label=label(name) if j == 0 else None,
+            )
+            axes[j, 0].set_ylabel(f"theta{j + 1} [rad]", fontsize=8)
+        for i in range(3):
+            axes[i, 1].plot(res.t, res.positions[:, i], linestyle=style(name), color=color, lw=lw)
+            axes[i, 1].set_ylabel(f"x{i + 1} [m]", fontsize=8)
+    for j in range(n, rows - 1):
+        axes[j, 0].set_visible(False)
+    for i in range(3, rows - 1):
+        axes[i, 1].set_visible(False)
+    axes[0, 0].legend(fontsize=7, loc="best")
+    axes[0, 0].set_title("joint angles", fontsize=9)
+    axes[0, 1].set_title("hand position (base frame)", fontsize=9)
+    if "fused" in results:
+        plot_influence(axes[rows - 1, 0], skill, results["fused"])
+        ax = axes[rows - 1, 1]
+        for name, err in results["fused"].task_errors.items():
+            ax.plot(
+                results["fused"].t,
+                1000 * err,
+                color=_space_color(skill, name),
+                label=f"distance to the {name} target",
+            )
+        ax.set_ylabel("[mm]", fontsize=8)
+        ax.set_xlabel("time step", fontsize=8)
+        ax.set_yscale("log")
+        ax.legend(fontsize=7)
+        ax.set_title("fused: hand to each object's expected position", fontsize=9)
+    else:
+        axes[rows - 1, 0].set_visible(False)
+        axes[rows - 1, 1].set_visible(False)
+    for ax in axes.ravel():
+        ax.tick_params(labelsize=7)
     fig.tight_layout()
     figure: Figure = fig
     return figure
