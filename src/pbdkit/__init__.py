@@ -30,8 +30,32 @@ Arrays have rows = samples and are float64: a trajectory is (T, D), a batch lead
 
 from __future__ import annotations
 
-from . import gaussian
+from . import gaussian, robots
+from .demos import (
+    Demonstration,
+    demonstration_from_csv,
+    load_demonstrations,
+    save_demonstrations,
+)
 from .gmm import GMM
+from .kinematics import damped_pinv, nullspace_projector
+from .reproduce import ReachWarning, ReproductionResult
+from .robot import Robot
+from .skill import Skill
 
-__all__ = ["GMM", "gaussian"]
+__all__ = [
+    "GMM",
+    "Demonstration",
+    "ReachWarning",
+    "ReproductionResult",
+    "Robot",
+    "Skill",
+    "damped_pinv",
+    "demonstration_from_csv",
+    "gaussian",
+    "load_demonstrations",
+    "nullspace_projector",
+    "robots",
+    "save_demonstrations",
+]
 __version__ = "0.1.0"

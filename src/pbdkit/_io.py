@@ -62,7 +62,8 @@ def load_npz_safe(path: str | os.PathLike[str], *, what: str = "file") -> dict[s
     if not p.exists():
         raise FileNotFoundError(f"{what} not found: {p}")
     try:
-        with np.load(p, allow_pickle=False) as data:
+        # Open the file ourselves: np.load(path) leaks its handle when the archive is truncated.
+        with open(p, "rb") as f, np.load(f, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
     except (zipfile.BadZipFile, OSError, EOFError, KeyError) as exc:
         raise ValueError(f"{p} is not a valid {what} (not a readable .npz archive): {exc}") from exc

@@ -600,17 +600,35 @@ class Robot:
         """
         arr = self.check_joints(q)
         if arr.ndim == 1:
-            jac = pin.computeFrameJacobian(self._model, self._data, arr, self._tip_id, self._lf)
-            # computeFrameJacobian also updates data.oMf[tip] for this q
-            x = np.array(self._oMf[self._tip_id].translation)
-            if self.n_joints == 1:  # pinocchio returns a 1-D array when nv == 1
-                return x, np.array(jac[:3]).reshape(3, 1)
-            return x, np.ascontiguousarray(jac[:3])
+            return self.fk_jacobian_unchecked(arr)
         x, jb = _chain_fk_jacobian(
             arr, self._consts, self._revolute, self._tip_rot, self._tip_trans, jacobian=True
         )
         assert jb is not None
         return x, jb
+
+    def fk_jacobian_unchecked(
+        self, q: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`fk_jacobian` for one configuration without input validation (control loops).
+
+        Parameters
+        ----------
+        q : ndarray of float64, shape (n,)
+            Must already be a finite, contiguous float64 array of the right length (as returned
+            by :meth:`check_joints`); anything else gives undefined results.
+
+        Returns
+        -------
+        x : ndarray, shape (3,)
+        J : ndarray, shape (3, n)
+        """
+        jac = pin.computeFrameJacobian(self._model, self._data, q, self._tip_id, self._lf)
+        # computeFrameJacobian also updates data.oMf[tip] for this q
+        x = np.array(self._oMf[self._tip_id].translation)
+        if self.n_joints == 1:  # pinocchio returns a 1-D array when nv == 1
+            return x, np.array(jac[:3]).reshape(3, 1)
+        return x, np.ascontiguousarray(jac[:3])
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,0 +1,460 @@
+"""Demonstrations: validated containers, time rescaling and file I/O.
+
+A :class:`Demonstration` is one kinesthetic demonstration of a skill (paper Sec. II-A): the joint
+angles theta recorded at times t, the positions o(n) of the objects in the scene (fixed during the
+demonstration, as in the paper) and, optionally, the gripper signal. The hand position x is not
+stored: it follows from the joint angles by forward kinematics when a skill is learned.
+
+Time rescaling (paper Table I). :meth:`Demonstration.rescaled` linearly interpolates the joint
+angles and the gripper signal onto ``n_steps`` samples uniformly spread over the demonstration's
+own duration ``[t[0], t[-1]]``; the time of the result is expressed in *steps*:
+``t = 0, 1, ..., n_steps - 1`` (the paper's t_j, as in its figures "time steps 200-500").
+
+File formats
+------------
+``.npz`` (:func:`save_demonstrations` / :func:`load_demonstrations`): a NumPy archive with no
+pickled object (``allow_pickle=False`` on load), written atomically. Keys:
+
+====================  ========================  ===============================================
+key                   dtype, shape              meaning
+====================  ========================  ===============================================
+``format``            unicode, ()               ``"pbdkit-demonstrations"``
+``version``           int64, ()                 ``1``
+``n_demos``           int64, ()                 number of demonstrations M
+``object_names``      unicode, (N,)             object names, in a fixed order
+``has_gripper``       bool, ()                  whether ``demo_i_gripper`` keys exist
+``demo_{i}_t``        float64, (T_i,)           time stamps in seconds, strictly increasing
+``demo_{i}_joints``   float64, (T_i, n)         joint angles in radians
+``demo_{i}_objects``  float64, (N, 3)           object positions, rows in ``object_names`` order
+``demo_{i}_gripper``  float64, (T_i,)           gripper signal (0 open, 1 closed), optional
+====================  ========================  ===============================================
+
+CSV (:func:`demonstration_from_csv`), for logs recorded on a real robot: one file per
+demonstration, comma-separated, one header line, then one row per sample::
+
+    t,pan,lift1,lift2,lift3,wrist_roll,gripper
+    0.00,0.10,0.52,-1.20,0.30,0.00,0
+    0.01,0.11,0.53,-1.19,0.30,0.00,0
+    ...
+
+The column ``t`` (seconds, strictly increasing) is required; an optional column ``gripper``
+holds the gripper signal (0 open, 1 closed); every other column is a joint angle in radians, in
+the robot's joint order (or selected and ordered with ``joint_columns``). Object positions are not
+in the file: pass them as ``objects={"glass": (x, y, z), ...}`` in the robot's base frame (metres).
+Lines starting with ``#`` are comments.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from ._io import load_npz_safe, save_npz_atomic
+from ._validation import check_array, check_int
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "Demonstration",
+    "check_demonstrations",
+    "demonstration_from_csv",
+    "load_demonstrations",
+    "save_demonstrations",
+]
+
+FORMAT_NAME = "pbdkit-demonstrations"
+FORMAT_VERSION = 1
+RESERVED_NAMES = frozenset({"joint"})
+
+Float = NDArray[np.float64]
+
+
+def _check_objects(objects: object, name: str = "objects") -> dict[str, Float]:
+    """Validate a mapping object name -> position (3,); return a new dict of float64 arrays."""
+    if not isinstance(objects, Mapping):
+        raise ValueError(
+            f"{name} must be a dict mapping object names to positions (3,), "
+            f"got {type(objects).__name__}"
+        )
+    out: dict[str, Float] = {}
+    for key, value in objects.items():
+        if not isinstance(key, str) or not key:
+            raise ValueError(f"{name} keys must be non-empty strings, got {key!r}")
+        if key in RESERVED_NAMES:
+            raise ValueError(
+                f"{name}: {key!r} is reserved for the joint-space constraint; rename the object"
+            )
+        pos = check_array(value, f"{name}[{key!r}]", shape=(3,)).copy()
+        pos.setflags(write=False)
+        out[key] = pos
+    return out
+
+
+@dataclass(frozen=True, eq=False, init=False)
+class Demonstration:
+    """One demonstration of a skill, validated on construction.
+
+    Parameters
+    ----------
+    t : array-like, shape (T,)
+        Time stamps (seconds, or any unit), finite and strictly increasing, T >= 2.
+    joints : array-like, shape (T, n)
+        Joint angles theta in radians, one row per time stamp.
+    objects : dict str -> array-like, shape (3,)
+        Position o(n) of each object in the robot's base frame (metres), constant during the
+        demonstration. The name ``"joint"`` is reserved. May be empty (joint-space skill only).
+    gripper : array-like, shape (T,), optional
+        Gripper signal (0 open, 1 closed; booleans accepted), one value per time stamp.
+
+    Attributes
+    ----------
+    t, joints, objects, gripper
+        The validated float64 arrays (read-only; ``objects`` is a read-only mapping).
+    n_steps : int
+        T.
+    n_joints : int
+        n.
+    object_names : tuple of str
+        Names of the objects, in the order given.
+
+    Raises
+    ------
+    ValueError
+        If a shape is wrong, a value is NaN or infinite, t is not strictly increasing, there are
+        fewer than 2 samples, or an object position is not (3,). The message names the argument,
+        the expected and the actual value.
+    """
+
+    t: Float
+    joints: Float
+    objects: Mapping[str, Float]
+    gripper: Float | None
+
+    def __init__(
+        self,
+        t: npt.ArrayLike,
+        joints: npt.ArrayLike,
+        objects: Mapping[str, npt.ArrayLike] | None = None,
+        gripper: npt.ArrayLike | None = None,
+    ) -> None:
+        # Copies: the arrays are made read-only and must not freeze the caller's own arrays.
+        t_ = check_array(t, "t", ndim=1).copy()
+        if t_.shape[0] < 2:
+            raise ValueError(f"t must have at least 2 samples, got {t_.shape[0]}")
+        dt = np.diff(t_)
+        if np.any(dt <= 0):
+            i = int(np.argmax(dt <= 0))
+            raise ValueError(
+                f"t must be strictly increasing, got t[{i}]={float(t_[i])!r} "
+                f">= t[{i + 1}]={float(t_[i + 1])!r}"
+            )
+        joints_ = check_array(joints, "joints", ndim=2).copy()
+        if joints_.shape[0] != t_.shape[0] or joints_.shape[1] < 1:
+            raise ValueError(f"joints must have shape ({t_.shape[0]}, n), got {joints_.shape}")
+        objects_ = _check_objects({} if objects is None else objects)
+        gripper_: Float | None = None
+        if gripper is not None:
+            gripper_ = check_array(gripper, "gripper", shape=(t_.shape[0],)).copy()
+            gripper_.setflags(write=False)
+        t_.setflags(write=False)
+        joints_.setflags(write=False)
+        object.__setattr__(self, "t", t_)
+        object.__setattr__(self, "joints", joints_)
+        object.__setattr__(self, "objects", MappingProxyType(objects_))
+        object.__setattr__(self, "gripper", gripper_)
+
+    @property
+    def n_steps(self) -> int:
+        """Number of samples T."""
+        return int(self.t.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return int(self.joints.shape[1])
+
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        """Names of the objects, in the order given."""
+        return tuple(self.objects)
+
+    @property
+    def duration(self) -> float:
+        """t[-1] - t[0]."""
+        return float(self.t[-1] - self.t[0])
+
+    def rescaled(self, n_steps: int) -> Demonstration:
+        """The demonstration resampled on ``n_steps`` uniform steps (paper Table I).
+
+        Joint angles and gripper are linearly interpolated at ``n_steps`` times uniformly spread
+        over ``[t[0], t[-1]]``; the returned time is in steps: ``t = 0, 1, ..., n_steps - 1``.
+
+        Parameters
+        ----------
+        n_steps : int
+            Number of samples of the result (>= 2).
+
+        Returns
+        -------
+        demo : Demonstration
+            t (n_steps,), joints (n_steps, n), same objects, gripper (n_steps,) or None.
+        """
+        n_steps = check_int(n_steps, "n_steps", minimum=2)
+        joints, gripper = _resample(self.t, self.joints, self.gripper, n_steps)
+        return Demonstration(
+            t=np.arange(n_steps, dtype=np.float64),
+            joints=joints,
+            objects=dict(self.objects),
+            gripper=gripper,
+        )
+
+    def __repr__(self) -> str:
+        grip = "yes" if self.gripper is not None else "no"
+        return (
+            f"Demonstration(T={self.n_steps}, n_joints={self.n_joints}, "
+            f"duration={self.duration:.3g}, objects={list(self.objects)}, gripper={grip})"
+        )
+
+
+def _resample(
+    t: Float, joints: Float, gripper: Float | None, n_steps: int
+) -> tuple[Float, Float | None]:
+    """Linear interpolation of joints (T, n) and gripper (T,) onto n_steps uniform times."""
+    grid = np.linspace(t[0], t[-1], n_steps)
+    # searchsorted + one vectorised lerp for all joints (np.interp is per column).
+    idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, t.shape[0] - 2)
+    w = ((grid - t[idx]) / (t[idx + 1] - t[idx]))[:, None]
+    out = joints[idx] * (1.0 - w) + joints[idx + 1] * w
+    g = None
+    if gripper is not None:
+        g = gripper[idx] * (1.0 - w[:, 0]) + gripper[idx + 1] * w[:, 0]
+    return out, g
+
+
+def check_demonstrations(demos: object, *, min_demos: int = 2) -> list[Demonstration]:
+    """Validate a set of demonstrations that must share one structure.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+    min_demos : int
+        Minimum number of demonstrations (2 to learn a skill: variability needs at least two).
+
+    Returns
+    -------
+    demos : list of Demonstration
+
+    Raises
+    ------
+    ValueError
+        Fewer than ``min_demos`` demonstrations, an element that is not a Demonstration,
+        different joint counts, different object names, or a gripper signal in some
+        demonstrations only.
+    """
+    if isinstance(demos, Demonstration) or not isinstance(demos, Sequence):
+        raise ValueError(f"demos must be a list of Demonstration, got {type(demos).__name__}")
+    out = list(demos)
+    if len(out) < min_demos:
+        raise ValueError(f"demos must hold at least {min_demos} demonstrations, got {len(out)}")
+    for i, d in enumerate(out):
+        if not isinstance(d, Demonstration):
+            raise ValueError(f"demos[{i}] must be a Demonstration, got {type(d).__name__}")
+    ref = out[0]
+    for i, d in enumerate(out[1:], start=1):
+        if d.n_joints != ref.n_joints:
+            raise ValueError(
+                f"demos[{i}] has {d.n_joints} joints, expected {ref.n_joints} like demos[0]"
+            )
+        if set(d.object_names) != set(ref.object_names):
+            raise ValueError(
+                f"demos[{i}] has objects {sorted(d.object_names)}, expected "
+                f"{sorted(ref.object_names)} like demos[0]"
+            )
+        if (d.gripper is None) != (ref.gripper is None):
+            raise ValueError(
+                f"demos[{i}] {'has no' if d.gripper is None else 'has a'} gripper signal, "
+                f"unlike demos[0]: give it in every demonstration or in none"
+            )
+    return out
+
+
+def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[str]) -> None:
+    """Save demonstrations to a versioned ``.npz`` file (no pickle, written atomically).
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        At least one; all with the same joint count, object names and gripper presence.
+    path : str or path-like
+        Destination; replaced atomically (readers see the old file or the new one).
+
+    See the module docstring for the keys of the file.
+    """
+    items = check_demonstrations(demos, min_demos=1)
+    names = list(items[0].object_names)
+    has_gripper = items[0].gripper is not None
+    arrays: dict[str, Any] = {
+        "format": np.array(FORMAT_NAME),
+        "version": np.array(FORMAT_VERSION, dtype=np.int64),
+        "n_demos": np.array(len(items), dtype=np.int64),
+        "object_names": np.array(names, dtype=np.str_) if names else np.zeros(0, dtype="<U1"),
+        "has_gripper": np.array(has_gripper),
+    }
+    for i, d in enumerate(items):
+        arrays[f"demo_{i}_t"] = d.t
+        arrays[f"demo_{i}_joints"] = d.joints
+        arrays[f"demo_{i}_objects"] = (
+            np.stack([d.objects[n] for n in names]) if names else np.zeros((0, 3))
+        )
+        if d.gripper is not None:
+            arrays[f"demo_{i}_gripper"] = d.gripper
+    save_npz_atomic(path, arrays)
+
+
+def _header(data: Mapping[str, NDArray[Any]], path: Path, what: str, version: int) -> None:
+    """Check the format name and version keys of a pbdkit ``.npz`` file."""
+    fmt = data.get("format")
+    if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != what:
+        raise ValueError(f"{path} is not a {what} file (its 'format' key is missing or differs)")
+    ver = data.get("version")
+    if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
+        raise ValueError(f"{path} is not a valid {what} file: missing 'version'")
+    if int(ver) != version:
+        raise ValueError(
+            f"{path} is a {what} file of version {int(ver)}; this pbdkit reads version {version}"
+        )
+
+
+def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
+    """Load demonstrations saved by :func:`save_demonstrations`.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    demos : list of Demonstration
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is corrupt, not a pbdkit demonstrations file, of another version, or holds
+        invalid data.
+    """
+    p = Path(path)
+    data = load_npz_safe(p, what=FORMAT_NAME + " file")
+    _header(data, p, FORMAT_NAME, FORMAT_VERSION)
+    try:
+        n_demos = int(data["n_demos"])
+        names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
+        has_gripper = bool(data["has_gripper"])
+        demos = []
+        for i in range(n_demos):
+            pos = np.asarray(data[f"demo_{i}_objects"], dtype=np.float64)
+            if pos.shape != (len(names), 3):
+                raise ValueError(
+                    f"demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}"
+                )
+            demos.append(
+                Demonstration(
+                    t=data[f"demo_{i}_t"],
+                    joints=data[f"demo_{i}_joints"],
+                    objects={n: pos[k] for k, n in enumerate(names)},
+                    gripper=data[f"demo_{i}_gripper"] if has_gripper else None,
+                )
+            )
+    except KeyError as exc:
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
+    return demos
+
+
+def demonstration_from_csv(
+    path: str | os.PathLike[str],
+    objects: Mapping[str, npt.ArrayLike],
+    *,
+    joint_columns: Sequence[str] | None = None,
+    delimiter: str = ",",
+) -> Demonstration:
+    """Read one demonstration from a CSV log (format in the module docstring).
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV file with a header line; columns ``t``, joint angles, optional ``gripper``.
+    objects : dict str -> array-like, shape (3,)
+        Object positions in the robot's base frame during this demonstration.
+    joint_columns : sequence of str, optional
+        Joint columns to use, in this order. Default: every column other than ``t`` and
+        ``gripper``, in file order.
+    delimiter : str
+        Field separator.
+
+    Returns
+    -------
+    demo : Demonstration
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        No header, no ``t`` column, a missing joint column, a non-numeric value, or any
+        :class:`Demonstration` check.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"CSV file not found: {p}")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{p} is not a UTF-8 text CSV file: {exc}") from exc
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ValueError(f"{p}: empty CSV file, expected a header line 't,<joints...>'")
+    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+    if "t" not in header:
+        raise ValueError(f"{p}: the header must contain a column 't', got {header}")
+    if len(set(header)) != len(header):
+        raise ValueError(f"{p}: duplicate column names in the header {header}")
+    if joint_columns is None:
+        cols = [h for h in header if h not in ("t", "gripper")]
+    else:
+        cols = list(joint_columns)
+        missing = [c for c in cols if c not in header]
+        if missing:
+            raise ValueError(f"{p}: joint columns {missing} not in the header {header}")
+    if not cols:
+        raise ValueError(f"{p}: no joint column in the header {header}")
+    try:
+        table = np.loadtxt(
+            io.StringIO("\n".join(lines[1:])), delimiter=delimiter, dtype=np.float64, ndmin=2
+        )
+    except ValueError as exc:
+        raise ValueError(f"{p}: non-numeric or ragged CSV data: {exc}") from exc
+    if table.shape[0] == 0 or table.shape[1] != len(header):
+        raise ValueError(
+            f"{p}: expected rows of {len(header)} values (header {header}), "
+            f"got a table of shape {table.shape}"
+        )
+    col = {h: i for i, h in enumerate(header)}
+    return Demonstration(
+        t=table[:, col["t"]],
+        joints=table[:, [col[c] for c in cols]],
+        objects=dict(objects),
+        gripper=table[:, col["gripper"]] if "gripper" in col else None,
+    )

@@ -1,0 +1,648 @@
+"""Reproduction of a skill by probabilistic inverse kinematics (paper Table II).
+
+Given the generalized constraints of a skill (GMR outputs over the whole time grid) and the new
+positions o(n) of the objects, the closed loop of Table II computes the joint trajectory
+theta_0, ..., theta_{T-1}. At step j -> j+1, with x_j = f(theta_j) and J = J(theta_j):
+
+- joint-space constraint: dtheta^(joint) = theta_hat_{j+1} - theta_j, covariance
+  Sigma^theta_{j+1} (Table II);
+- task-space constraint of object n: dx^(n) = (o(n) + x_hat^(n)_{j+1}) - x_j, covariance
+  Sigma^x(n)_{j+1} in task space (Table II).
+
+Corrections to the paper (design.md, "Math notes")
+--------------------------------------------------
+- Pseudo-inverse. The paper's J+ = (J^T J)^-1 J^T is singular for a 3 x n Jacobian with n > 3;
+  the task-only controller uses the damped right inverse J^T (J J^T + lambda^2 I)^-1 of
+  :func:`pbdkit.kinematics.damped_pinv` (lambda > 0 only near singularities).
+- Fusion in information form. The paper's Sigma^(n) = J+ Sigma^x(n) J+^T has rank 3 in n-D joint
+  space, so eq. (1) cannot invert it. Its Moore-Penrose pseudo-inverse is exactly
+  Lambda^(n) = J^T (Sigma^x(n))^-1 J, and the information vector is
+  eta^(n) = Lambda^(n) dtheta^(n) = J^T (Sigma^x(n))^-1 dx^(n): with
+  dtheta^(n) = J+ dx + alpha (I - J+ J)(theta_hat - theta), J J+ = I and J (I - J+ J) = 0, so
+  the null-space term cancels. The fused step is (eq. (1) in information form)
+
+      dtheta = (Lambda^(joint) + sum_n Lambda^(n))^-1 (Lambda^(joint) dtheta^(joint)
+               + sum_n J^T (Sigma^x(n))^-1 dx^(n)),   Sigma_{j+1} = (sum of the precisions)^-1.
+
+  ``alpha`` therefore has no effect on any controller that includes the joint constraint; it
+  acts only in the task-only controllers. This equals eq. (1) with the Tikhonov-regularized
+  inverse (S^2 + eps I)^-1 S of each Sigma^(n) in the limit eps -> 0 (tested). The naive
+  (Sigma^(n) + eps I)^-1 does *not* converge to it: it gives precision 1/eps to the null space
+  of J and freezes the null-space motion at the task constraint's own alpha term.
+- Task-only controllers (``use`` without ``"joint"``): the task constraints in use are fused in
+  task space first (precisions add: dx = (sum_n P_n)^-1 sum_n P_n dx^(n), P_n = (Sigma^x(n))^-1),
+  then theta_{j+1} = theta_j + J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j) (Table II); with
+  one object this is exactly the paper's controller for that object. The reported covariance is
+  the paper's J+ Sigma^x J+^T (rank 3).
+
+Joint limits. After every step theta_{j+1} is clipped to [lower, upper]: the reproduction never
+leaves the limits; a constraint that would push a joint beyond its limit is followed as far as
+the limit allows (the next steps correct from the clipped posture, the loop being closed).
+
+Step size. Table II takes the full linearized step. When a target is far from the hand (out of
+reach, or a tight constraint at t_0 far from theta_0) the linearization is invalid and a full step
+can throw the arm against its limits, folded. Each step is therefore scaled down, keeping its
+direction, to a joint-space length (Euclidean norm over the joints) of at most ``max_step``
+(default 0.1 rad; a Katana at its top speed of 68 deg/s moves 0.012 rad per joint in a 10 ms
+step, so skills tracked at a feasible speed are never affected). ``max_step=None`` restores the
+paper's full step.
+
+Reach. With ``reach`` given (a :class:`pbdkit.Skill` passes its estimate, see
+:func:`reach_from_samples`), every object in use is checked before the loop: at the step where
+its task constraint is tightest (smallest trace of Sigma^x(n)) the hand must be at
+o(n) + x_hat^(n); if that point is farther from the base origin than ``reach``, the object is out
+of reach: ``on_unreachable="raise"`` (default) raises ValueError, ``"warn"`` issues a
+:class:`ReachWarning` and reproduces anyway: the hand stretches toward the target and stops
+short; the result stays finite and within the limits (damped pseudo-inverse, step size,
+clipping).
+
+Influence of the constraints (paper Fig. 6). With Sigma the fused covariance and Lambda_c the
+precision of constraint c in joint space, the share of c at a step is
+
+    share_c = tr(Sigma Lambda_c) / n,      sum_c share_c = tr(Sigma sum_c Lambda_c) / n = 1.
+
+Each share is in [0, 1], is invariant to any linear change of joint coordinates (units), and is
+the fraction of the fused information contributed by c, averaged over the n directions of joint
+space. A task constraint informs at most 3 of the n directions, so with the joint constraint in
+use its share is at most 3/n (0.6 on the 5-DOF Katana, whose wrist roll only the joint constraint
+governs). Task-only controllers use the same formula in task space (n replaced by 3).
+
+Performance. Every GMR output is independent of the state, so :class:`Constraints` evaluates
+them once over the whole grid and precomputes, batched, the joint precisions and information
+vectors and the task precisions P_n = (Sigma^x(n))^-1 (Cholesky, no ``inv`` of a covariance). As
+every task constraint shares J, sum_n J^T P_n J = J^T (sum_n P_n) J and
+sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x_j) with h = sum_n P_n (o(n) + x_hat^(n)), both sums
+precomputed for all steps: inside the loop there are only the robot's fk/Jacobian, a few products
+of (n, 3) matrices and one n x n Cholesky solve (LAPACK ``dposv``), whatever the number of
+objects. Covariances and influences are computed after the loop, batched.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
+
+from ._validation import check_array, check_positive_float
+from .kinematics import damped_pinv
+
+__all__ = [
+    "Constraints",
+    "KinematicModel",
+    "ReachWarning",
+    "ReproductionResult",
+    "check_objects",
+    "reach_from_samples",
+    "reproduce",
+]
+
+Float = NDArray[np.float64]
+JOINT = "joint"
+
+
+@runtime_checkable
+class KinematicModel(Protocol):
+    """What reproduction needs from an arm (:class:`pbdkit.Robot` satisfies it).
+
+    Attributes
+    ----------
+    n_joints : int
+    lower, upper : ndarray, shape (n,)
+        Joint limits.
+    """
+
+    @property
+    def n_joints(self) -> int: ...
+
+    @property
+    def lower(self) -> Float: ...
+
+    @property
+    def upper(self) -> Float: ...
+
+    def fk(self, q: npt.ArrayLike) -> Float:
+        """Tip position: q (n,) -> (3,), Q (M, n) -> (M, 3)."""
+        ...
+
+    def fk_jacobian(self, q: npt.ArrayLike) -> tuple[Float, Float]:
+        """Tip position (3,) and position Jacobian (3, n) for q (n,); batched for Q (M, n).
+
+        Must return new arrays at each call (reproduction keeps them), not a reused buffer.
+        """
+        ...
+
+
+class ReachWarning(UserWarning):
+    """An object's constrained target lies beyond the arm's reach (the hand stops short)."""
+
+
+def _chol_inverse_factor(cov: Float, name: str) -> Float:
+    """L^-1 for Sigma = L L^T, batched over the leading axis: (T, d, d) -> (T, d, d)."""
+    try:
+        chol = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError as exc:
+        bad = [j for j in range(cov.shape[0]) if np.linalg.eigvalsh(cov[j]).min() <= 0]
+        raise ValueError(
+            f"{name} must be positive definite at every step; it is not at steps {bad[:5]}; "
+            "learn with a larger reg_covar"
+        ) from exc
+    eye = np.broadcast_to(np.eye(cov.shape[-1]), cov.shape)
+    return np.asarray(np.linalg.solve(chol, eye))
+
+
+class Constraints:
+    """Generalized constraints of a skill over its whole time grid, with precomputed precisions.
+
+    Parameters
+    ----------
+    t : array-like, shape (T,)
+        Time of each step.
+    joint_mean : array-like, shape (T, n)
+        theta_hat: expected joint angles (GMR of the joint-space GMM).
+    joint_cov : array-like, shape (T, n, n)
+        Sigma^theta: their covariance (positive definite).
+    task_mean : dict str -> array-like, shape (T, 3)
+        x_hat^(n): expected hand position relative to object n.
+    task_cov : dict str -> array-like, shape (T, 3, 3)
+        Sigma^x(n): its covariance (positive definite). Same keys as ``task_mean``.
+    gripper : array-like, shape (T,), optional
+        Generalized gripper signal (GMR of the gripper column of the joint-space GMM).
+
+    Attributes
+    ----------
+    names : list of str
+        ``["joint", *task names]``.
+    joint_prec : ndarray, shape (T, n, n)
+        (Sigma^theta)^-1.
+    joint_eta : ndarray, shape (T, n)
+        (Sigma^theta)^-1 theta_hat.
+    task_prec : dict str -> ndarray, shape (T, 3, 3)
+        (Sigma^x(n))^-1.
+    """
+
+    def __init__(
+        self,
+        t: npt.ArrayLike,
+        joint_mean: npt.ArrayLike,
+        joint_cov: npt.ArrayLike,
+        task_mean: Mapping[str, npt.ArrayLike],
+        task_cov: Mapping[str, npt.ArrayLike],
+        gripper: npt.ArrayLike | None = None,
+    ) -> None:
+        self.t = check_array(t, "t", ndim=1, min_rows=2)
+        n_steps = self.t.shape[0]
+        self.joint_mean = check_array(joint_mean, "joint_mean", shape=(n_steps, None))
+        n = self.joint_mean.shape[1]
+        self.joint_cov = check_array(joint_cov, "joint_cov", shape=(n_steps, n, n))
+        if set(task_mean) != set(task_cov):
+            raise ValueError(
+                f"task_mean and task_cov must have the same keys, got {sorted(task_mean)} "
+                f"and {sorted(task_cov)}"
+            )
+        if JOINT in task_mean:
+            raise ValueError(f"task_mean: {JOINT!r} is reserved for the joint-space constraint")
+        self.task_mean = {
+            k: check_array(v, f"task_mean[{k!r}]", shape=(n_steps, 3)) for k, v in task_mean.items()
+        }
+        self.task_cov = {
+            k: check_array(task_cov[k], f"task_cov[{k!r}]", shape=(n_steps, 3, 3))
+            for k in task_mean
+        }
+        self.gripper = (
+            None if gripper is None else check_array(gripper, "gripper", shape=(n_steps,))
+        )
+        linv = _chol_inverse_factor(self.joint_cov, "joint_cov")
+        self.joint_prec: Float = np.swapaxes(linv, -1, -2) @ linv
+        self.joint_eta: Float = np.einsum("tij,tj->ti", self.joint_prec, self.joint_mean)
+        self.task_prec: dict[str, Float] = {}
+        for k, cov in self.task_cov.items():
+            li = _chol_inverse_factor(cov, f"task_cov[{k!r}]")
+            self.task_prec[k] = np.swapaxes(li, -1, -2) @ li
+
+    @property
+    def n_steps(self) -> int:
+        """T."""
+        return int(self.t.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        """n."""
+        return int(self.joint_mean.shape[1])
+
+    @property
+    def object_names(self) -> list[str]:
+        """Names of the task-space constraints (objects)."""
+        return list(self.task_mean)
+
+    @property
+    def names(self) -> list[str]:
+        """``["joint", *object names]``."""
+        return [JOINT, *self.task_mean]
+
+
+@dataclass(frozen=True, eq=False)
+class ReproductionResult:
+    """Outcome of a reproduction.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Time of each step (steps 0 .. T-1 for a :class:`pbdkit.Skill`).
+    joints : ndarray, shape (T, n)
+        theta_j, within the joint limits.
+    positions : ndarray, shape (T, 3)
+        Hand positions x_j = f(theta_j) in the base frame.
+    covariances : ndarray, shape (T, n, n)
+        Covariance of the posture at each step: the fused Sigma_j of eq. (1) (information form)
+        when the joint constraint is in use; Sigma^theta for the joint-only controller;
+        J+ Sigma^x J+^T (rank 3) for task-only controllers.
+    gripper : ndarray of bool, shape (T,)
+        Generalized gripper signal > 0.5 (closed); all False if the skill has no gripper.
+    gripper_signal : ndarray, shape (T,) or None
+        The generalized (continuous) gripper signal, None if the skill has no gripper.
+    influence : dict str -> ndarray, shape (T,)
+        Share of each constraint in use, tr(Sigma Lambda_c) / n, summing to 1 at each step.
+    task_errors : dict str -> ndarray, shape (T,)
+        For every object (in use or not): ||x_j - (o(n) + x_hat^(n)_j)|| in metres, the distance
+        from the hand to where that object's constraint expects it.
+    used : tuple of str
+        The constraints in use.
+    """
+
+    t: Float
+    joints: Float
+    positions: Float
+    covariances: Float
+    gripper: NDArray[np.bool_]
+    gripper_signal: Float | None
+    influence: dict[str, Float]
+    task_errors: dict[str, Float]
+    used: tuple[str, ...]
+
+
+def check_objects(objects: object, names: Sequence[str], name: str = "objects") -> dict[str, Float]:
+    """Validate object positions for a reproduction.
+
+    Parameters
+    ----------
+    objects : dict str -> array-like, shape (3,)
+        Must have exactly the keys ``names``.
+    names : sequence of str
+        Expected object names.
+
+    Returns
+    -------
+    objects : dict str -> ndarray, shape (3,)
+        In the order of ``names``.
+    """
+    if not isinstance(objects, Mapping):
+        raise ValueError(
+            f"{name} must be a dict mapping the object names {list(names)} to positions (3,), "
+            f"got {type(objects).__name__}"
+        )
+    unknown = [k for k in objects if k not in names]
+    if unknown:
+        raise ValueError(
+            f"{name}: unknown object name(s) {unknown}; this skill knows {list(names)}"
+        )
+    missing = [k for k in names if k not in objects]
+    if missing:
+        raise ValueError(
+            f"{name}: missing position(s) for {missing}; this skill needs {list(names)}"
+        )
+    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)) for k in names}
+
+
+def _check_use(use: Sequence[str] | str | None, names: Sequence[str]) -> list[str]:
+    if use is None:
+        return list(names)
+    if isinstance(use, str):
+        use = [use]
+    out = list(use)
+    if not out:
+        raise ValueError(f"use must name at least one constraint of {list(names)}, got []")
+    bad = [u for u in out if u not in names]
+    if bad:
+        raise ValueError(f"use: unknown constraint(s) {bad}; choose among {list(names)}")
+    if len(set(out)) != len(out):
+        raise ValueError(f"use must not repeat a constraint, got {out}")
+    # Keep the skill's order so that results do not depend on how `use` is spelled.
+    return [n for n in names if n in out]
+
+
+def _check_reach(
+    objs: Mapping[str, Float],
+    constraints: Constraints,
+    reach: float,
+    on_unreachable: str,
+) -> None:
+    """Compare each object's most constrained target with the arm's reach (module docstring)."""
+    for k, o in objs.items():
+        # The step where the constraint is tightest is where the hand must be at o + x_hat.
+        j = int(np.argmin(np.trace(constraints.task_cov[k], axis1=1, axis2=2)))
+        target = o + constraints.task_mean[k][j]
+        dist = float(np.linalg.norm(target))
+        if dist > reach:
+            msg = (
+                f"objects[{k!r}]: the hand must be at {np.round(target, 4).tolist()} at step "
+                f"{j} (o + x_hat, where this object's constraint is tightest), "
+                f"{dist:.3f} m from the base, beyond the arm's reach of {reach:.3f} m; "
+                "move the object closer"
+            )
+            if on_unreachable == "raise":
+                raise ValueError(msg)
+            warnings.warn(msg + " (the hand will stop short)", ReachWarning, stacklevel=3)
+
+
+def reproduce(
+    robot: KinematicModel,
+    constraints: Constraints,
+    objects: Mapping[str, npt.ArrayLike],
+    *,
+    q0: npt.ArrayLike | None = None,
+    use: Sequence[str] | str | None = None,
+    alpha: float = 0.5,
+    max_step: float | None = 0.1,
+    reach: float | None = None,
+    on_unreachable: Literal["raise", "warn"] = "raise",
+) -> ReproductionResult:
+    """Closed-loop reproduction of Table II for new object positions.
+
+    Parameters
+    ----------
+    robot : KinematicModel
+        The arm (e.g. :class:`pbdkit.Robot`); n joints, as the constraints.
+    constraints : Constraints
+        The skill's generalized constraints over T steps.
+    objects : dict str -> array-like, shape (3,)
+        Position o(n) of every object of the skill, in the robot's base frame.
+    q0 : array-like, shape (n,), optional
+        Initial posture, within the joint limits. Default: theta_hat_0 (the paper), clipped to
+        the limits.
+    use : sequence of str, optional
+        Constraints to use: None for all (fused); ``["joint"]`` for the joint-space controller;
+        ``["glass"]`` for the task-space controller of one object; several names fuse them.
+    alpha : float
+        Weight of the null-space term of the task-only controllers (paper: 0.5). Without effect
+        when ``"joint"`` is in use (see the module docstring).
+    max_step : float or None
+        Largest joint-space step (Euclidean norm over the joints, rad): a longer step is scaled
+        down, keeping its direction (module docstring, "Step size"). None: the paper's full step.
+    reach : float, optional
+        Reach of the arm (m, from the base origin). If given, the most constrained target
+        o + x_hat of every object in use is checked against it.
+    on_unreachable : {"raise", "warn"}
+        Raise ValueError, or warn with :class:`ReachWarning` and reproduce anyway (the hand then
+        stops short; the result stays finite and within limits).
+
+    Returns
+    -------
+    result : ReproductionResult
+    """
+    c = constraints
+    if not isinstance(c, Constraints):
+        raise ValueError(f"constraints must be a Constraints, got {type(c).__name__}")
+    n = c.n_joints
+    if int(robot.n_joints) != n:
+        raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
+    objs = check_objects(objects, c.object_names)
+    used = _check_use(use, c.names)
+    alpha = check_positive_float(alpha, "alpha", allow_zero=True)
+    step_cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
+    if on_unreachable not in ("raise", "warn"):
+        raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
+    if reach is not None:
+        # Only the objects whose constraints are in use steer the arm.
+        _check_reach({k: o for k, o in objs.items() if k in used}, c, float(reach), on_unreachable)
+    lower = np.asarray(robot.lower, dtype=np.float64)
+    upper = np.asarray(robot.upper, dtype=np.float64)
+    # The paper starts at theta_hat_0; clipped in case the GMR mean grazes a limit.
+    theta0 = np.clip(c.joint_mean[0], lower, upper) if q0 is None else _check_q0(q0, lower, upper)
+
+    tasks = [u for u in used if u != JOINT]
+    if JOINT in used and tasks:
+        joints, positions, covs, influence = _fused_loop(
+            robot, c, objs, tasks, theta0, lower, upper, step_cap
+        )
+    elif JOINT in used:
+        joints = _joint_only(c.joint_mean, theta0, lower, upper, step_cap)
+        positions = np.asarray(robot.fk(joints), dtype=np.float64)
+        covs = c.joint_cov.copy()
+        influence = {JOINT: np.ones(c.n_steps)}
+    else:
+        joints, positions, covs, influence = _task_loop(
+            robot, c, objs, tasks, theta0, lower, upper, alpha, step_cap
+        )
+
+    task_errors = {
+        k: np.linalg.norm(positions - (o + c.task_mean[k]), axis=1) for k, o in objs.items()
+    }
+    signal = None if c.gripper is None else c.gripper.copy()
+    closed = np.zeros(c.n_steps, dtype=bool) if signal is None else signal > 0.5
+    return ReproductionResult(
+        t=c.t.copy(),
+        joints=joints,
+        positions=positions,
+        covariances=covs,
+        gripper=closed,
+        gripper_signal=signal,
+        influence=influence,
+        task_errors=task_errors,
+        used=tuple(used),
+    )
+
+
+def _joint_only(
+    theta_hat: Float, theta0: Float, lower: Float, upper: Float, max_step: float
+) -> Float:
+    """Joint-space controller: theta_{j+1} = theta_j + (theta_hat_{j+1} - theta_j) (Table II).
+
+    That is theta_hat itself (clipped to the limits), except where a step would exceed
+    ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those steps are scaled.
+    """
+    target = np.clip(theta_hat, lower, upper)
+    joints = target.copy()
+    joints[0] = theta0
+    d = np.diff(joints, axis=0)
+    if np.all(np.einsum("ij,ij->i", d, d) <= max_step * max_step):
+        return joints
+    theta = theta0
+    for j in range(1, joints.shape[0]):
+        step = target[j] - theta
+        step2 = step @ step
+        if step2 > max_step * max_step:
+            step = step * (max_step / np.sqrt(step2))
+        theta = theta + step  # stays in the box: a point between theta and target[j]
+        joints[j] = theta
+    return joints
+
+
+def _check_q0(q0: npt.ArrayLike, lower: Float, upper: Float) -> Float:
+    q = check_array(q0, "q0", shape=(lower.shape[0],))
+    bad = np.flatnonzero((q < lower) | (q > upper))
+    if bad.size:
+        j = int(bad[0])
+        raise ValueError(
+            f"q0[{j}] must be within the joint limits [{lower[j]:.6g}, {upper[j]:.6g}], "
+            f"got {q[j]:.6g}"
+        )
+    return q
+
+
+def _fused_loop(
+    robot: KinematicModel,
+    c: Constraints,
+    objs: Mapping[str, Float],
+    tasks: list[str],
+    theta0: Float,
+    lower: Float,
+    upper: Float,
+    max_step: float,
+) -> tuple[Float, Float, Float, dict[str, Float]]:
+    """Table II with eq. (1) in information form; returns joints, positions, covs, influence."""
+    n_steps, n = c.n_steps, c.n_joints
+    # Everything that does not depend on the state, for all steps at once.
+    # Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
+    # sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)):
+    # per step the cost does not grow with the number of objects. P_n = (Sigma^x(n))^-1.
+    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)  # (T, m, 3, 3)
+    targets = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
+    p_sum = prec.sum(axis=1)  # (T, 3, 3)
+    h = np.einsum("tkij,tkj->ti", prec, targets)  # (T, 3)
+    prec_j, eta_j = c.joint_prec, c.joint_eta
+    # [sum_n P_n | h] so that one product gives J^T P and J^T h; lists of per-step views are
+    # cheaper to index in the loop than the arrays.
+    g = list(np.concatenate([p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
+    prec_list, eta_list = list(prec_j), list(eta_j)
+    # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
+    fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+    lo, hi = np.maximum, np.minimum
+    max_step2 = max_step * max_step
+    theta = theta0
+    x, jac = fk_jac(theta)
+    # Python lists: appending costs less than writing rows into arrays, step by step.
+    joints_l, positions_l, jacs_l = [theta], [x], [jac]
+    for j in range(1, n_steps):
+        # x, jac are f(theta_{j-1}) and J(theta_{j-1}): Table II linearizes at the current posture.
+        m = jac.T @ g[j]  # (n, 4): [J^T P | J^T h]
+        a = m[:, :3]
+        lam_j = prec_list[j] + a @ jac  # eq. (1) in information form: precisions add
+        # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
+        # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
+        _, target, info = dposv(lam_j, eta_list[j] + m[:, 3] + a @ (jac @ theta - x))
+        if info != 0:
+            raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
+        step = target - theta
+        step2 = step @ step
+        if step2 > max_step2:  # trust region of the linearization (module docstring)
+            target = theta + step * (max_step / np.sqrt(step2))
+        theta = hi(lo(target, lower), upper)
+        x, jac = fk_jac(theta)
+        # Entry j holds the state theta_j and the Jacobian that step j+1 will use.
+        joints_l.append(theta)
+        positions_l.append(x)
+        jacs_l.append(jac)
+    joints, positions, jacs = np.array(joints_l), np.array(positions_l), np.array(jacs_l)
+    # Step 0 reports the constraints at t_0 with J(theta_0); step j >= 1 used J(theta_{j-1}).
+    jac_used = np.concatenate([jacs[:1], jacs[:-1]])
+    jt = np.swapaxes(jac_used, -1, -2)
+    lam = prec_j + jt @ p_sum @ jac_used
+    cov = _spd_inverse(lam)
+    influence: dict[str, Float] = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
+    jcj = jac_used @ cov @ jt  # (T, 3, 3): tr(Sigma J^T P J) = tr(J Sigma J^T P)
+    for i, k in enumerate(tasks):
+        influence[k] = np.einsum("tij,tji->t", jcj, prec[:, i]) / n
+    return joints, positions, cov, influence
+
+
+def _spd_inverse(a: Float) -> Float:
+    """Inverse of symmetric positive-definite matrices (..., d, d), symmetrized."""
+    inv = np.linalg.inv(a)
+    return np.asarray(0.5 * (inv + np.swapaxes(inv, -1, -2)))
+
+
+def _task_loop(
+    robot: KinematicModel,
+    c: Constraints,
+    objs: Mapping[str, Float],
+    tasks: list[str],
+    theta0: Float,
+    lower: Float,
+    upper: Float,
+    alpha: float,
+    max_step: float,
+) -> tuple[Float, Float, Float, dict[str, Float]]:
+    """Task-only controller of Table II (objects in ``tasks`` fused in task space first)."""
+    n_steps, n = c.n_steps, c.n_joints
+    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)  # (T, m, 3, 3)
+    pos = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
+    prec_sum = prec.sum(axis=1)
+    s_fused = _spd_inverse(prec_sum)  # (T, 3, 3)
+    # Product of the task-space Gaussians: target = S (sum_n P_n (o_n + x_hat_n)).
+    target = np.einsum("tij,tj->ti", s_fused, np.einsum("tkij,tkj->ti", prec, pos))
+    theta_hat = c.joint_mean
+    joints = np.empty((n_steps, n))
+    positions = np.empty((n_steps, 3))
+    pinvs = np.empty((n_steps, n, 3))
+    # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
+    fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+    eye = np.eye(n)
+    theta = theta0
+    x, jac = fk_jac(theta)
+    jp = damped_pinv(jac)
+    joints[0], positions[0], pinvs[0] = theta, x, jp
+    for j in range(1, n_steps):
+        d_hat = theta_hat[j] - theta
+        # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
+        step = jp @ (target[j] - x) + alpha * ((eye - jp @ jac) @ d_hat)
+        step2 = step @ step
+        if step2 > max_step * max_step:
+            step *= max_step / np.sqrt(step2)
+        theta = np.minimum(np.maximum(theta + step, lower), upper)
+        x, jac = fk_jac(theta)
+        pinvs[j] = jp
+        jp = damped_pinv(jac)
+        joints[j], positions[j] = theta, x
+    covs = pinvs @ s_fused @ np.swapaxes(pinvs, -1, -2)
+    influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}
+    return joints, positions, covs, influence
+
+
+def reach_from_samples(
+    robot: KinematicModel,
+    joints: npt.ArrayLike | None = None,
+    n_samples: int = 4096,
+    seed: int = 0,
+) -> float:
+    """Estimate of the arm's reach: max ||f(theta)|| over random postures within the limits.
+
+    Parameters
+    ----------
+    robot : KinematicModel
+    joints : array-like, shape (M, n), optional
+        Extra postures (e.g. the demonstrated ones) to include.
+    n_samples : int
+        Number of uniformly random postures.
+    seed : int
+        Seed of the sampler (the estimate is deterministic).
+
+    Returns
+    -------
+    reach : float
+        In metres, from the base origin; a slight under-estimate of the true maximum, enlarged
+        by 2 % so that a target just inside the workspace is never reported out of reach.
+    """
+    rng = np.random.default_rng(seed)
+    lower = np.asarray(robot.lower, dtype=np.float64)
+    upper = np.asarray(robot.upper, dtype=np.float64)
+    q = lower + (upper - lower) * rng.random((n_samples, lower.shape[0]))
+    if joints is not None:
+        q = np.concatenate([q, check_array(joints, "joints", shape=(None, lower.shape[0]))])
+    x = np.asarray(robot.fk(q), dtype=np.float64)
+    return 1.02 * float(np.max(np.linalg.norm(x, axis=1)))

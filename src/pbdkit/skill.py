@@ -1,0 +1,442 @@
+"""A skill: learned from demonstrations (paper Table I), reproduced for new objects (Table II).
+
+Learning (:meth:`Skill.learn`):
+
+1. every demonstration is rescaled to ``n_steps`` steps (time in steps 0 .. n_steps-1, see
+   :meth:`pbdkit.Demonstration.rescaled`);
+2. the hand positions x = f(theta) follow from forward kinematics (one batched call);
+3. one GMM per data space, K chosen by BIC (:class:`pbdkit.GMM`): the joint space
+   {t, theta, gripper} (the gripper column only when the demonstrations have one: the paper
+   generalizes the binary gripper signal with the joints) and, for every object n, the task space
+   {t, x - o(n)};
+4. GMR over the time grid gives the constraints theta_hat, Sigma^theta, x_hat^(n), Sigma^x(n);
+   they do not depend on the new object positions, so they are computed once per skill and
+   covariance mode and cached.
+
+Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.reproduce.reproduce`.
+
+File format (:meth:`Skill.save` / :meth:`Skill.load`): a NumPy ``.npz`` archive, no pickle,
+written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_steps``,
+``n_joints``, ``object_names`` (N,) unicode, ``has_gripper``, ``reach`` (m), ``robot_urdf``
+(the URDF text, empty if the robot was not built from a URDF), ``robot_tip``, and for each space
+``gmm_joint_*`` / ``gmm_{i}_*`` (object i in ``object_names`` order) with ``weights`` (K,),
+``means`` (K, D) and ``covariances`` (K, D, D).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from ._io import load_npz_safe, save_npz_atomic
+from ._validation import check_int, check_positive_float
+from .demos import Demonstration, check_demonstrations
+from .gmm import GMM
+from .reproduce import (
+    JOINT,
+    Constraints,
+    KinematicModel,
+    ReproductionResult,
+    reach_from_samples,
+    reproduce,
+)
+
+__all__ = ["Skill"]
+
+Float = NDArray[np.float64]
+FORMAT_NAME = "pbdkit-skill"
+FORMAT_VERSION = 1
+CovarianceMode = Literal["exact", "paper"]
+
+
+class Skill:
+    """A skill learned from demonstrations: one GMM per constraint space.
+
+    Build it with :meth:`learn` or :meth:`load`.
+
+    Attributes
+    ----------
+    robot : KinematicModel
+        The arm the skill was learned on.
+    n_steps : int
+        Number of steps T of the time grid (and of every reproduction).
+    object_names : list of str
+        Objects of the skill (task-space constraints), in a fixed order.
+    constraint_names : list of str
+        ``["joint", *object_names]``.
+    gmms : dict str -> GMM
+        The GMM of each constraint space: ``"joint"`` over {t, theta(n), [gripper]} and one per
+        object over {t, x - o(n)}.
+    n_components : dict str -> int
+        Number of components K of each GMM (chosen by BIC when learned with ``"bic"``).
+    has_gripper : bool
+        Whether the joint-space GMM has a gripper column.
+    reach : float
+        Reach of the arm from its base origin (m): 1.02 x the largest ||f(theta)|| over 4096
+        random postures within the limits and all demonstrated postures.
+    """
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        gmms: Mapping[str, GMM],
+        *,
+        n_steps: int,
+        object_names: Sequence[str],
+        has_gripper: bool,
+        reach: float,
+    ) -> None:
+        self.robot = robot
+        self.n_steps = int(n_steps)
+        self.object_names = list(object_names)
+        self.gmms = {k: gmms[k] for k in [JOINT, *self.object_names]}
+        self.has_gripper = bool(has_gripper)
+        self.reach = float(reach)
+        self._constraints: dict[str, Constraints] = {}
+
+    @property
+    def constraint_names(self) -> list[str]:
+        """``["joint", *object_names]``."""
+        return [JOINT, *self.object_names]
+
+    @property
+    def n_components(self) -> dict[str, int]:
+        """K of each constraint space's GMM."""
+        return {k: int(g.n_components_) for k, g in self.gmms.items()}
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints n."""
+        return int(self.robot.n_joints)
+
+    def __repr__(self) -> str:
+        return (
+            f"Skill(n_steps={self.n_steps}, n_joints={self.n_joints}, "
+            f"constraints={self.constraint_names}, n_components={self.n_components})"
+        )
+
+    # ------------------------------------------------------------------ learning
+    @classmethod
+    def learn(
+        cls,
+        demos: Sequence[Demonstration],
+        robot: KinematicModel,
+        n_steps: int = 1000,
+        n_components: int | Literal["bic"] = "bic",
+        max_components: int = 10,
+        reg_covar: float = 1e-6,
+        random_state: int | None = 0,
+        fit_samples: int | None = 100,
+    ) -> Skill:
+        """Learn a skill from demonstrations (paper Table I).
+
+        Parameters
+        ----------
+        demos : sequence of Demonstration
+            At least 2, with the robot's joint count, the same object names, and a gripper
+            signal in all or none.
+        robot : KinematicModel
+            The arm (e.g. :func:`pbdkit.robots.katana`); its forward kinematics gives x.
+        n_steps : int
+            Steps of the time grid (the paper: 1000).
+        n_components : int or "bic"
+            K of every GMM, or ``"bic"`` to choose it per space in 1..``max_components``.
+        max_components : int
+            Largest K tried with ``"bic"``.
+        reg_covar : float
+            Added to the diagonal of every GMM covariance (rad^2 in joint space, m^2 in task
+            space): a floor on the variability of a constraint.
+        random_state : int or None
+            Seed passed to the GMMs.
+        fit_samples : int or None
+            Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
+            None or larger). Consecutive steps of a smooth motion carry almost no new
+            information (the reason the BIC uses an effective sample size, see
+            :mod:`pbdkit.gmm`, which counts 100 effective samples per demonstration), while EM's
+            cost grows linearly with the points: with 1000 steps, 100 of them learn 5 times
+            faster and reproduce as well (``benchmarks/bench_skill.py``: reach errors 0.04 and
+            1.9 mm, against 0.05 and 0.31 mm with all steps). The GMMs still model time in
+            steps 0 .. n_steps-1.
+
+        Returns
+        -------
+        skill : Skill
+        """
+        items = check_demonstrations(demos, min_demos=2)
+        if not isinstance(robot, KinematicModel):
+            raise ValueError(
+                "robot must provide n_joints, lower, upper, fk and fk_jacobian "
+                f"(e.g. pbdkit.robots.katana()), got {type(robot).__name__}"
+            )
+        n = int(robot.n_joints)
+        if items[0].n_joints != n:
+            raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
+        n_steps = check_int(n_steps, "n_steps", minimum=2)
+        check_positive_float(reg_covar, "reg_covar", allow_zero=True)
+        names = list(items[0].object_names)
+        has_gripper = items[0].gripper is not None
+
+        n_fit = n_steps if fit_samples is None else check_int(fit_samples, "fit_samples", minimum=2)
+        steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
+
+        resampled = [d.rescaled(n_steps) for d in items]
+        t = np.tile(steps.astype(np.float64), len(items))[:, None]  # restarts per demonstration
+        theta = np.concatenate([d.joints[steps] for d in resampled])  # (M T_fit, n)
+        x = np.asarray(robot.fk(theta), dtype=np.float64)  # (M T_fit, 3), one batched call
+        blocks = [t, theta]
+        if has_gripper:
+            grip = [d.gripper[steps] for d in resampled if d.gripper is not None]
+            blocks.append(np.concatenate(grip)[:, None])
+        data = {JOINT: np.hstack(blocks)}
+        for k in names:
+            o = np.repeat(np.stack([d.objects[k] for d in items]), steps.shape[0], axis=0)
+            data[k] = np.hstack([t, x - o])
+
+        gmms = {
+            k: GMM(
+                n_components=n_components,
+                max_components=max_components,
+                reg_covar=reg_covar,
+                random_state=random_state,
+            ).fit(X)
+            for k, X in data.items()
+        }
+        reach = reach_from_samples(robot, theta)
+        return cls(
+            robot,
+            gmms,
+            n_steps=n_steps,
+            object_names=names,
+            has_gripper=has_gripper,
+            reach=reach,
+        )
+
+    # ------------------------------------------------------------------ generalization
+    def constraints(self, covariance: CovarianceMode = "exact") -> Constraints:
+        """GMR of every space over the time grid (cached per covariance mode).
+
+        Parameters
+        ----------
+        covariance : {"exact", "paper"}
+            GMR covariance: exact conditional covariance of the mixture, or the paper's
+            sum_k beta_k^2 Sigma_k.
+
+        Returns
+        -------
+        constraints : Constraints
+            theta_hat (T, n), Sigma^theta (T, n, n), x_hat^(n) (T, 3), Sigma^x(n) (T, 3, 3),
+            gripper (T,) or None.
+        """
+        if covariance not in ("exact", "paper"):
+            raise ValueError(f"covariance must be 'exact' or 'paper', got {covariance!r}")
+        cached = self._constraints.get(covariance)
+        if cached is not None:
+            return cached
+        n = self.n_joints
+        t = np.arange(self.n_steps, dtype=np.float64)
+        mean, cov = self.gmms[JOINT].regress(t[:, None], in_dims=[0], covariance=covariance)
+        task_mean: dict[str, Float] = {}
+        task_cov: dict[str, Float] = {}
+        for k in self.object_names:
+            task_mean[k], task_cov[k] = self.gmms[k].regress(
+                t[:, None], in_dims=[0], covariance=covariance
+            )
+        c = Constraints(
+            t,
+            mean[:, :n],
+            cov[:, :n, :n],  # marginal of theta: the gripper is not part of the IK
+            task_mean,
+            task_cov,
+            gripper=mean[:, n] if self.has_gripper else None,
+        )
+        self._constraints[covariance] = c
+        return c
+
+    # ------------------------------------------------------------------ reproduction
+    def reproduce(
+        self,
+        objects: Mapping[str, npt.ArrayLike],
+        q0: npt.ArrayLike | None = None,
+        use: Sequence[str] | str | None = None,
+        alpha: float = 0.5,
+        covariance: CovarianceMode = "exact",
+        max_step: float | None = 0.1,
+        on_unreachable: Literal["raise", "warn"] = "raise",
+    ) -> ReproductionResult:
+        """Reproduce the skill for new object positions (paper Table II).
+
+        Parameters
+        ----------
+        objects : dict str -> array-like, shape (3,)
+            Position of every object of the skill in the robot's base frame (m).
+        q0 : array-like, shape (n,), optional
+            Initial posture within the joint limits; default theta_hat_0 (the paper).
+        use : sequence of str, optional
+            None: all constraints fused. ``["joint"]``: the joint-space controller.
+            ``["glass"]``: the task-space controller of that object. Several names: fused.
+        alpha : float
+            Null-space weight of the task-only controllers (no effect once "joint" is used).
+        covariance : {"exact", "paper"}
+            GMR covariance mode.
+        max_step : float or None
+            Largest joint-space step (Euclidean norm, rad); longer steps are scaled down (see
+            :mod:`pbdkit.reproduce`, "Step size"). None: the paper's full step.
+        on_unreachable : {"raise", "warn"}
+            What to do when an object's most constrained target o + x_hat is beyond
+            :attr:`reach`: raise ValueError, or warn (:class:`pbdkit.reproduce.ReachWarning`)
+            and reproduce anyway (the hand stops short; never NaN).
+
+        Returns
+        -------
+        result : ReproductionResult
+            t (T,), joints (T, n), positions (T, 3), covariances (T, n, n), gripper (T,) bool,
+            influence dict name -> (T,), task_errors dict name -> (T,).
+        """
+        return reproduce(
+            self.robot,
+            self.constraints(covariance),
+            objects,
+            q0=q0,
+            use=use,
+            alpha=alpha,
+            max_step=max_step,
+            reach=self.reach,
+            on_unreachable=on_unreachable,
+        )
+
+    # ------------------------------------------------------------------ I/O
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Save the skill to a versioned ``.npz`` file (no pickle, written atomically).
+
+        The robot is stored as its URDF text and tip frame when it has them (a
+        :class:`pbdkit.Robot`); otherwise :meth:`load` needs the robot again.
+
+        Parameters
+        ----------
+        path : str or path-like
+        """
+        urdf = getattr(self.robot, "urdf", "")
+        tip = getattr(self.robot, "tip", "")
+        arrays: dict[str, Any] = {
+            "format": np.array(FORMAT_NAME),
+            "version": np.array(FORMAT_VERSION, dtype=np.int64),
+            "n_steps": np.array(self.n_steps, dtype=np.int64),
+            "n_joints": np.array(self.n_joints, dtype=np.int64),
+            "object_names": np.array(self.object_names, dtype=np.str_)
+            if self.object_names
+            else np.zeros(0, dtype="<U1"),
+            "has_gripper": np.array(self.has_gripper),
+            "reach": np.array(self.reach),
+            "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
+            "robot_tip": np.array(tip if isinstance(tip, str) else ""),
+        }
+        for i, k in enumerate(self.constraint_names):
+            key = "joint" if k == JOINT else str(i - 1)
+            g = self.gmms[k]
+            arrays[f"gmm_{key}_weights"] = g.weights_
+            arrays[f"gmm_{key}_means"] = g.means_
+            arrays[f"gmm_{key}_covariances"] = g.covariances_
+        save_npz_atomic(path, arrays)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], robot: KinematicModel | None = None) -> Skill:
+        """Load a skill saved by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or path-like
+        robot : KinematicModel, optional
+            The arm to use. Default: rebuilt from the stored URDF and tip frame with
+            :meth:`pbdkit.Robot.from_urdf`.
+
+        Returns
+        -------
+        skill : Skill
+            Reproduces bit-identical results to the skill that was saved.
+
+        Raises
+        ------
+        FileNotFoundError
+            If ``path`` does not exist.
+        ValueError
+            A corrupt or foreign file, another format version, or inconsistent content.
+        """
+        p = Path(path)
+        data = load_npz_safe(p, what=FORMAT_NAME + " file")
+        fmt = data.get("format")
+        if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != FORMAT_NAME:
+            raise ValueError(
+                f"{p} is not a {FORMAT_NAME} file (its 'format' key is missing or differs)"
+            )
+        ver = data.get("version")
+        if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing 'version'")
+        if int(ver) != FORMAT_VERSION:
+            raise ValueError(
+                f"{p} is a {FORMAT_NAME} file of version {int(ver)}; "
+                f"this pbdkit reads version {FORMAT_VERSION}"
+            )
+        try:
+            n_steps = int(data["n_steps"])
+            n_joints = int(data["n_joints"])
+            names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
+            has_gripper = bool(data["has_gripper"])
+            reach = float(data["reach"])
+            urdf = str(data["robot_urdf"])
+            tip = str(data["robot_tip"])
+            gmms: dict[str, GMM] = {}
+            for i, k in enumerate([JOINT, *names]):
+                key = "joint" if k == JOINT else str(i - 1)
+                gmms[k] = GMM.from_params(
+                    data[f"gmm_{key}_weights"],
+                    data[f"gmm_{key}_means"],
+                    data[f"gmm_{key}_covariances"],
+                )
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
+        if len(set(names)) != len(names) or JOINT in names or "" in names:
+            raise ValueError(
+                f"{p} is not a valid {FORMAT_NAME} file: object names {names} must be unique, "
+                f"non-empty and not {JOINT!r}"
+            )
+        d_joint = 1 + n_joints + int(has_gripper)
+        dims = {k: int(g.means_.shape[1]) for k, g in gmms.items()}
+        expected = {k: (d_joint if k == JOINT else 4) for k in gmms}
+        if dims != expected or n_steps < 2 or not (np.isfinite(reach) and reach > 0):
+            raise ValueError(
+                f"{p} is not a valid {FORMAT_NAME} file: GMM dimensions {dims}, expected "
+                f"{expected} for n_joints={n_joints}, gripper={has_gripper}; "
+                f"n_steps={n_steps} (>= 2), reach={reach} (> 0)"
+            )
+        if robot is None:
+            if not urdf:
+                raise ValueError(
+                    f"{p} holds no URDF (the skill was learned with a robot not built from a "
+                    "URDF): pass robot= to Skill.load"
+                )
+            from .robot import Robot
+
+            try:
+                robot = Robot.from_urdf(urdf, tip=tip or None)
+            except ValueError as exc:
+                raise ValueError(
+                    f"{p} is not a valid {FORMAT_NAME} file: its robot URDF does not load: {exc}"
+                ) from exc
+        if int(robot.n_joints) != n_joints:
+            raise ValueError(f"robot has {robot.n_joints} joints, the skill in {p} has {n_joints}")
+        return cls(
+            robot,
+            gmms,
+            n_steps=n_steps,
+            object_names=names,
+            has_gripper=has_gripper,
+            reach=reach,
+        )

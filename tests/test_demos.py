@@ -1,0 +1,286 @@
+"""Tests of pbdkit.demos: validation, time rescaling, .npz and CSV I/O."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pbdkit.demos import (
+    Demonstration,
+    check_demonstrations,
+    demonstration_from_csv,
+    load_demonstrations,
+    save_demonstrations,
+)
+
+
+def random_demo(
+    rng: np.random.Generator,
+    n_samples: int = 50,
+    n_joints: int = 4,
+    objects: tuple[str, ...] = ("glass", "coaster"),
+    gripper: bool = True,
+) -> Demonstration:
+    t = np.cumsum(rng.uniform(0.01, 0.05, n_samples))
+    return Demonstration(
+        t=t,
+        joints=rng.normal(size=(n_samples, n_joints)),
+        objects={k: rng.normal(size=3) for k in objects},
+        gripper=(rng.random(n_samples) > 0.5).astype(float) if gripper else None,
+    )
+
+
+# ----------------------------------------------------------------------------- construction
+def test_demonstration_fields_are_validated_read_only_copies() -> None:
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 2.0, 20)
+    q = rng.normal(size=(20, 5))
+    pos = np.array([0.4, 0.1, 0.2])
+    d = Demonstration(t, q, {"glass": pos}, gripper=[True] * 10 + [False] * 10)
+    assert d.n_steps == 20 and d.n_joints == 5 and d.object_names == ("glass",)
+    assert d.gripper is not None and d.gripper.dtype == np.float64
+    np.testing.assert_array_equal(d.gripper[:10], 1.0)
+    assert d.duration == pytest.approx(2.0, abs=1e-12)
+    with pytest.raises(ValueError, match="read-only"):
+        d.joints[0, 0] = 1.0
+    with pytest.raises(TypeError):
+        d.objects["cup"] = np.zeros(3)  # type: ignore[index]
+    # The caller's arrays stay writable and independent.
+    q[0, 0] = 99.0
+    pos[0] = 99.0
+    assert d.joints[0, 0] != 99.0 and d.objects["glass"][0] == pytest.approx(0.4)
+    assert "T=20" in repr(d)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"t": [0.0]}, r"t must have at least 2 samples, got 1"),
+        ({"t": [0.0, 1.0, 1.0]}, r"t must be strictly increasing, got t\[1\]=1.0 >= t\[2\]"),
+        ({"t": [0.0, 2.0, 1.0]}, r"strictly increasing"),
+        ({"t": [[0.0, 1.0, 2.0]]}, r"t must be 1-D, got 2-D"),
+        ({"t": [0.0, np.inf, 2.0]}, r"t must be finite"),
+        ({"joints": np.zeros((2, 3))}, r"joints must have shape \(3, n\), got \(2, 3\)"),
+        ({"joints": np.zeros(3)}, r"joints must be 2-D"),
+        ({"joints": [[0.0, np.nan]] * 3}, r"joints must be finite, got 3 NaN"),
+        (
+            {"objects": {"glass": [0.0, 1.0]}},
+            r"objects\['glass'\] must have shape \(3,\), got \(2,\)",
+        ),
+        ({"objects": {"glass": [0.0, np.nan, 1.0]}}, r"objects\['glass'\] must be finite"),
+        ({"objects": {"joint": [0.0, 0.0, 1.0]}}, r"'joint' is reserved"),
+        ({"objects": {3: [0.0, 0.0, 1.0]}}, r"keys must be non-empty strings"),
+        ({"objects": [1.0, 2.0, 3.0]}, r"objects must be a dict"),
+        ({"gripper": [0.0, 1.0]}, r"gripper must have shape \(3,\), got \(2,\)"),
+        ({"gripper": ["a", "b", "c"]}, r"gripper must be an array of numbers"),
+    ],
+)
+def test_demonstration_rejects_bad_input(kwargs: dict[str, object], match: str) -> None:
+    args: dict[str, object] = {
+        "t": [0.0, 1.0, 2.0],
+        "joints": np.zeros((3, 2)),
+        "objects": {"glass": [0.1, 0.2, 0.3]},
+        "gripper": None,
+    }
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        Demonstration(**args)  # type: ignore[arg-type]
+
+
+# ----------------------------------------------------------------------------- rescaling
+def test_rescaled_is_exact_on_linear_signals_and_keeps_endpoints() -> None:
+    rng = np.random.default_rng(1)
+    t = np.sort(rng.uniform(0.0, 3.0, 40))
+    slope, offset = rng.normal(size=3), rng.normal(size=3)
+    q = offset + t[:, None] * slope
+    g = 0.2 * t
+    d = Demonstration(t, q, {"o": [0.0, 0.0, 0.5]}, gripper=g).rescaled(101)
+    grid = np.linspace(t[0], t[-1], 101)
+    np.testing.assert_array_equal(d.t, np.arange(101.0))
+    np.testing.assert_allclose(d.joints, offset + grid[:, None] * slope, rtol=0, atol=1e-12)
+    assert d.gripper is not None
+    np.testing.assert_allclose(d.gripper, 0.2 * grid, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(d.joints[[0, -1]], q[[0, -1]])
+    np.testing.assert_array_equal(d.objects["o"], [0.0, 0.0, 0.5])
+
+
+def test_rescaled_matches_np_interp_per_joint() -> None:
+    rng = np.random.default_rng(2)
+    d = random_demo(rng, n_samples=37, n_joints=3)
+    r = d.rescaled(64)
+    grid = np.linspace(d.t[0], d.t[-1], 64)
+    for i in range(3):
+        np.testing.assert_allclose(r.joints[:, i], np.interp(grid, d.t, d.joints[:, i]), atol=1e-12)
+
+
+def test_rescaled_rejects_bad_n_steps() -> None:
+    d = random_demo(np.random.default_rng(3))
+    with pytest.raises(ValueError, match="n_steps must be >= 2, got 1"):
+        d.rescaled(1)
+    with pytest.raises(ValueError, match="n_steps must be an integer"):
+        d.rescaled(10.5)  # type: ignore[arg-type]
+
+
+# ----------------------------------------------------------------------------- demo sets
+def test_check_demonstrations_rejects_inconsistent_sets() -> None:
+    rng = np.random.default_rng(4)
+    a = random_demo(rng)
+    with pytest.raises(ValueError, match="at least 2 demonstrations, got 1"):
+        check_demonstrations([a])
+    with pytest.raises(ValueError, match="demos must be a list of Demonstration"):
+        check_demonstrations(a)
+    with pytest.raises(ValueError, match=r"demos\[1\] must be a Demonstration, got dict"):
+        check_demonstrations([a, {}])
+    with pytest.raises(ValueError, match=r"demos\[1\] has 3 joints, expected 4"):
+        check_demonstrations([a, random_demo(rng, n_joints=3)])
+    with pytest.raises(ValueError, match=r"demos\[1\] has objects \['glass'\], expected"):
+        check_demonstrations([a, random_demo(rng, objects=("glass",))])
+    with pytest.raises(ValueError, match=r"demos\[1\] has no gripper signal"):
+        check_demonstrations([a, random_demo(rng, gripper=False)])
+    # Same names in another order are the same set.
+    b = Demonstration(a.t, a.joints, {"coaster": [0, 0, 1], "glass": [1, 0, 0]}, a.gripper)
+    assert len(check_demonstrations([a, b])) == 2
+
+
+# ----------------------------------------------------------------------------- .npz I/O
+@pytest.mark.parametrize("gripper", [True, False])
+def test_save_load_round_trip_is_exact(tmp_path: Path, gripper: bool) -> None:
+    rng = np.random.default_rng(5)
+    demos = [random_demo(rng, n_samples=n, gripper=gripper) for n in (20, 35, 27)]
+    path = tmp_path / "sub" / "demos.npz"
+    save_demonstrations(demos, path)
+    back = load_demonstrations(path)
+    assert len(back) == 3
+    for a, b in zip(demos, back, strict=True):
+        np.testing.assert_array_equal(a.t, b.t)
+        np.testing.assert_array_equal(a.joints, b.joints)
+        assert a.object_names == b.object_names
+        for k in a.objects:
+            np.testing.assert_array_equal(a.objects[k], b.objects[k])
+        if gripper:
+            assert a.gripper is not None and b.gripper is not None
+            np.testing.assert_array_equal(a.gripper, b.gripper)
+        else:
+            assert b.gripper is None
+    # No temporary file is left behind, and the file needs no pickle.
+    assert [p.name for p in path.parent.iterdir()] == ["demos.npz"]
+    with np.load(path, allow_pickle=False) as data:
+        assert str(data["format"]) == "pbdkit-demonstrations" and int(data["version"]) == 1
+
+
+def test_save_load_without_objects(tmp_path: Path) -> None:
+    rng = np.random.default_rng(6)
+    demos = [random_demo(rng, objects=()) for _ in range(2)]
+    save_demonstrations(demos, tmp_path / "d.npz")
+    back = load_demonstrations(tmp_path / "d.npz")
+    assert back[0].object_names == ()
+
+
+def test_save_rejects_invalid_sets_and_writes_nothing(tmp_path: Path) -> None:
+    rng = np.random.default_rng(7)
+    with pytest.raises(ValueError, match="at least 1 demonstrations, got 0"):
+        save_demonstrations([], tmp_path / "d.npz")
+    with pytest.raises(ValueError, match="has 3 joints"):
+        save_demonstrations([random_demo(rng), random_demo(rng, n_joints=3)], tmp_path / "d.npz")
+    assert not (tmp_path / "d.npz").exists()
+
+
+def test_load_rejects_missing_corrupt_foreign_and_other_versions(tmp_path: Path) -> None:
+    rng = np.random.default_rng(8)
+    with pytest.raises(FileNotFoundError, match="not found"):
+        load_demonstrations(tmp_path / "nope.npz")
+    bad = tmp_path / "corrupt.npz"
+    bad.write_bytes(rng.bytes(200))
+    with pytest.raises(ValueError, match=r"corrupt\.npz is not a (valid|readable)"):
+        load_demonstrations(bad)
+    foreign = tmp_path / "foreign.npz"
+    np.savez(foreign, x=np.zeros(3))
+    with pytest.raises(ValueError, match="is not a pbdkit-demonstrations file"):
+        load_demonstrations(foreign)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    np.savez(tmp_path / "v2.npz", **{**arrays, "version": np.array(2)})
+    with pytest.raises(ValueError, match="of version 2; this pbdkit reads version 1"):
+        load_demonstrations(tmp_path / "v2.npz")
+    np.savez(tmp_path / "missing.npz", **{k: v for k, v in arrays.items() if k != "demo_1_t"})
+    with pytest.raises(ValueError, match="missing key 'demo_1_t'"):
+        load_demonstrations(tmp_path / "missing.npz")
+    broken = dict(arrays, demo_0_joints=np.full_like(arrays["demo_0_joints"], np.nan))
+    np.savez(tmp_path / "nan.npz", **broken)
+    with pytest.raises(ValueError, match="joints must be finite"):
+        load_demonstrations(tmp_path / "nan.npz")
+    # An archive whose member needs pickle is refused without running it.
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, format=np.array("pbdkit-demonstrations"), obj=np.array([{}], dtype=object))
+    with pytest.raises(ValueError, match="pbdkit-demonstrations"):
+        load_demonstrations(pickled)
+    assert zipfile.is_zipfile(path)
+
+
+def test_load_rejects_truncated_archive(tmp_path: Path) -> None:
+    rng = np.random.default_rng(10)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(ValueError, match=r"not a readable \.npz archive"):
+        load_demonstrations(truncated)
+
+
+# ----------------------------------------------------------------------------- CSV
+def test_csv_import(tmp_path: Path) -> None:
+    rng = np.random.default_rng(9)
+    t = np.linspace(0.0, 1.0, 11)
+    q = rng.normal(size=(11, 3))
+    g = (t > 0.5).astype(float)
+    lines = ["# logged on the arm", "t,pan,lift1,lift2,gripper"]
+    lines += [",".join(f"{v:.17g}" for v in (t[i], *q[i], g[i])) for i in range(11)]
+    path = tmp_path / "demo.csv"
+    path.write_text("\n".join(lines) + "\n")
+    d = demonstration_from_csv(path, objects={"glass": [0.4, 0.1, 0.1]})
+    np.testing.assert_array_equal(d.t, t)
+    np.testing.assert_array_equal(d.joints, q)
+    assert d.gripper is not None
+    np.testing.assert_array_equal(d.gripper, g)
+    d2 = demonstration_from_csv(path, objects={}, joint_columns=["lift2", "pan"])
+    np.testing.assert_array_equal(d2.joints, q[:, [2, 0]])
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("", "empty CSV file"),
+        ("pan,lift1\n0,1\n", "must contain a column 't'"),
+        ("t,pan,pan\n0,1,2\n", "duplicate column names"),
+        ("t,gripper\n0,1\n1,0\n", "no joint column"),
+        ("t,pan\n0,abc\n", "non-numeric or ragged"),
+        ("t,pan\n0,1,2\n1,2,3\n", "expected rows of 2 values"),
+        ("t,pan\n1,1\n0,2\n", "strictly increasing"),
+        ("t,pan\n0,1\n1,nan\n", "joints must be finite"),
+    ],
+)
+def test_csv_rejects_bad_files(tmp_path: Path, text: str, match: str) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        demonstration_from_csv(path, objects={})
+
+
+def test_csv_missing_file_and_columns(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="CSV file not found"):
+        demonstration_from_csv(tmp_path / "none.csv", objects={})
+    path = tmp_path / "d.csv"
+    path.write_text("t,pan\n0,1\n1,2\n")
+    with pytest.raises(ValueError, match=r"joint columns \['lift1'\] not in the header"):
+        demonstration_from_csv(path, objects={}, joint_columns=["lift1"])
+    with pytest.raises(ValueError, match=r"objects\['glass'\] must have shape \(3,\)"):
+        demonstration_from_csv(path, objects={"glass": [1.0]})
+    binary = tmp_path / "b.csv"
+    binary.write_bytes(b"\xff\xfe\x00\x81")
+    with pytest.raises(ValueError, match="not a UTF-8 text CSV file"):
+        demonstration_from_csv(binary, objects={})

@@ -1,0 +1,410 @@
+"""Tests of pbdkit.reproduce: the Table II loop, fusion in information form, controllers.
+
+A small spatial 4-joint arm with analytic kinematics (base yaw + three pitch joints) satisfies
+the KinematicModel protocol; constraints are built by hand so that every quantity is known.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from numpy.typing import NDArray
+
+from pbdkit.kinematics import damped_pinv
+from pbdkit.reproduce import (
+    Constraints,
+    KinematicModel,
+    ReachWarning,
+    check_objects,
+    reach_from_samples,
+    reproduce,
+)
+
+Float = NDArray[np.float64]
+
+
+class ToyArm:
+    """Base yaw q0, then pitch joints q1..q3 with links ``lengths`` in the vertical plane."""
+
+    def __init__(self, lower: float = -3.0, upper: float = 3.0) -> None:
+        self.lengths = np.array([0.3, 0.25, 0.15])
+        self.height = 0.1
+        self.n_joints = 4
+        self.lower = np.full(4, lower)
+        self.upper = np.full(4, upper)
+
+    def fk_jacobian(self, q: npt.ArrayLike) -> tuple[Float, Float]:
+        q = np.asarray(q, dtype=np.float64)
+        batch = q.ndim == 2
+        qq = np.atleast_2d(q)
+        phi = np.cumsum(qq[:, 1:], axis=1)  # (M, 3) absolute pitch of each link
+        lc, ls = self.lengths * np.cos(phi), self.lengths * np.sin(phi)
+        r, z = lc.sum(axis=1), self.height + ls.sum(axis=1)
+        c0, s0 = np.cos(qq[:, 0]), np.sin(qq[:, 0])
+        x = np.stack([r * c0, r * s0, z], axis=1)
+        # d r / d q_k = -sum_{i >= k} l_i sin(phi_i), d z / d q_k = sum_{i >= k} l_i cos(phi_i)
+        dr = -np.cumsum(ls[:, ::-1], axis=1)[:, ::-1]
+        dz = np.cumsum(lc[:, ::-1], axis=1)[:, ::-1]
+        jac = np.zeros((qq.shape[0], 3, 4))
+        jac[:, 0, 0], jac[:, 1, 0] = -r * s0, r * c0
+        jac[:, 0, 1:], jac[:, 1, 1:], jac[:, 2, 1:] = dr * c0[:, None], dr * s0[:, None], dz
+        return (x, jac) if batch else (x[0], jac[0])
+
+    def fk(self, q: npt.ArrayLike) -> Float:
+        return self.fk_jacobian(q)[0]
+
+
+def random_spd(rng: np.random.Generator, n: int, scale: float, batch: int) -> Float:
+    a = rng.normal(size=(batch, n, n))
+    return scale * (a @ np.swapaxes(a, -1, -2) / n + 0.2 * np.eye(n))
+
+
+def make_constraints(
+    rng: np.random.Generator,
+    n_steps: int = 40,
+    names: tuple[str, ...] = ("a", "b"),
+    joint_scale: float = 0.05,
+    task_scale: float = 1e-4,
+) -> Constraints:
+    s = np.linspace(0.0, 1.0, n_steps)[:, None]
+    q_start = np.array([0.2, 0.6, -0.9, -0.4])
+    q_end = np.array([0.9, 0.3, -1.2, 0.3])
+    joint_mean = q_start + (q_end - q_start) * s
+    task_mean = {k: 0.05 * rng.normal(size=(n_steps, 3)) for k in names}
+    return Constraints(
+        t=np.arange(float(n_steps)),
+        joint_mean=joint_mean,
+        joint_cov=random_spd(rng, 4, joint_scale, n_steps),
+        task_mean=task_mean,
+        task_cov={k: random_spd(rng, 3, task_scale, n_steps) for k in names},
+        gripper=np.linspace(0.0, 1.0, n_steps),
+    )
+
+
+def objects_near_path(c: Constraints, arm: ToyArm) -> dict[str, Float]:
+    # Place each object so that its target o + x_hat sits close to the joint-space path.
+    mid = c.n_steps // 2
+    x_mid = arm.fk(c.joint_mean[mid])
+    return {k: x_mid - c.task_mean[k][mid] + 0.02 for k in c.object_names}
+
+
+def right_pinv(jac: Float) -> Float:
+    """Undamped right pseudo-inverse J^T (J J^T)^-1 (the design's correction of Table II)."""
+    return np.asarray(jac.T @ np.linalg.inv(jac @ jac.T))
+
+
+def paper_fused_loop(
+    arm: ToyArm, c: Constraints, objs: dict[str, Float], q0: Float, alpha: float
+) -> tuple[Float, Float]:
+    """Table II literally: dtheta^(n) with the null-space term; Sigma^(n) = J+ S J+^T inverted
+    by the Moore-Penrose pseudo-inverse (the matrix is singular); explicit inverses."""
+    theta = q0.copy()
+    joints, covs = [theta.copy()], []
+    for j in range(1, c.n_steps):
+        x, jac = arm.fk_jacobian(theta)
+        jp = right_pinv(jac)
+        null = np.eye(4) - jp @ jac
+        lams = [np.linalg.inv(c.joint_cov[j])]
+        steps = [c.joint_mean[j] - theta]
+        for k, o in objs.items():
+            dx = o + c.task_mean[k][j] - x
+            steps.append(jp @ dx + alpha * null @ (c.joint_mean[j] - theta))
+            lams.append(np.linalg.pinv(jp @ c.task_cov[k][j] @ jp.T, rcond=1e-10, hermitian=True))
+        cov = np.linalg.inv(sum(lams))
+        theta = theta + cov @ sum(lam @ d for lam, d in zip(lams, steps, strict=True))
+        joints.append(theta.copy())
+        covs.append(cov)
+    return np.array(joints), np.array(covs)
+
+
+# ----------------------------------------------------------------------------- the toy arm
+def test_toy_arm_is_a_kinematic_model_with_a_correct_jacobian() -> None:
+    rng = np.random.default_rng(0)
+    arm = ToyArm()
+    assert isinstance(arm, KinematicModel)
+    q = rng.uniform(-1, 1, 4)
+    x, jac = arm.fk_jacobian(q)
+    h = 1e-6
+    fd = np.stack([(arm.fk(q + h * e) - arm.fk(q - h * e)) / (2 * h) for e in np.eye(4)], axis=1)
+    np.testing.assert_allclose(jac, fd, rtol=0, atol=1e-8)
+    xb, jb = arm.fk_jacobian(np.stack([q, q]))
+    np.testing.assert_allclose(xb[1], x, atol=1e-15)
+    np.testing.assert_allclose(jb[1], jac, atol=1e-15)
+
+
+# ----------------------------------------------------------------------------- fusion
+def test_fused_step_is_eq1_with_a_regularized_inverse_in_the_limit() -> None:
+    rng = np.random.default_rng(1)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=2)
+    objs = objects_near_path(c, arm)
+    q0 = c.joint_mean[0] + 0.05 * rng.normal(size=4)
+    res = reproduce(arm, c, objs, q0=q0, max_step=None)
+    step, cov = res.joints[1] - q0, res.covariances[1]
+
+    x, jac = arm.fk_jacobian(q0)
+    jp = right_pinv(jac)
+    null = np.eye(4) - jp @ jac
+    d_joint = c.joint_mean[1] - q0
+
+    def eq1(eps_rel: float, tikhonov: bool) -> tuple[Float, Float]:
+        lams, steps = [np.linalg.inv(c.joint_cov[1])], [d_joint]
+        for k, o in objs.items():
+            m = jp @ c.task_cov[k][1] @ jp.T  # Table II's Sigma^(n), rank 3
+            eps = eps_rel * np.linalg.norm(m, 2) ** (2 if tikhonov else 1)
+            if tikhonov:  # (M^2 + eps I)^-1 M -> M^+ as eps -> 0
+                lam = np.linalg.solve(m @ m + eps * np.eye(4), m)
+            else:  # the naive regularization (M + eps I)^-1
+                lam = np.linalg.inv(m + eps * np.eye(4))
+            lams.append(lam)
+            steps.append(jp @ (o + c.task_mean[k][1] - x) + 0.5 * null @ d_joint)
+        s = np.linalg.inv(sum(lams))
+        return s @ sum(lm @ d for lm, d in zip(lams, steps, strict=True)), s
+
+    errors, cov_errors = [], []
+    for eps_rel in (1e-2, 1e-4, 1e-6, 1e-8):
+        ref_step, ref_cov = eq1(eps_rel, tikhonov=True)
+        errors.append(np.linalg.norm(ref_step - step) / np.linalg.norm(step))
+        cov_errors.append(np.linalg.norm(ref_cov - cov) / np.linalg.norm(cov))
+    # Converges linearly in eps: every factor 100 in eps gains a factor 10 to 100.
+    assert errors[-1] < 1e-6 and cov_errors[-1] < 1e-6, (errors, cov_errors)
+    for e in (errors, cov_errors):
+        assert all(b < 0.1 * a for a, b in itertools.pairwise(e)), e
+    # The naive (Sigma^(n) + eps I)^-1 does not converge to it: it pins the null-space motion.
+    naive_step, _ = eq1(1e-8, tikhonov=False)
+    assert np.linalg.norm(naive_step - step) / np.linalg.norm(step) > 1e-2
+
+
+def test_null_space_term_has_no_effect_on_the_fused_controller() -> None:
+    rng = np.random.default_rng(2)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=40)
+    objs = objects_near_path(c, arm)
+    q0 = c.joint_mean[0]
+    ref0, cov0 = paper_fused_loop(arm, c, objs, q0, alpha=0.0)
+    ref5, cov5 = paper_fused_loop(arm, c, objs, q0, alpha=0.5)
+    np.testing.assert_allclose(ref5, ref0, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cov5, cov0, rtol=0, atol=1e-12 * np.abs(cov0).max())
+    for alpha in (0.0, 0.5):
+        res = reproduce(arm, c, objs, alpha=alpha, max_step=None)
+        np.testing.assert_allclose(res.joints, ref5, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(
+            res.covariances[1:], cov5, rtol=0, atol=1e-9 * np.abs(cov5).max()
+        )
+        np.testing.assert_allclose(res.positions, arm.fk(res.joints), rtol=0, atol=1e-14)
+    assert res.used == ("joint", "a", "b")
+
+
+def test_task_only_controller_is_table_ii_and_alpha_acts_there() -> None:
+    rng = np.random.default_rng(3)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=30, names=("a",))
+    objs = objects_near_path(c, arm)
+    runs = {}
+    for alpha in (0.0, 0.5):
+        res = reproduce(arm, c, objs, use=["a"], alpha=alpha, max_step=None)
+        theta = c.joint_mean[0].copy()
+        ref = [theta.copy()]
+        for j in range(1, c.n_steps):
+            x, jac = arm.fk_jacobian(theta)
+            jp = damped_pinv(jac)
+            d_hat = c.joint_mean[j] - theta
+            theta = theta + jp @ (objs["a"] + c.task_mean["a"][j] - x)
+            theta = theta + alpha * (np.eye(4) - jp @ jac) @ d_hat
+            ref.append(theta.copy())
+        np.testing.assert_allclose(res.joints, np.array(ref), rtol=0, atol=1e-12)
+        # The task is tracked one step late (closed loop on x_j): the error is the target's
+        # motion between two steps, a few cm here for random x_hat.
+        np.testing.assert_allclose(res.influence["a"], 1.0, rtol=0, atol=1e-9)
+        assert res.covariances.shape == (30, 4, 4)
+        assert np.linalg.matrix_rank(res.covariances[5], tol=1e-12) == 3
+        runs[alpha] = res.joints
+    assert np.abs(runs[0.5] - runs[0.0]).max() > 1e-2
+
+
+def test_task_subset_is_fused_in_task_space() -> None:
+    rng = np.random.default_rng(4)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=20)
+    objs = objects_near_path(c, arm)
+    res = reproduce(arm, c, objs, use=["b", "a"], max_step=None)
+    assert res.used == ("a", "b")
+    # Step 1 from theta_0: J+ (fused target - x_0) + alpha N (theta_hat_1 - theta_0).
+    theta0 = c.joint_mean[0]
+    x, jac = arm.fk_jacobian(theta0)
+    pa, pb = np.linalg.inv(c.task_cov["a"][1]), np.linalg.inv(c.task_cov["b"][1])
+    target = np.linalg.solve(
+        pa + pb, pa @ (objs["a"] + c.task_mean["a"][1]) + pb @ (objs["b"] + c.task_mean["b"][1])
+    )
+    jp = damped_pinv(jac)
+    expected = (
+        theta0 + jp @ (target - x) + 0.5 * (np.eye(4) - jp @ jac) @ (c.joint_mean[1] - theta0)
+    )
+    np.testing.assert_allclose(res.joints[1], expected, rtol=0, atol=1e-12)
+    total = res.influence["a"] + res.influence["b"]
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+
+
+def test_joint_only_controller_follows_theta_hat() -> None:
+    rng = np.random.default_rng(5)
+    arm = ToyArm()
+    c = make_constraints(rng)
+    res = reproduce(arm, c, objects_near_path(c, arm), use="joint")
+    np.testing.assert_array_equal(res.joints, c.joint_mean)
+    np.testing.assert_array_equal(res.covariances, c.joint_cov)
+    np.testing.assert_array_equal(res.influence["joint"], np.ones(c.n_steps))
+    np.testing.assert_allclose(res.positions, arm.fk(c.joint_mean), atol=1e-15)
+
+
+def test_joint_only_controller_from_a_distant_q0_is_step_limited() -> None:
+    rng = np.random.default_rng(13)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=40)
+    q0 = c.joint_mean[0] + np.array([0.5, -0.4, 0.3, 0.2])
+    res = reproduce(arm, c, objects_near_path(c, arm), q0=q0, use=["joint"], max_step=0.1)
+    steps = np.linalg.norm(np.diff(res.joints, axis=0), axis=1)
+    assert steps.max() <= 0.1 + 1e-12
+    np.testing.assert_array_equal(res.joints[0], q0)
+    np.testing.assert_allclose(res.joints[-10:], c.joint_mean[-10:], rtol=0, atol=1e-12)
+    full = reproduce(arm, c, objects_near_path(c, arm), q0=q0, use=["joint"], max_step=None)
+    np.testing.assert_array_equal(full.joints[1:], c.joint_mean[1:])  # the paper's full step
+
+
+def test_influence_shares_sum_to_one_and_follow_the_precisions() -> None:
+    rng = np.random.default_rng(6)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=30)
+    # Make task 'a' very tight in the second half only.
+    cov_a = c.task_cov["a"].copy()
+    cov_a[15:] *= 1e-4
+    covs = {"a": cov_a, "b": c.task_cov["b"]}
+    c2 = Constraints(c.t, c.joint_mean, c.joint_cov, c.task_mean, covs, gripper=c.gripper)
+    res = reproduce(arm, c2, objects_near_path(c2, arm))
+    total = sum(res.influence.values())
+    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+    for share in res.influence.values():
+        assert np.all(share >= -1e-12) and np.all(share <= 1 + 1e-12)
+    # A task constraint informs 3 of the 4 directions: its share is at most 3/4.
+    assert res.influence["a"][20:].min() > 0.7 and res.influence["a"][20:].max() <= 0.75 + 1e-9
+    assert res.influence["a"][:14].max() < res.influence["a"][20:].min() - 0.1
+    assert res.gripper.dtype == bool and res.gripper_signal is not None
+    np.testing.assert_array_equal(res.gripper, res.gripper_signal > 0.5)
+
+
+# ----------------------------------------------------------------------------- limits, reach
+@pytest.mark.parametrize("use", [None, ["joint"], ["a"], ["a", "b"]])
+def test_reproduction_never_leaves_the_joint_limits(use: list[str] | None) -> None:
+    rng = np.random.default_rng(7)
+    arm = ToyArm(lower=-0.8, upper=0.8)
+    c = make_constraints(rng)  # theta_hat leaves [-0.8, 0.8] (lift to -1.2)
+    objs = {k: np.array([0.1, 0.6, 0.1]) for k in c.object_names}  # pulls the arm around
+    res = reproduce(arm, c, objs, use=use)
+    assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
+    assert np.all(res.joints >= arm.lower) and np.all(res.joints <= arm.upper)
+    assert np.any(np.isclose(res.joints, arm.lower, atol=0, rtol=0) | (res.joints == arm.upper))
+
+
+@pytest.mark.parametrize("use", [None, ["a"]])
+def test_unreachable_target_warns_or_raises_and_never_gives_nan(use: list[str] | None) -> None:
+    rng = np.random.default_rng(8)
+    arm = ToyArm()
+    c = make_constraints(rng, names=("a",), task_scale=1e-6)
+    reach = reach_from_samples(arm)
+    assert 0.79 <= reach <= 1.02 * 0.8  # the arm reaches 0.7 m from (0, 0, 0.1): <= 0.8
+    far = {"a": np.array([1.5, 0.0, 0.2]) - c.task_mean["a"].mean(axis=0)}
+    with pytest.raises(ValueError, match=r"objects\['a'\]: the hand must be at .* beyond the arm"):
+        reproduce(arm, c, far, reach=reach, use=use)
+    with pytest.warns(ReachWarning, match="beyond the arm's reach"):
+        res = reproduce(arm, c, far, reach=reach, use=use, on_unreachable="warn")
+    assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.positions))
+    assert np.all(np.isfinite(res.covariances))
+    # No step is longer than max_step (0.1 rad by default), although the target is 1 m away.
+    assert np.linalg.norm(np.diff(res.joints, axis=0), axis=1).max() <= 0.1 + 1e-12
+    # The hand stretches toward the target: as far as the arm reaches.
+    assert np.linalg.norm(res.positions[-1] - [0.0, 0.0, 0.1]) > 0.65
+
+
+def test_singular_posture_stays_finite() -> None:
+    rng = np.random.default_rng(9)
+    arm = ToyArm()
+    c = make_constraints(rng, names=("a",))
+    straight = np.zeros(4)  # all pitch joints 0: the arm is stretched, J has rank 2
+    assert np.linalg.matrix_rank(arm.fk_jacobian(straight)[1]) == 2
+    objs = {"a": np.array([0.0, 0.0, 0.0])}
+    for use in (None, ["a"]):
+        res = reproduce(arm, c, objs, q0=straight, use=use)
+        assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
+
+
+# ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"objects": {"a": [0, 0, 0]}}, r"missing position\(s\) for \['b'\]"),
+        ({"objects": {"a": [0, 0, 0], "b": [0, 0, 0], "c": [0, 0, 0]}}, r"unknown object.*'c'"),
+        ({"objects": {"a": [0, 0, np.nan], "b": [0, 0, 0]}}, r"objects\['a'\] must be finite"),
+        ({"objects": {"a": [0, 0], "b": [0, 0, 0]}}, r"objects\['a'\] must have shape \(3,\)"),
+        ({"objects": [[0, 0, 0]]}, r"objects must be a dict"),
+        ({"q0": [0.0, 0.0, 0.0]}, r"q0 must have shape \(4,\), got \(3,\)"),
+        ({"q0": [0.0, 0.0, 0.0, np.inf]}, r"q0 must be finite"),
+        (
+            {"q0": [0.0, 3.5, 0.0, 0.0]},
+            r"q0\[1\] must be within the joint limits \[-3, 3\], got 3.5",
+        ),
+        ({"use": ["c"]}, r"use: unknown constraint\(s\) \['c'\]"),
+        ({"use": []}, r"use must name at least one constraint"),
+        ({"use": ["a", "a"]}, r"use must not repeat"),
+        ({"alpha": -0.5}, r"alpha must be finite and >= 0"),
+        ({"alpha": float("nan")}, r"alpha must be finite"),
+        ({"on_unreachable": "ignore"}, r"on_unreachable must be 'raise' or 'warn'"),
+    ],
+)
+def test_reproduce_rejects_bad_input(kwargs: dict[str, object], match: str) -> None:
+    rng = np.random.default_rng(10)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=5)
+    args: dict[str, object] = {"objects": {"a": [0.3, 0, 0.2], "b": [0.3, 0, 0.2]}}
+    args.update(kwargs)
+    objects = args.pop("objects")
+    with pytest.raises(ValueError, match=match):
+        reproduce(arm, c, objects, **args)  # type: ignore[arg-type]
+
+
+def test_reproduce_rejects_mismatched_robot_and_constraints() -> None:
+    rng = np.random.default_rng(11)
+    c = make_constraints(rng, n_steps=5)
+    arm = ToyArm()
+    arm.n_joints = 5
+    with pytest.raises(ValueError, match="robot has 5 joints, the constraints have 4"):
+        reproduce(arm, c, {"a": [0, 0, 0], "b": [0, 0, 0]})
+    with pytest.raises(ValueError, match="constraints must be a Constraints, got dict"):
+        reproduce(ToyArm(), {}, {})  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"unknown object name\(s\) \['x'\]; this skill knows"):
+        check_objects({"x": [0, 0, 0]}, ["a"])
+
+
+def test_constraints_validate_their_arrays() -> None:
+    rng = np.random.default_rng(12)
+    t = np.arange(5.0)
+    jm, jc = np.zeros((5, 4)), random_spd(rng, 4, 0.1, 5)
+    tm, tc = {"a": np.zeros((5, 3))}, {"a": random_spd(rng, 3, 1e-3, 5)}
+    c = Constraints(t, jm, jc, tm, tc)
+    assert c.names == ["joint", "a"] and c.n_steps == 5 and c.n_joints == 4
+    np.testing.assert_allclose(c.joint_prec @ jc, np.broadcast_to(np.eye(4), (5, 4, 4)), atol=1e-10)
+    with pytest.raises(ValueError, match=r"joint_cov must have shape \(5, 4, 4\)"):
+        Constraints(t, jm, jc[:, :3, :3], tm, tc)
+    with pytest.raises(ValueError, match=r"task_mean\['a'\] must have shape \(5, 3\)"):
+        Constraints(t, jm, jc, {"a": np.zeros((4, 3))}, tc)
+    with pytest.raises(ValueError, match="the same keys"):
+        Constraints(t, jm, jc, tm, {"b": tc["a"]})
+    with pytest.raises(ValueError, match="'joint' is reserved"):
+        Constraints(t, jm, jc, {"joint": tm["a"]}, {"joint": tc["a"]})
+    bad = jc.copy()
+    bad[2] = -np.eye(4)
+    with pytest.raises(ValueError, match=r"joint_cov must be positive definite .* steps \[2\]"):
+        Constraints(t, jm, bad, tm, tc)
+    with pytest.raises(ValueError, match=r"joint_mean must be finite"):
+        Constraints(t, np.full((5, 4), np.nan), jc, tm, tc)
