@@ -352,3 +352,19 @@ def test_reproduce_rejects_bad_input(
 ) -> None:
     with pytest.raises(ValueError, match=match):
         skill.reproduce(objects, **kwargs)  # type: ignore[arg-type]
+
+
+def test_duration_is_the_mean_demo_duration_and_survives_save_load(
+    skill: Skill, demos: list[Demonstration], tmp_path: Path
+) -> None:
+    expected = float(np.mean([d.duration for d in demos]))
+    assert skill.duration == pytest.approx(expected, rel=1e-12)
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    loaded = Skill.load(path)
+    assert loaded.duration == skill.duration
+    res = loaded.reproduce({"glass": demos[0].objects["glass"]})
+    t = loaded.times(res)
+    assert t[0] == 0.0
+    assert t[-1] == pytest.approx(expected)
+    assert np.all(np.diff(t) > 0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 import typer
@@ -21,6 +21,7 @@ from ._io import atomic_write_bytes
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
+    pretty_exceptions_enable=False,
     help="Teach a robot arm a skill from a few demonstrations (Calinon & Billard, IROS 2008).",
 )
 console = Console(stderr=True)
@@ -32,7 +33,15 @@ def _root() -> None:
 
 
 def _write_json(path: Path, data: object) -> None:
-    atomic_write_bytes(path, (json.dumps(data, indent=2, sort_keys=True) + "\n").encode())
+    def default(value: object) -> object:
+        if isinstance(value, np.ndarray):
+            return value.tolist()
+        if isinstance(value, (np.floating, np.integer, np.bool_)):
+            return value.item()
+        raise TypeError(f"not JSON serializable: {type(value).__name__}")
+
+    text = json.dumps(data, indent=2, sort_keys=True, default=default) + "\n"
+    atomic_write_bytes(path, text.encode())
 
 
 def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) -> dict[str, object]:
@@ -81,35 +90,226 @@ def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) ->
     return metrics
 
 
+TASKS = ("coaster", "basin", "lasa")
+
+
 @app.command()
 def demo(
-    out: Annotated[Path, typer.Option(help="Folder for figures and metrics.json.")] = Path(
-        "demo-output"
-    ),
-    task: Annotated[str, typer.Option(help="Task to run: lasa.")] = "lasa",
-    shape: Annotated[str, typer.Option(help="LASA shape (task lasa).")] = "GShape",
+    out: Annotated[Path, typer.Option(help="Folder for the results.")] = Path("demo-output"),
+    task: Annotated[
+        str, typer.Option(help="coaster, basin (the robot tasks) or lasa.")
+    ] = "coaster",
+    seed: Annotated[
+        int, typer.Option(help="Seed of the demonstrations and the new situation.")
+    ] = 0,
+    shape: Annotated[str, typer.Option(help="LASA shape (task lasa only).")] = "GShape",
+) -> None:
+    """Run the main job: demonstrations -> skill -> new situation -> physics, with figures,
+    a video, report.html and metrics.json in OUT."""
+    if task not in TASKS:
+        raise typer.BadParameter(
+            f"task must be one of {', '.join(TASKS)}; got {task!r}", param_hint="--task"
+        )
+    if task == "lasa":
+        with console.status(f"learning LASA shape {shape} ..."):
+            lasa_metrics = run_lasa_demo(out, shape)
+        table = Table(title=f"pbdkit demo: LASA {shape}")
+        table.add_column("metric")
+        table.add_column("value", justify="right")
+        for key in ("n_components", "rmse_gmr_to_demos", "rmse_pointwise_mean_to_demos"):
+            value = lasa_metrics[key]
+            table.add_row(key, f"{value:.3f}" if isinstance(value, float) else str(value))
+        table.add_row("learn time", f"{lasa_metrics['learn_seconds']:.2f} s")
+        console.print(table)
+        console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
+        return
+    from .demo import run_robot_demo
+
+    with console.status("starting ...") as st:
+        robot_metrics = run_robot_demo(task, out, seed=seed, status=lambda m: st.update(m))
+    metrics: dict[str, Any] = robot_metrics
+    table = Table(title=f"pbdkit demo: {task} task, new situation (seed {seed})")
+    table.add_column("controller")
+    table.add_column("success")
+    keys = [k for k in metrics["controllers"]["fused"] if k != "success"]
+    for k in keys:
+        table.add_column(k, justify="right")
+    for name, row in metrics["controllers"].items():
+        cells = [("[green]yes" if row["success"] else "[red]no")]
+        cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
+        table.add_row(name, *cells)
+    console.print(table)
+    ks = ", ".join(f"{k}: {v}" for k, v in metrics["n_components"].items())
+    console.print(f"K by BIC per space: {ks}")
+    secs = metrics["seconds"]
+    console.print(
+        f"teach {secs['teach']:.1f} s, learn {secs['learn']:.2f} s, reproduce "
+        f"{1000 * secs['reproduce_fused']:.0f} ms, whole demo {secs['total']:.1f} s"
+    )
+    console.print(f"open {out / 'report.html'} (video: {out / 'reproduction.mp4'})")
+
+
+@app.command()
+def teach(
+    task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
+    demos: Annotated[int, typer.Option(help="Number of demonstrations.")] = 5,
+    out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("demos.npz"),
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
-    """Run the main job: demonstrations -> GMM (K by BIC) -> GMR, with figures and metrics."""
-    del seed  # the LASA job is deterministic (time-based EM initialisation)
-    if task != "lasa":
-        raise typer.BadParameter(f"task must be 'lasa', got {task!r}", param_hint="--task")
-    with console.status(f"learning LASA shape {shape} ..."):
-        metrics = run_lasa_demo(out, shape)
-    table = Table(title=f"pbdkit demo: LASA {shape}")
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    for key in ("n_components", "rmse_gmr_to_demos", "rmse_pointwise_mean_to_demos"):
-        value = metrics[key]
-        table.add_row(key, f"{value:.3f}" if isinstance(value, float) else str(value))
-    table.add_row("learn time", f"{metrics['learn_seconds']:.2f} s")
+    """Record simulated kinesthetic demonstrations of a task."""
+    from .demos import save_demonstrations
+    from .sim.teacher import teach as sim_teach
+
+    if task not in ("coaster", "basin"):
+        raise typer.BadParameter(
+            f"task must be coaster or basin, got {task!r}", param_hint="--task"
+        )
+    if demos < 2:
+        raise typer.BadParameter(
+            f"need at least 2 demonstrations, got {demos}", param_hint="--demos"
+        )
+    with console.status(f"teaching {demos} demonstrations ..."):
+        items = sim_teach(task, demos, seed=seed)
+    save_demonstrations(items, out)
+    console.print(f"wrote {len(items)} demonstrations to {out}")
+
+
+@app.command()
+def learn(
+    demos: Annotated[Path, typer.Argument(help="Demonstrations (.npz from `pbdkit teach`).")],
+    robot: Annotated[str, typer.Option(help="katana, panda, or a URDF file.")] = "katana",
+    tip: Annotated[str | None, typer.Option(help="Tip frame (URDF robots).")] = None,
+    out: Annotated[Path, typer.Option(help="Output skill file.")] = Path("skill.npz"),
+    n_steps: Annotated[int, typer.Option(help="Steps of the time grid.")] = 1000,
+    max_components: Annotated[int, typer.Option(help="Largest K tried by BIC.")] = 10,
+) -> None:
+    """Learn a skill (one GMM per space, K by BIC) from demonstrations."""
+    from . import robots
+    from .demos import load_demonstrations
+    from .robot import Robot
+    from .skill import Skill
+
+    items = load_demonstrations(demos)
+    if robot in robots.available():
+        arm = robots.load(robot)
+    elif Path(robot).is_file():
+        arm = Robot.from_urdf(Path(robot), tip=tip)
+    else:
+        raise typer.BadParameter(
+            f"robot must be one of {robots.available()} or a URDF file, got {robot!r}",
+            param_hint="--robot",
+        )
+    with console.status("learning ..."):
+        start = time.perf_counter()
+        skill = Skill.learn(items, arm, n_steps=n_steps, max_components=max_components)
+        seconds = time.perf_counter() - start
+    skill.save(out)
+    ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components.items())
+    console.print(f"learned in {seconds:.2f} s; K by BIC per space: {ks}; wrote {out}")
+
+
+def _parse_object(text: str) -> tuple[str, np.ndarray]:
+    name, sep, rest = text.partition("=")
+    try:
+        values = [float(v) for v in rest.split(",")]
+    except ValueError:
+        values = []
+    if not sep or not name or len(values) != 3:
+        raise typer.BadParameter(
+            f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
+        )
+    return name, np.array(values)
+
+
+@app.command()
+def reproduce(
+    skill_path: Annotated[Path, typer.Argument(metavar="SKILL", help="Skill file (.npz).")],
+    obj: Annotated[
+        list[str], typer.Option("--object", help="NAME=x,y,z in the robot's base frame (m).")
+    ],
+    out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("repro.npz"),
+    use: Annotated[
+        list[str] | None, typer.Option(help="Constraints to use (default: all, fused).")
+    ] = None,
+) -> None:
+    """Reproduce a skill for new object positions (paper Table II)."""
+    from ._io import save_npz_atomic
+    from .skill import Skill
+
+    skill = Skill.load(skill_path)
+    objects = dict(_parse_object(o) for o in obj)
+    res = skill.reproduce(objects, use=use or None)
+    arrays = {
+        "t": res.t,
+        "joints": res.joints,
+        "positions": res.positions,
+        "gripper": res.gripper,
+        "covariances": res.covariances,
+    }
+    arrays.update({f"influence_{k}": v for k, v in res.influence.items()})
+    save_npz_atomic(out, arrays)
+    errs = ", ".join(f"{k} {1000 * v.min():.1f} mm" for k, v in res.task_errors.items())
+    console.print(f"wrote {out} ({len(res.t)} steps); closest approach: {errs}")
+
+
+@app.command()
+def evaluate(
+    task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
+    trials: Annotated[int, typer.Option(help="Number of new placements.")] = 50,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
+) -> None:
+    """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from .sim.experiment import evaluate as sim_evaluate
+
+    if task not in ("coaster", "basin"):
+        raise typer.BadParameter(
+            f"task must be coaster or basin, got {task!r}", param_hint="--task"
+        )
+    if trials < 1:
+        raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    ) as bar:
+        job = bar.add_task(f"{task}: teaching and learning", total=None)
+
+        def tick(done: int, total: int) -> None:
+            bar.update(job, description=f"{task}: executing", completed=done, total=total)
+
+        result = sim_evaluate(task, trials, seed, progress=tick)
+    if json_path is not None:
+        _write_json(json_path, result)
+    table = Table(title=f"{task}: {trials} new placements (seed {seed})")
+    table.add_column("controller")
+    table.add_column("success rate", justify="right")
+    table.add_column("median errors", justify="left")
+    for name, row in result["controllers"].items():
+        med = ", ".join(
+            f"{k} {v['median']:.1f}" for k, v in row["metrics"].items() if v is not None
+        )
+        table.add_row(name, f"{100 * row['success_rate']:.0f}%", med)
     console.print(table)
-    console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
+    ks = ", ".join(f"{k}: {v}" for k, v in result["n_components"].items())
+    console.print(f"K by BIC per space: {ks}")
 
 
 def main() -> None:
-    """Entry point of the ``pbdkit`` console script."""
-    app()
+    """Entry point of the ``pbdkit`` console script.
+
+    Bad input (a ValueError or a missing file from the library) ends with a one-line message
+    and exit status 2, not a traceback.
+    """
+    try:
+        app()
+    except (ValueError, FileNotFoundError) as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

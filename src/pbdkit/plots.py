@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from .skill import Skill
 
 __all__ = [
+    "figure_png",
     "plot_constraints",
     "plot_demonstrations_3d",
     "plot_gmm_ellipses",
@@ -57,11 +58,19 @@ def _pyplot() -> Any:
     return plt
 
 
-def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int = 110) -> None:
-    """Render ``fig`` to PNG and write it atomically to ``path``."""
+def figure_png(fig: Figure, *, dpi: int = 110) -> bytes:
+    """Render ``fig`` to PNG bytes and close it (frees matplotlib's memory)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    atomic_write_bytes(path, buf.getvalue())
+    _pyplot().close(fig)
+    return buf.getvalue()
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int = 110) -> bytes:
+    """Render ``fig`` to PNG, write it atomically to ``path``, close it; returns the PNG bytes."""
+    png = figure_png(fig, dpi=dpi)
+    atomic_write_bytes(path, png)
+    return png
 
 
 def plot_gmm_ellipses(

@@ -80,6 +80,9 @@ class Skill:
     reach : float
         Reach of the arm from its base origin (m): 1.02 x the largest ||f(theta)|| over 4096
         random postures within the limits and all demonstrated postures.
+    duration : float
+        Mean duration of the demonstrations (s): a reproduction's steps span this time when it
+        is executed (:meth:`times`). NaN when unknown.
     """
 
     def __init__(
@@ -91,8 +94,10 @@ class Skill:
         object_names: Sequence[str],
         has_gripper: bool,
         reach: float,
+        duration: float = float("nan"),
     ) -> None:
         self.robot = robot
+        self.duration = float(duration)
         self.n_steps = int(n_steps)
         self.object_names = list(object_names)
         self.gmms = {k: gmms[k] for k in [JOINT, *self.object_names]}
@@ -109,6 +114,18 @@ class Skill:
     def n_components(self) -> dict[str, int]:
         """K of each constraint space's GMM."""
         return {k: int(g.n_components_) for k, g in self.gmms.items()}
+
+    def times(self, result: ReproductionResult) -> Float:
+        """Time stamps in seconds for executing a reproduction: its steps spread over
+        :attr:`duration`.
+
+        Returns
+        -------
+        t : ndarray, shape (T,)
+        """
+        if not np.isfinite(self.duration) or self.duration <= 0:
+            raise ValueError("this skill has no known duration; scale result.t yourself")
+        return np.asarray(result.t / max(result.t[-1], 1.0) * self.duration, dtype=np.float64)
 
     @property
     def n_joints(self) -> int:
@@ -215,6 +232,7 @@ class Skill:
             object_names=names,
             has_gripper=has_gripper,
             reach=reach,
+            duration=float(np.mean([d.duration for d in items])),
         )
 
     # ------------------------------------------------------------------ generalization
@@ -333,6 +351,7 @@ class Skill:
             else np.zeros(0, dtype="<U1"),
             "has_gripper": np.array(self.has_gripper),
             "reach": np.array(self.reach),
+            "duration": np.array(self.duration),
             "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
             "robot_tip": np.array(tip if isinstance(tip, str) else ""),
         }
@@ -388,6 +407,7 @@ class Skill:
             names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
             has_gripper = bool(data["has_gripper"])
             reach = float(data["reach"])
+            duration = float(data["duration"]) if "duration" in data else float("nan")
             urdf = str(data["robot_urdf"])
             tip = str(data["robot_tip"])
             gmms: dict[str, GMM] = {}
@@ -439,4 +459,5 @@ class Skill:
             object_names=names,
             has_gripper=has_gripper,
             reach=reach,
+            duration=duration,
         )
