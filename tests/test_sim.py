@@ -1,0 +1,284 @@
+"""Tests of the simulated world: scene, kinematic agreement, cameras, physics, teacher."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+from pbdkit.robots import katana
+from pbdkit.sim import (
+    PLACEMENT_RANGES,
+    Simulation,
+    build_scene,
+    execute,
+    sample_objects,
+    solve_ik,
+    teach,
+    tool_pitch,
+)
+from pbdkit.sim import tasks as T
+from pbdkit.sim.scene import CAMERA_POSITIONS, CAMERA_TARGET
+
+
+def _red_mask(image: np.ndarray) -> np.ndarray:
+    rgb = image.astype(np.int32)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (r > 90) & (r > 2.5 * g) & (r > 2.5 * b)
+
+
+@pytest.mark.parametrize("task", ["coaster", "basin"])
+def test_tool_position_matches_pinocchio(task: str) -> None:
+    # The scene's arm comes from the same URDF text as the kinematics: no offset may creep in.
+    rng = np.random.default_rng(0)
+    robot = katana()
+    with Simulation.from_task(task) as sim:
+        for _ in range(200):
+            q = rng.uniform(robot.lower, robot.upper)
+            sim.set_joints(q)
+            np.testing.assert_allclose(sim.tool_position(), robot.fk(q), rtol=0, atol=1e-9)
+            assert np.allclose(sim.joints(), q, rtol=0, atol=1e-12)
+
+
+def test_tool_pitch_and_roll_conventions() -> None:
+    # The teacher relies on pitch = lift1 + lift2 - lift3 and on the roll leaving the tool
+    # point in place; both are checked against MuJoCo's tool frame.
+    rng = np.random.default_rng(1)
+    robot = katana()
+    with Simulation.from_task("coaster") as sim:
+        for _ in range(50):
+            q = rng.uniform(robot.lower, robot.upper)
+            sim.set_joints(q)
+            axis = sim.tool_rotation()[:, 0]  # the tool's x axis points out of the gripper
+            # elevation of the tool axis, with the sign of its horizontal part along the pan
+            horiz = axis[0] * math.cos(q[0]) + axis[1] * math.sin(q[0])
+            pitch = math.atan2(axis[2], horiz)
+            diff = (pitch - tool_pitch(q) + math.pi) % (2 * math.pi) - math.pi
+            assert abs(diff) < 1e-9
+            x0 = sim.tool_position()
+            q2 = q.copy()
+            q2[4] = rng.uniform(robot.lower[4], robot.upper[4])
+            sim.set_joints(q2)
+            np.testing.assert_allclose(sim.tool_position(), x0, rtol=0, atol=1e-12)
+
+
+def test_build_scene_places_objects_and_validates() -> None:
+    rng = np.random.default_rng(2)
+    objects = sample_objects("coaster", rng)
+    model, info = build_scene("coaster", objects)
+    assert model.nu == 12  # 5 position + 5 velocity servos, 2 fingers
+    assert info.n_liquid == 0
+    for name, p in objects.items():
+        np.testing.assert_allclose(info.objects[name], p, rtol=0, atol=1e-12)
+    sim = Simulation(model, info)
+    np.testing.assert_allclose(sim.object_positions()["glass"], objects["glass"], atol=1e-9)
+    sim.step(250)  # the glass rests on the shelf: it does not move
+    np.testing.assert_allclose(sim.object_positions()["glass"], objects["glass"], atol=5e-4)
+
+    _, info_b = build_scene("basin", seed=0)
+    assert info_b.n_liquid == T.N_LIQUID
+
+    with pytest.raises(ValueError, match="task must be one of"):
+        build_scene("juggling")
+    with pytest.raises(ValueError, match="unknown object"):
+        build_scene("coaster", {"cup": [0.5, 0.0, 0.1]})
+    with pytest.raises(ValueError, match=r"objects\['glass'\]: z must be"):
+        build_scene("coaster", {"glass": [0.47, 0.2, 0.5]})
+    with pytest.raises(ValueError, match="fixed"):
+        build_scene("basin", {"basin": [0.3, -0.2, T.BASIN_FLOOR]})
+    with pytest.raises(ValueError, match="finite"):
+        build_scene("coaster", {"glass": [np.nan, 0.2, 0.175]})
+
+
+def test_sample_objects_inside_ranges() -> None:
+    rng = np.random.default_rng(3)
+    for task, ranges in PLACEMENT_RANGES.items():
+        for _ in range(20):
+            objects = sample_objects(task, rng)
+            assert set(objects) == set(ranges)
+            assert all(ranges[k].contains(v) for k, v in objects.items())
+    assert PLACEMENT_RANGES["basin"]["basin"].fixed
+
+
+def test_render_frames_and_red_patch_in_both_cameras() -> None:
+    with Simulation.from_task("coaster") as sim:
+        glass = sim.object_positions()["glass"]
+        for cam in sim.info.cameras:
+            image = sim.render(cam)
+            assert image.shape == (240, 320, 3)
+            assert image.dtype == np.uint8
+            red = _red_mask(image)
+            assert red.sum() > 30, f"red patch not visible in {cam}"
+            # The patch's centroid lies where the camera model projects the glass (the band's
+            # visible front is a few pixels off the axis point).
+            K, R, t, w, h = sim.camera_parameters(cam)
+            assert (w, h) == (320, 240)
+            uvw = K @ (R @ glass + t)
+            uv = uvw[:2] / uvw[2]
+            rows, cols = np.nonzero(red)
+            assert abs(cols.mean() - uv[0]) < 6.0
+            assert abs(rows.mean() - uv[1]) < 10.0
+
+
+def test_camera_parameters_conventions() -> None:
+    with Simulation.from_task("basin") as sim:
+        centres = []
+        for cam in sim.info.cameras:
+            K, R, t, w, h = sim.camera_parameters(cam)
+            np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+            assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-12)
+            centre = -R.T @ t
+            np.testing.assert_allclose(centre, CAMERA_POSITIONS[cam], atol=1e-9)
+            centres.append(centre)
+            # OpenCV convention: the look-at point is in front (z > 0) at the image centre.
+            pc = R @ np.array(CAMERA_TARGET) + t
+            assert pc[2] > 0
+            uv = (K @ pc)[:2] / pc[2]
+            np.testing.assert_allclose(uv, [(w - 1) / 2, (h - 1) / 2], atol=1e-6)
+            # y down: a point above the target is higher in the image (smaller v)
+            above = R @ (np.array(CAMERA_TARGET) + np.array([0.0, 0.0, 0.1])) + t
+            assert (K @ above)[1] / above[2] < uv[1]
+        assert np.linalg.norm(centres[0] - centres[1]) == pytest.approx(0.30)
+        with pytest.raises(ValueError, match="camera must be one of"):
+            sim.render("cam_top")
+
+
+def test_solve_ik_reaches_targets() -> None:
+    rng = np.random.default_rng(4)
+    robot = katana()
+    for _ in range(20):
+        q_true = rng.uniform(robot.lower + 0.3, robot.upper - 0.3)
+        x = robot.fk(q_true)
+        q = solve_ik(robot, x, float(tool_pitch(q_true)), float(q_true[4]), q_true + 0.05)
+        np.testing.assert_allclose(robot.fk(q), x, rtol=0, atol=1e-6)
+        assert tool_pitch(q) == pytest.approx(tool_pitch(q_true), abs=1e-6)
+    with pytest.raises(ValueError, match="IK did not reach"):
+        solve_ik(robot, np.array([2.0, 0.0, 0.2]), 0.0, 0.0, np.zeros(5))
+
+
+def test_execute_validates_input() -> None:
+    sim = Simulation.from_task("coaster")
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.zeros((11, 5))
+    with pytest.raises(ValueError, match="joints must have shape"):
+        execute(sim, t, q[:, :4])
+    with pytest.raises(ValueError, match="strictly increasing"):
+        execute(sim, t[::-1], q)
+    with pytest.raises(ValueError, match="gripper must be"):
+        execute(sim, t, q, np.ones(3))
+    with pytest.raises(ValueError, match="finite"):
+        execute(sim, t, np.full((11, 5), np.nan))
+    with pytest.raises(ValueError, match="duration must be"):
+        execute(sim, t, q, duration=-1.0)
+    # Time steps of a reproduction, played over 0.2 s.
+    res = execute(sim, np.arange(11.0), q, settle=0.0, record_rate=100.0, duration=0.2)
+    assert res.t[-1] == pytest.approx(0.2, abs=0.011)
+
+
+def test_teacher_demonstrations_structure() -> None:
+    robot = katana()
+    demos = teach("coaster", n_demos=3, seed=5)
+    durations = [d.t[-1] for d in demos]
+    assert len(set(np.round(durations, 2))) > 1  # a person's timing varies
+    for d in demos:
+        np.testing.assert_allclose(np.diff(d.t), 0.01, atol=1e-9)  # 100 Hz encoders
+        assert np.all(d.joints >= robot.lower) and np.all(d.joints <= robot.upper)
+        # the Katana's motors cap joint speeds (1.19 rad/s): the teacher stays below
+        speed = np.abs(np.diff(d.joints, axis=0)) / np.diff(d.t)[:, None]
+        assert np.all(speed <= robot.velocity_limit)
+        assert set(d.objects) == {"glass", "coaster"}
+        assert d.gripper is not None
+        x = robot.fk(d.joints)
+        # Tight relative to the glass when the gripper closes, to the coaster when it opens.
+        close = int(np.argmax(d.gripper > 0.5))
+        open_ = close + int(np.argmax(d.gripper[close:] < 0.5))
+        np.testing.assert_allclose(x[close] - d.objects["glass"], T.GRASP_OFFSET, atol=1e-6)
+        expected = np.array([0.0, 0.0, T.GLASS_PATCH_CENTER + 0.002]) + T.GRASP_OFFSET
+        np.testing.assert_allclose(x[open_] - d.objects["coaster"], expected, atol=1e-6)
+    basin = teach("basin", n_demos=2, seed=6)
+    # The pouring gesture is the same in joint space: roll profiles after the roll starts.
+    rolls = []
+    for d in basin:
+        k = int(np.argmax(d.joints[:, 4] > 0.1))
+        rolls.append(d.joints[k : k + 400, 4])
+    np.testing.assert_allclose(rolls[0], rolls[1], atol=0.1)
+    assert max(rolls[0]) > 1.9
+
+
+def _run_demos(task: str, n: int, seed: int) -> list[dict[str, float]]:
+    metrics = []
+    for i, d in enumerate(teach(task, n_demos=n, seed=seed)):
+        with Simulation.from_task(task, d.objects, seed=i) as sim:
+            res = execute(sim, d.t, d.joints, d.gripper, settle=0.8, record_rate=20.0)
+        assert res.outcome.success, (task, i, res.outcome.metrics)
+        # the servos track the demonstration: no collision held the arm back
+        assert np.max(np.abs(res.joints - res.targets)) < 0.01
+        metrics.append(res.outcome.metrics)
+    return metrics
+
+
+def test_teacher_coaster_demonstrations_succeed_in_physics() -> None:
+    # Physical grasp (friction only) holds through lift and carry; the glass ends upright on
+    # the coaster, centred within 15 mm.
+    for m in _run_demos("coaster", n=2, seed=7):
+        assert m["placement_error_mm"] < 15.0
+        assert m["tilt_deg"] < 10.0
+
+
+def test_teacher_basin_demonstration_succeeds_in_physics() -> None:
+    (m,) = _run_demos("basin", n=1, seed=8)
+    assert m["liquid_fraction"] >= 0.9
+    assert m["held"] == 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task", ["coaster", "basin"])
+def test_every_demonstration_succeeds(task: str) -> None:
+    _run_demos(task, n=5, seed=11)
+
+
+def test_execute_records_frames() -> None:
+    rng = np.random.default_rng(9)
+    robot = katana()
+    with Simulation.from_task("coaster") as sim:
+        q0 = np.array([0.0, 1.6, -1.9, 0.0, 0.0]) + rng.normal(0.0, 0.01, 5)
+        t = np.linspace(0.0, 0.5, 51)
+        q = np.tile(q0, (51, 1))
+        q[:, 0] = np.linspace(q0[0], q0[0] + 0.3, 51)
+        res = execute(sim, t, q, None, settle=0.1, camera="cam_left", fps=10.0)
+        assert res.frames is not None and res.frames.shape[1:] == (240, 320, 3)
+        assert res.frames.shape[0] == res.frame_times.shape[0] >= 5
+        np.testing.assert_allclose(res.joints[-1], q[-1], atol=5e-3)
+        np.testing.assert_allclose(res.tool[-1], robot.fk(res.joints[-1]), atol=1e-9)
+        assert not res.outcome.success  # nothing was placed
+
+
+def test_save_video(tmp_path: Path) -> None:
+    from pbdkit.sim.video import save_video
+
+    rng = np.random.default_rng(10)
+    frames = rng.integers(0, 255, size=(6, 240, 320, 3), dtype=np.uint8)
+    out = save_video(frames, tmp_path / "run.mp4", fps=15.0)
+    assert out.exists() and out.stat().st_size > 1000
+    assert [p.name for p in out.parent.iterdir()] == ["run.mp4"]  # no temporary file left
+    with pytest.raises(ValueError, match="uint8"):
+        save_video(frames.astype(np.float64), tmp_path / "bad.mp4")
+
+
+def test_outcome_detects_a_failed_grasp() -> None:
+    # The same motion without closing the gripper never lifts the glass (the open fingers may
+    # drag it along the shelf): a failure, with the error measured from where the glass is.
+    (d,) = teach("coaster", n_demos=1, seed=12)
+    with Simulation.from_task("coaster", d.objects) as sim:
+        res = execute(sim, d.t, d.joints, np.zeros_like(d.t), settle=0.2, record_rate=10.0)
+        glass_xy = sim.glass_pose()[0][:2]
+    assert not res.outcome.success
+    assert not res.grasped.any()
+    assert np.all(res.objects["glass"][:, 2] < d.objects["glass"][2] + 0.005)
+    error = 1e3 * np.linalg.norm(glass_xy - d.objects["coaster"][:2])
+    assert res.outcome.metrics["placement_error_mm"] == pytest.approx(error, abs=1e-6)
+    assert error > 100.0
