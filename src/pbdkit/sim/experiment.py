@@ -10,6 +10,12 @@ A trial samples new object positions inside the demonstrated ranges
 (:data:`pbdkit.sim.tasks.PLACEMENT_RANGES`), reproduces the skill with a controller, executes the
 joint trajectory under physics over the demonstrations' mean duration, and judges the outcome
 (:func:`pbdkit.sim.execute.evaluate_outcome`).
+
+Vision in the loop (default of :func:`evaluate`): the skill is told the positions the stereo
+tracker measures (:mod:`pbdkit.sim.tracking`, calibrated once per evaluation), while the simulated
+world keeps the true ones; ``ground_truth=True`` tells it the true positions instead. A placement
+whose objects the cameras cannot locate counts as a failure of every controller (the robot would
+not move), reported in ``"tracking_failures"``; it never falls back to the true positions.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ..demos import Demonstration
@@ -31,6 +38,7 @@ from . import tasks as T
 from .execute import ExecutionResult, execute
 from .scene import Simulation
 from .teacher import teach
+from .tracking import ObjectNotSeenError, SimTracker, observed_objects
 
 __all__ = [
     "ControllerRun",
@@ -39,7 +47,11 @@ __all__ = [
     "controller_use",
     "evaluate",
     "learn_task",
+    "observe",
     "run_controller",
+    "start_posture",
+    "tracking_errors",
+    "tracking_summary",
 ]
 
 Float = NDArray[np.float64]
@@ -144,6 +156,93 @@ def run_controller(
     return ControllerRun(controller, objects, res, ex, rep_s, [str(w.message) for w in caught])
 
 
+def start_posture(ts: TaskSkill) -> Float:
+    """The skill's start posture theta_hat_0 (n,) (GMR mean at the first step, within limits).
+
+    The robot waits there while the cameras locate the objects: it does not depend on them.
+    """
+    robot = ts.skill.robot
+    return np.asarray(np.clip(ts.skill.constraints().joint_mean[0], robot.lower, robot.upper))
+
+
+def observe(
+    task: str,
+    truth: dict[str, Float],
+    tracker: SimTracker,
+    arm: npt.ArrayLike | None = None,
+) -> dict[str, Float]:
+    """Object positions the cameras give for a placement (fixed objects passed through).
+
+    Builds the scene of ``task`` with the objects at ``truth`` and the arm at ``arm``, runs one
+    tracker cycle and closes the scene. The arm must be out of the cameras' way: a patch partly
+    hidden gives a biased position, not a refusal (``bench_tracking.py``, arm at rest q = 0:
+    up to 10.5 mm on the coaster and 32 mm on the glass on the table; none at a start posture).
+
+    Parameters
+    ----------
+    task : {"coaster", "basin"}
+    truth : dict str -> ndarray, shape (3,)
+        True positions of every object of the task.
+    tracker : SimTracker
+        Calibrated on ``task``.
+    arm : array-like, shape (n,), optional
+        Arm joint angles while the cameras look (e.g. :func:`start_posture`); default q = 0.
+
+    Returns
+    -------
+    objects : dict str -> ndarray, shape (3,)
+        Same keys as ``truth``: tracked positions for the tracked objects, ``truth`` for the
+        others (fixed objects, known without vision).
+
+    Raises
+    ------
+    ObjectNotSeenError
+        If a tracked object is not located.
+    """
+    sim = Simulation.from_task(task, truth)
+    try:
+        if arm is not None:
+            sim.set_joints(arm)
+        fixed = {k: v for k, v in truth.items() if k not in tracker.objects}
+        seen = observed_objects(sim, tracker, fixed)
+    finally:
+        sim.close()
+    return {k: seen[k] for k in truth}
+
+
+def tracking_errors(
+    observed: dict[str, Float], truth: dict[str, Float], names: Sequence[str]
+) -> dict[str, float]:
+    """3-D distance (mm) between observed and true positions of the objects ``names``."""
+    return {k: 1e3 * float(np.linalg.norm(observed[k] - truth[k])) for k in names}
+
+
+def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:
+    """Mean and standard deviation (mm) of tracking errors, pooled and per object.
+
+    Parameters
+    ----------
+    errors : sequence of dict str -> float
+        One dict per observed placement (from :func:`tracking_errors`).
+
+    Returns
+    -------
+    summary : dict or None
+        ``{"mean", "std", "max", "n", "per_object": {name: {"mean", "std", "max", "n"}}}``;
+        None when nothing was observed.
+    """
+
+    def stats(v: NDArray[np.float64]) -> dict[str, Any]:
+        return {"mean": float(v.mean()), "std": float(v.std()), "max": float(v.max()), "n": len(v)}
+
+    pooled = np.array([e for row in errors for e in row.values()], dtype=np.float64)
+    if pooled.size == 0:
+        return None
+    names = list(dict.fromkeys(k for row in errors for k in row))
+    per = {k: stats(np.array([row[k] for row in errors if k in row])) for k in names}
+    return {**stats(pooled), "per_object": per}
+
+
 def evaluate(
     task: str,
     trials: int,
@@ -153,12 +252,37 @@ def evaluate(
     controllers: Sequence[str] | None = None,
     progress: Callable[[int, int], None] | None = None,
     task_skill: TaskSkill | None = None,
+    ground_truth: bool = False,
+    tracker: SimTracker | None = None,
 ) -> dict[str, Any]:
     """Success rate of every controller over ``trials`` random new placements.
 
-    Returns a JSON-ready dict ``{"task", "trials", "seed", "n_components", "controllers":
-    {NAME: {"success_rate", "successes", "metrics": {metric: {"mean", "median", "max"}}}},
-    "placements": [...]}``. ``progress(done, total)`` is called after every execution.
+    Parameters
+    ----------
+    task : {"coaster", "basin"}
+    trials : int
+        Number of new placements (>= 1).
+    seed : int
+        Seeds the demonstrations and the placements.
+    n_demos : int
+    controllers : sequence of str, optional
+        Default: every controller (:func:`controller_names`).
+    progress : callable, optional
+        ``progress(done, total)`` after every execution.
+    task_skill : TaskSkill, optional
+        A skill already learned (skips teaching and learning).
+    ground_truth : bool
+        Tell the skill the true object positions instead of the tracked ones.
+    tracker : SimTracker, optional
+        With vision: the tracker to use (default: calibrated here, at the nominal placement).
+
+    Returns
+    -------
+    result : dict
+        JSON-ready: ``{"task", "trials", "seed", "n_components", "vision", "controllers":
+        {NAME: {"success_rate", "successes", "metrics": {metric: {"mean", "median", "max"}}}},
+        "tracking_error_mm": {"mean", "std", "max", "n", "per_object"} or None,
+        "tracking_failures", "placements", "observed", "runs"}``.
     """
     T.check_task(task)
     if trials < 1:
@@ -170,21 +294,49 @@ def evaluate(
     # Placements come from their own stream so that they do not depend on the teacher's draws.
     rng = np.random.default_rng([seed, 1])
     placements = [T.sample_objects(task, rng) for _ in range(trials)]
+    vision = not ground_truth
+    q_start = start_posture(ts)
+    if vision and tracker is None:
+        calib = Simulation.from_task(task, T.nominal_objects(task))
+        try:
+            tracker = SimTracker.from_simulation(calib, at_nominal=False, arm=q_start)
+        finally:
+            calib.close()
     runs: dict[str, list[dict[str, Any]]] = {n: [] for n in names}
+    observed: list[dict[str, list[float]] | None] = []
+    errors: list[dict[str, float]] = []
+    failures = 0
     total, done = trials * len(names), 0
-    for objects in placements:
+    for truth in placements:
+        told: dict[str, Float] | None = truth
+        statuses: dict[str, str] = {}
+        if vision and tracker is not None:
+            try:
+                told = observe(task, truth, tracker, arm=q_start)
+            except ObjectNotSeenError as exc:
+                told = None
+                failures += 1
+                statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
+            else:
+                errors.append(tracking_errors(told, truth, tracker.objects))
+        observed.append(None if told is None else {k: v.tolist() for k, v in told.items()})
         for name in names:
-            runs[name].append(run_controller(ts, objects, name).summary())
+            if told is None:
+                runs[name].append({"success": False, "tracking_status": statuses})
+            else:
+                runs[name].append(run_controller(ts, told, name, sim_objects=truth).summary())
             done += 1
             if progress is not None:
                 progress(done, total)
     summary: dict[str, Any] = {}
     for name, rows in runs.items():
         successes = sum(bool(r["success"]) for r in rows)
-        metric_names = [k for k in rows[0] if k != "success"]
+        metric_names = list(
+            dict.fromkeys(k for r in rows for k in r if k not in ("success", "tracking_status"))
+        )
         stats = {}
         for m in metric_names:
-            vals = np.array([r[m] for r in rows if r[m] is not None], dtype=float)
+            vals = np.array([r[m] for r in rows if r.get(m) is not None], dtype=float)
             stats[m] = (
                 {
                     "mean": float(vals.mean()),
@@ -206,7 +358,11 @@ def evaluate(
         "n_demos": n_demos,
         "n_components": ts.skill.n_components,
         "learn_seconds": ts.learn_seconds,
+        "vision": vision,
         "controllers": summary,
+        "tracking_error_mm": tracking_summary(errors) if vision else None,
+        "tracking_failures": failures,
         "placements": [{k: v.tolist() for k, v in p.items()} for p in placements],
+        "observed": observed,
         "runs": runs,
     }
