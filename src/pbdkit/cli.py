@@ -92,6 +92,15 @@ def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) ->
 
 TASKS = ("coaster", "basin", "lasa")
 
+# Shared by `demo` and `evaluate`.
+GroundTruthOption = Annotated[
+    bool,
+    typer.Option(
+        "--ground-truth",
+        help="Tell the skill the true object positions (default: the stereo cameras').",
+    ),
+]
+
 
 @app.command()
 def demo(
@@ -103,13 +112,7 @@ def demo(
         int, typer.Option(help="Seed of the demonstrations and the new situation.")
     ] = 0,
     shape: Annotated[str, typer.Option(help="LASA shape (task lasa only).")] = "GShape",
-    ground_truth: Annotated[
-        bool,
-        typer.Option(
-            "--ground-truth",
-            help="Tell the skill the true object positions (default: the stereo cameras').",
-        ),
-    ] = False,
+    ground_truth: GroundTruthOption = False,
 ) -> None:
     """Run the main job: demonstrations -> skill -> new situation -> physics, with figures,
     a video, report.html and metrics.json in OUT."""
@@ -274,13 +277,7 @@ def evaluate(
     trials: Annotated[int, typer.Option(help="Number of new placements.")] = 50,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
-    ground_truth: Annotated[
-        bool,
-        typer.Option(
-            "--ground-truth",
-            help="Tell the skill the true object positions (default: the stereo cameras').",
-        ),
-    ] = False,
+    ground_truth: GroundTruthOption = False,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
