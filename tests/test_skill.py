@@ -368,3 +368,21 @@ def test_duration_is_the_mean_demo_duration_and_survives_save_load(
     assert t[0] == 0.0
     assert t[-1] == pytest.approx(expected)
     assert np.all(np.diff(t) > 0)
+
+
+def test_learn_objects_selects_the_task_space_constraints(
+    robot: Robot, demos: list[Demonstration]
+) -> None:
+    two = synthetic_demos(robot, np.random.default_rng(3), n_demos=3, coaster=True)
+    only_glass = Skill.learn(two, robot, n_steps=60, n_components=2, objects=["glass"])
+    assert only_glass.constraint_names == ["joint", "glass"]
+    res = only_glass.reproduce({"glass": two[0].objects["glass"]})
+    assert set(res.influence) == {"joint", "glass"}
+    both = Skill.learn(two, robot, n_steps=60, n_components=2)
+    assert both.constraint_names == ["joint", "glass", "coaster"]
+    # The same data give the same glass and joint models whichever objects are kept.
+    np.testing.assert_array_equal(both.gmms["glass"].means_, only_glass.gmms["glass"].means_)
+    with pytest.raises(ValueError, match=r"objects must be distinct names among .*'cup'"):
+        Skill.learn(two, robot, objects=["cup"])
+    with pytest.raises(ValueError, match=r"objects must be distinct names"):
+        Skill.learn(two, robot, objects=["glass", "glass"])

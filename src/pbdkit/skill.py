@@ -151,6 +151,7 @@ class Skill:
         random_state: int | None = 0,
         fit_samples: int | None = 100,
         bic_samples_per_sequence: float = 20.0,
+        objects: Sequence[str] | None = None,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
 
@@ -177,6 +178,12 @@ class Skill:
             larger values favour more components. Measured on the simulated coaster task
             (10 new placements): 20 gives K = 3/6/5 (joint/glass/coaster) and 10/10 fused
             successes; 50 gives K = 8/8/8 and 8/10.
+        objects : sequence of str, optional
+            The objects that get a task-space constraint, among those the demonstrations
+            record (default: all). An object that never moves (the basin of the paper's
+            second task) carries no information about where the hand must go relative to
+            it that the joint-space constraint does not already hold; leave it out to learn
+            the paper's configuration.
         fit_samples : int or None
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
@@ -202,7 +209,19 @@ class Skill:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
         n_steps = check_int(n_steps, "n_steps", minimum=2)
         check_positive_float(reg_covar, "reg_covar", allow_zero=True)
-        names = list(items[0].object_names)
+        recorded = list(items[0].object_names)
+        if objects is None:
+            names = recorded
+        else:
+            if isinstance(objects, str):
+                objects = [objects]
+            names = list(objects)
+            unknown = [k for k in names if k not in recorded]
+            if unknown or len(set(names)) != len(names):
+                raise ValueError(
+                    f"objects must be distinct names among the recorded objects {recorded}, "
+                    f"got {names}"
+                )
         has_gripper = items[0].gripper is not None
 
         n_fit = n_steps if fit_samples is None else check_int(fit_samples, "fit_samples", minimum=2)
