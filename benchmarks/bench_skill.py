@@ -3,7 +3,8 @@
 Workload (design.md, performance targets): 5 synthetic demonstrations (about 1000 samples each,
 irregular time stamps) of a glass-to-coaster task, rescaled to 1000 steps; 3 constraint spaces
 (joint + glass + coaster); BIC over K = 1..10 for every space; reproduction of 1000 steps with
-the 3 constraints fused.
+the 3 constraints fused (default settings: the Katana's velocity limits and max_step bound the
+steps; the comparison with the naive loop turns both off).
 
 Peers:
 - learning: scikit-learn ``GaussianMixture`` with its default (k-means) initialisation, a BIC sweep
@@ -88,6 +89,16 @@ def sklearn_bic_sweep(data: dict[str, Float], max_components: int = 10) -> dict[
     return chosen
 
 
+def _energy(robot: Robot, q: Float, terms: list[tuple[Float, Float, str | None]]) -> float:
+    """Fused energy of one step: 1/2 |q - theta_hat|^2 + 1/2 sum_n |f(q) - target_n|^2."""
+    xq = robot.fk(q)
+    total = 0.0
+    for prec, mean, name in terms:
+        r = (q if name is None else xq) - mean
+        total += 0.5 * float(r @ prec @ r)
+    return total
+
+
 def naive_reproduce(skill: Skill, objects: dict[str, Float], alpha: float = 0.5) -> Float:
     """The peer for reproduction: per-step GMR and Table II with explicit inverses."""
     robot = skill.robot
@@ -108,11 +119,23 @@ def naive_reproduce(skill: Skill, objects: dict[str, Float], alpha: float = 0.5)
             steps.append(jp @ (objects[k] + x_hat - x) + alpha * null @ (theta_hat - theta))
             precisions.append(np.linalg.pinv(jp @ sigma_x @ jp.T, hermitian=True))
         sigma = np.linalg.inv(sum(precisions))
-        theta = np.clip(
+        new = np.clip(
             theta + sigma @ sum(p @ d for p, d in zip(precisions, steps, strict=True)),
             robot.lower,
             robot.upper,
         )
+        # The same line search as pbdkit's (pbdkit.reproduce, "Stability"), written out: halve
+        # a step while it raises the fused energy of step j.
+        terms = [(np.linalg.inv(sigma_theta), theta_hat, None)]
+        for k in names:
+            x_hat, sigma_x = skill.gmms[k].regress_one([float(j)])
+            terms.append((np.linalg.inv(sigma_x), objects[k] + x_hat, k))
+        e0 = _energy(robot, theta, terms)
+        for _ in range(8):
+            if _energy(robot, new, terms) <= e0:
+                break
+            new = theta + 0.5 * (new - theta)
+        theta = new
         joints.append(theta)
     return np.array(joints)
 
@@ -167,7 +190,8 @@ def main() -> None:
 
         t_cold = median_time(cold, repeat=5 * args.repeat)
         t_naive = median_time(lambda: naive_reproduce(skill, objects), repeat=few)
-        fast = skill.reproduce(objects, max_step=None).joints
+        # The naive loop takes the paper's full step: no trust region, no velocity limit.
+        fast = skill.reproduce(objects, max_step=None, velocity_limit=None).joints
         naive = naive_reproduce(skill, objects)
         agree = float(np.abs(fast - naive).max())
         t_gmr = median_time(lambda: GMM.from_params(

@@ -8,6 +8,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from pbdkit.cli import app
+from pbdkit.gmm import CV_TOLERANCE
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -21,9 +22,14 @@ def test_demo_lasa_writes_figure_and_metrics(tmp_path: Path) -> None:
     assert png.read_bytes()[:8] == PNG_MAGIC
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert metrics["shape"] == "Angle"
-    assert 1 <= metrics["n_components"] < 10  # BIC picks an interior K, not the cap
-    k = str(metrics["n_components"])
-    assert metrics["bic_scores"][k] == min(metrics["bic_scores"].values())
+    sel = metrics["selection"]
+    k = metrics["n_components"]
+    assert sel["method"] == "cv" and sel["chosen"] == k
+    assert 2 <= k < sel["candidates"][-1]  # an interior K, not the cap
+    # The smallest K whose left-out-demonstration error is within the tolerance of the best.
+    scores = dict(zip(sel["candidates"], sel["scores"], strict=True))
+    bound = (1 + CV_TOLERANCE) * scores[sel["best"]]
+    assert scores[k] <= bound and all(scores[j] > bound for j in scores if j < k)
     # The generalized trajectory is a faithful summary of the demonstrations.
     assert metrics["rmse_gmr_to_demos"] < 1.5 * metrics["rmse_pointwise_mean_to_demos"]
     assert not list(tmp_path.glob(".*.tmp"))  # atomic writes leave no temporary file

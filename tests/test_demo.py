@@ -14,6 +14,11 @@ from typer.testing import CliRunner
 pytest.importorskip("mujoco")
 
 from pbdkit.cli import app
+from pbdkit.gmm import MAX_COMPONENTS
+from pbdkit.robots import katana
+from pbdkit.sim import experiment as E
+from pbdkit.sim.teacher import teach
+from pbdkit.skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -48,7 +53,13 @@ def test_demo_metrics_show_the_papers_finding(coaster_demo: Path) -> None:
     assert m["controllers"]["joint"]["success"] is False
     assert m["controllers"]["task:glass"]["success"] is False
     assert set(m["n_components"]) == {"joint", "glass", "coaster"}
-    assert all(1 <= k <= 10 for k in m["n_components"].values())
+    assert m["constraints"] == ["joint", "glass", "coaster"]
+    assert m["constrain_fixed"] is False  # nothing is fixed in the coaster task
+    assert all(2 <= k < MAX_COMPONENTS for k in m["n_components"].values())
+    # How K was chosen is recorded, and the K kept is the one reported.
+    for name, sel in m["selection"].items():
+        assert sel["method"] == "cv" and sel["chosen"] == m["n_components"][name]
+        assert len(sel["scores"]) == len(sel["candidates"]) == len(sel["fold_scores"])
     shares = m["mean_influence_fused"]
     assert sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
 
@@ -58,7 +69,8 @@ def test_report_has_every_section_and_embedded_figures(coaster_demo: Path) -> No
     for anchor in ("summary", "learned", "cartesian", "controllers", "video", "timings"):
         assert f'id="{anchor}"' in html, anchor
     images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)
-    assert len(images) == 3
+    assert len(images) == 4  # Figs. 4-5, how K was chosen, Fig. 3, Fig. 6
+    assert 'alt="selection"' in html
     assert 'src="reproduction.mp4"' in html
 
 
@@ -72,8 +84,79 @@ def test_evaluate_json_schema(tmp_path: Path) -> None:
     assert data["task"] == "coaster"
     assert data["trials"] == 1
     assert set(data["controllers"]) == {"fused", "joint", "task:glass", "task:coaster"}
+    assert data["constraints"] == ["joint", "glass", "coaster"]
+    assert data["constrain_fixed"] is False
     for row in data["controllers"].values():
         assert 0.0 <= row["success_rate"] <= 1.0
+
+
+@pytest.fixture(scope="module")
+def basin_demos() -> list:
+    return teach("basin", 2, seed=0, speed=2.0)
+
+
+@pytest.fixture
+def fast_basin(monkeypatch: pytest.MonkeyPatch, basin_demos: list) -> dict[str, object]:
+    """``learn_task`` on 2 fast demonstrations and a coarse grid; returns the options it got."""
+    got: dict[str, object] = {}
+
+    def learn_task(task: str, **kwargs: object) -> E.TaskSkill:
+        got.update(kwargs)
+        objects = E.constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
+        skill = Skill.learn(basin_demos, katana(), n_steps=100, max_components=3, objects=objects)
+        return E.TaskSkill(task, basin_demos, skill, 0.0, 0.0)
+
+    monkeypatch.setattr(E, "learn_task", learn_task)
+    return got
+
+
+@pytest.mark.parametrize(
+    ("flag", "constraints"),
+    [([], ["joint", "glass"]), (["--constrain-fixed"], ["joint", "glass", "basin"])],
+)
+def test_evaluate_basin_lists_the_controllers_of_its_constraints(
+    fast_basin: dict[str, object], tmp_path: Path, flag: list[str], constraints: list[str]
+) -> None:
+    path = tmp_path / "eval.json"
+    args = ["evaluate", "--task", "basin", "--trials", "1", "--seed", "0", "--ground-truth"]
+    result = CliRunner().invoke(app, [*args, "--json", str(path), *flag])
+    assert result.exit_code == 0, result.output
+    assert fast_basin["constrain_fixed"] is bool(flag)
+    data = json.loads(path.read_text())
+    assert data["constraints"] == constraints
+    assert data["constrain_fixed"] is bool(flag)
+    assert set(data["n_components"]) == set(constraints)
+    expected = {"fused", "joint", *(f"task:{k}" for k in constraints[1:])}
+    assert set(data["controllers"]) == expected == set(data["runs"])
+    # The world always has the basin; every controller's run was judged on it.
+    assert set(data["placements"][0]) == {"glass", "basin"}
+    for rows in data["runs"].values():
+        assert set(rows[0]) == {"success", "liquid_fraction", "held", "pour_error_mm", "tilt_deg"}
+
+
+def test_demo_basin_paper_configuration(fast_basin: dict[str, object], tmp_path: Path) -> None:
+    # With vision: the cameras track the glass, the fixed basin is known; the skill has no
+    # basin constraint, yet the run is judged on the scene's basin.
+    r = CliRunner().invoke(app, ["demo", "--task", "basin", "--out", str(tmp_path), "--seed", "0"])
+    assert r.exit_code == 0, r.output
+    assert fast_basin["constrain_fixed"] is False
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["constraints"] == ["joint", "glass"]
+    assert m["constrain_fixed"] is False
+    assert set(m["controllers"]) == {"fused", "joint", "task:glass"}
+    assert set(m["mean_influence_fused"]) == {"joint", "glass"}
+    assert set(m["objects"]) == set(m["observed_objects"]) == {"glass", "basin"}
+    assert m["observed_objects"]["basin"] == m["objects"]["basin"]  # fixed, known
+    assert set(m["tracking"]["error_mm"]) == {"glass"}
+    assert isinstance(m["success"], bool)
+    assert "liquid_fraction" in m["controllers"]["fused"]
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert (
+        "Constraints learned: joint space (with the gripper), the hand relative to the glass."
+        in html
+    )
+    assert "no task-space constraint" in html
+    assert "learn (2 GMMs" in html
 
 
 def test_teach_learn_reproduce_chain(tmp_path: Path) -> None:
@@ -103,6 +186,12 @@ def test_teach_learn_reproduce_chain(tmp_path: Path) -> None:
         assert data["joints"].shape == (200, 5)
         total = data["influence_joint"] + data["influence_glass"] + data["influence_coaster"]
         np.testing.assert_allclose(total, 1.0, atol=1e-9)
+    # --task-space chooses the recorded objects that get a constraint.
+    glass_only = tmp_path / "s_glass.npz"
+    args = ["learn", str(demos), "--out", str(glass_only), "--n-steps", "100"]
+    r = runner.invoke(app, [*args, "--task-space", "glass"])
+    assert r.exit_code == 0, r.output
+    assert Skill.load(glass_only).constraint_names == ["joint", "glass"]
 
 
 def test_cli_bad_input_is_reported_clearly(tmp_path: Path) -> None:

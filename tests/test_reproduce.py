@@ -15,12 +15,14 @@ from numpy.typing import NDArray
 
 from pbdkit.kinematics import damped_pinv
 from pbdkit.reproduce import (
+    VELOCITY_SAFETY,
     Constraints,
     KinematicModel,
     ReachWarning,
     check_objects,
     reach_from_samples,
     reproduce,
+    step_limit_from_velocity,
 )
 
 Float = NDArray[np.float64]
@@ -89,6 +91,46 @@ def objects_near_path(c: Constraints, arm: ToyArm) -> dict[str, Float]:
     mid = c.n_steps // 2
     x_mid = arm.fk(c.joint_mean[mid])
     return {k: x_mid - c.task_mean[k][mid] + 0.02 for k in c.object_names}
+
+
+def smooth_constraints(rng: np.random.Generator, n_steps: int = 60) -> Constraints:
+    """As make_constraints, with task means that move smoothly (a few cm over the grid)."""
+    c = make_constraints(rng, n_steps=n_steps)
+    s = np.linspace(0.0, np.pi, n_steps)[:, None]
+    task_mean = {
+        k: 0.03 * np.sin(s + i) * np.array([1.0, -1.0, 0.5]) for i, k in enumerate(c.object_names)
+    }
+    return Constraints(c.t, c.joint_mean, c.joint_cov, task_mean, c.task_cov, gripper=c.gripper)
+
+
+def unbounded_step(
+    arm: ToyArm,
+    c: Constraints,
+    objs: dict[str, Float],
+    used: list[str],
+    theta: Float,
+    j: int,
+    alpha: float = 0.5,
+) -> Float:
+    """Step j of Table II from theta with no bound, with explicit inverses (reference)."""
+    x, jac = arm.fk_jacobian(theta)
+    tasks = [k for k in used if k != "joint"]
+    precs = {k: np.linalg.inv(c.task_cov[k][j]) for k in tasks}
+    if "joint" in used and tasks:
+        lam_theta = np.linalg.inv(c.joint_cov[j])
+        lam = lam_theta + sum(jac.T @ p @ jac for p in precs.values())
+        eta = lam_theta @ (c.joint_mean[j] - theta)
+        eta = eta + sum(jac.T @ p @ (objs[k] + c.task_mean[k][j] - x) for k, p in precs.items())
+        return np.asarray(np.linalg.inv(lam) @ eta)
+    if "joint" in used:
+        return np.asarray(np.clip(c.joint_mean[j], arm.lower, arm.upper) - theta)
+    target = np.linalg.inv(sum(precs.values())) @ sum(
+        p @ (objs[k] + c.task_mean[k][j]) for k, p in precs.items()
+    )
+    jp = damped_pinv(jac)
+    return np.asarray(
+        jp @ (target - x) + alpha * (np.eye(4) - jp @ jac) @ (c.joint_mean[j] - theta)
+    )
 
 
 def right_pinv(jac: Float) -> Float:
@@ -283,28 +325,194 @@ def test_influence_shares_sum_to_one_and_follow_the_precisions() -> None:
     covs = {"a": cov_a, "b": c.task_cov["b"]}
     c2 = Constraints(c.t, c.joint_mean, c.joint_cov, c.task_mean, covs, gripper=c.gripper)
     res = reproduce(arm, c2, objects_near_path(c2, arm))
-    total = sum(res.influence.values())
-    np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
-    for share in res.influence.values():
-        assert np.all(share >= -1e-12) and np.all(share <= 1 + 1e-12)
-    # A task constraint informs 3 of the 4 directions: its share is at most 3/4.
-    assert res.influence["a"][20:].min() > 0.7 and res.influence["a"][20:].max() <= 0.75 + 1e-9
+    for influence in (res.influence, res.influence_joint_space):
+        assert list(influence) == ["joint", "a", "b"]
+        total = sum(influence.values())
+        np.testing.assert_allclose(total, 1.0, rtol=0, atol=1e-9)
+        for share in influence.values():
+            assert share.shape == (30,)
+            assert np.all(share >= -1e-12) and np.all(share <= 1 + 1e-12)
+    # In hand space the tight constraint dictates where the hand goes: its share nears 1.
+    assert res.influence["a"][20:].min() > 0.99
     assert res.influence["a"][:14].max() < res.influence["a"][20:].min() - 0.1
+    # In joint space a task constraint informs 3 of the 4 directions: its share is at most 3/4.
+    share_js = res.influence_joint_space["a"]
+    assert share_js[20:].min() > 0.7 and share_js[20:].max() <= 0.75 + 1e-9
+    assert share_js[:14].max() < share_js[20:].min() - 0.1
     assert res.gripper.dtype == bool and res.gripper_signal is not None
     np.testing.assert_array_equal(res.gripper, res.gripper_signal > 0.5)
 
 
-# ----------------------------------------------------------------------------- limits, reach
+def test_hand_space_precisions_add_by_woodbury() -> None:
+    # S = J Sigma J^T with Sigma = (Lambda_theta + J^T P J)^-1: S^-1 = (J Sigma_theta J^T)^-1 + P.
+    rng = np.random.default_rng(14)
+    for n in (3, 4, 5, 7):
+        sigma_theta = random_spd(rng, n, 0.1, 1)[0]
+        precs = random_spd(rng, 3, 50.0, 3)  # P_n of three task constraints
+        jac = rng.normal(size=(3, n))
+        sigma = np.linalg.inv(np.linalg.inv(sigma_theta) + jac.T @ precs.sum(axis=0) @ jac)
+        s = jac @ sigma @ jac.T
+        prior = np.linalg.inv(jac @ sigma_theta @ jac.T)
+        np.testing.assert_allclose(np.linalg.inv(s), prior + precs.sum(axis=0), rtol=1e-9)
+        shares = [np.trace(s @ prior) / 3, *(np.trace(s @ p) / 3 for p in precs)]
+        assert sum(shares) == pytest.approx(1.0, abs=1e-9)
+        assert all(0.0 <= v <= 1.0 for v in shares)
+
+
+@pytest.mark.parametrize("names", [("a",), ("a", "b")])
+def test_influence_is_the_hand_space_share_computed_the_explicit_way(
+    names: tuple[str, ...],
+) -> None:
+    rng = np.random.default_rng(15)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=25, names=names)
+    res = reproduce(arm, c, objects_near_path(c, arm), max_step=None)
+    assert res.used == ("joint", *names)
+    for j in range(c.n_steps):
+        # Step j was linearized at theta_{j-1} (step 0 reports J(theta_0)).
+        jac = arm.fk_jacobian(res.joints[max(j - 1, 0)])[1]
+        lam = {"joint": np.linalg.inv(c.joint_cov[j])}
+        hand = {"joint": np.linalg.inv(jac @ c.joint_cov[j] @ jac.T)}
+        for k in names:
+            hand[k] = np.linalg.inv(c.task_cov[k][j])
+            lam[k] = jac.T @ hand[k] @ jac
+        sigma = np.linalg.inv(sum(lam.values()))
+        s = jac @ sigma @ jac.T
+        for k in ("joint", *names):
+            expected_hand = np.trace(s @ hand[k]) / 3
+            expected_js = np.trace(sigma @ lam[k]) / 4
+            assert res.influence[k][j] == pytest.approx(expected_hand, abs=1e-9), (j, k)
+            assert res.influence_joint_space[k][j] == pytest.approx(expected_js, abs=1e-9)
+
+
+def test_influence_of_the_single_space_controllers() -> None:
+    rng = np.random.default_rng(16)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=20)
+    objs = objects_near_path(c, arm)
+    joint = reproduce(arm, c, objs, use="joint")
+    assert joint.influence.keys() == joint.influence_joint_space.keys() == {"joint"}
+    np.testing.assert_array_equal(joint.influence_joint_space["joint"], 1.0)
+    task = reproduce(arm, c, objs, use=["a", "b"])
+    s_fused = np.linalg.inv(np.linalg.inv(c.task_cov["a"]) + np.linalg.inv(c.task_cov["b"]))
+    expected = np.trace(s_fused @ np.linalg.inv(c.task_cov["a"]), axis1=1, axis2=2) / 3
+    np.testing.assert_allclose(task.influence["a"], expected, rtol=0, atol=1e-9)
+    for k in ("a", "b"):  # no joint-space precision (rank-3 covariance): the same shares
+        np.testing.assert_array_equal(task.influence_joint_space[k], task.influence[k])
+        assert task.influence_joint_space[k] is not task.influence[k]
+
+
+# ----------------------------------------------------------------------------- step bounds
 @pytest.mark.parametrize("use", [None, ["joint"], ["a"], ["a", "b"]])
-def test_reproduction_never_leaves_the_joint_limits(use: list[str] | None) -> None:
+def test_step_limit_scales_steps_uniformly_exactly_where_a_bound_binds(
+    use: list[str] | None,
+) -> None:
+    rng = np.random.default_rng(17)
+    arm = ToyArm()
+    c = smooth_constraints(rng, n_steps=60)
+    objs = objects_near_path(c, arm)
+    q0 = c.joint_mean[0] + np.array([0.4, -0.3, 0.3, 0.25])  # far from theta_hat_0
+    limit, max_step = np.array([0.02, 0.03, 0.025, 0.04]), 0.045
+    res = reproduce(arm, c, objs, q0=q0, use=use, step_limit=limit, max_step=max_step)
+    steps = np.diff(res.joints, axis=0)
+    assert np.all(np.abs(steps) <= limit * (1 + 1e-12))
+    assert np.linalg.norm(steps, axis=1).max() <= max_step * (1 + 1e-12)
+    used = list(res.used)
+    by_joint, by_norm = [], []
+    for j in range(1, c.n_steps):
+        raw = unbounded_step(arm, c, objs, used, res.joints[j - 1], j)
+        s_joint = 1.0 / np.max(np.abs(raw) / limit)
+        s_norm = max_step / np.linalg.norm(raw)
+        scale = min(1.0, s_joint, s_norm)
+        # Away from ties, so that the reference and the loop agree on whether a bound binds.
+        assert scale == 1.0 or scale < 1.0 - 1e-9, (j, scale)
+        assert res.limited[j] == (scale < 1.0), j
+        expected = np.clip(res.joints[j - 1] + scale * raw, arm.lower, arm.upper)
+        np.testing.assert_allclose(res.joints[j], expected, rtol=0, atol=1e-10)
+        by_joint.append(s_joint < min(1.0, s_norm))
+        by_norm.append(s_norm < min(1.0, s_joint))
+    assert not res.limited[0] and res.limited.dtype == bool and res.limited.shape == (60,)
+    # A scaled step meets the bound that binds: the binding joint moves at its top speed.
+    assert np.all((res.joints > arm.lower) & (res.joints < arm.upper))  # no clipping here
+    ratio = np.max(np.abs(steps) / limit, axis=1)
+    norm = np.linalg.norm(steps, axis=1) / max_step
+    np.testing.assert_allclose(ratio[np.array(by_joint)], 1.0, rtol=1e-12)
+    np.testing.assert_allclose(norm[np.array(by_norm)], 1.0, rtol=1e-12)
+    # The far q0 is caught up without a jump, and the bounds let go afterwards: they bind only
+    # while the posture lags behind the constraints.
+    assert res.limited[1:5].all() and not res.limited.all()
+    assert any(by_joint)
+    if use is None:
+        assert any(by_norm)  # here max_step binds too, where it is the tighter bound
+
+
+@pytest.mark.parametrize("use", [None, ["joint"], ["a"]])
+def test_a_step_limit_that_never_binds_changes_nothing(use: list[str] | None) -> None:
+    rng = np.random.default_rng(18)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=30)
+    objs = objects_near_path(c, arm)
+    q0 = c.joint_mean[0] + np.array([0.4, -0.3, 0.3, 0.25])  # max_step binds
+    ref = reproduce(arm, c, objs, q0=q0, use=use)
+    for limit in (1e9, np.inf, [np.inf, 1e9, np.inf, np.inf]):
+        res = reproduce(arm, c, objs, q0=q0, use=use, step_limit=limit)
+        for field in ("joints", "positions", "covariances", "limited"):
+            np.testing.assert_array_equal(getattr(res, field), getattr(ref, field))
+        for k in ref.influence:
+            np.testing.assert_array_equal(res.influence[k], ref.influence[k])
+    assert ref.limited.any()  # by max_step
+    free = reproduce(arm, c, objs, use="joint", step_limit=1e9)
+    assert not free.limited.any()
+
+
+def test_step_limit_from_velocity() -> None:
+    arm = ToyArm()
+    assert step_limit_from_velocity("robot", arm, 0.02) is None  # the toy arm has no limits
+    arm.velocity_limit = np.array([1.0, 0.0, -1.0, np.inf])  # type: ignore[attr-defined]
+    limit = step_limit_from_velocity("robot", arm, 0.02)
+    assert limit is not None
+    np.testing.assert_array_equal(limit, [0.02 * VELOCITY_SAFETY, np.inf, np.inf, np.inf])
+    assert VELOCITY_SAFETY == 1 - 1e-6
+    assert step_limit_from_velocity("robot", arm, float("nan")) is None  # unknown timing
+    arm.velocity_limit = np.zeros(4)  # type: ignore[attr-defined]
+    assert step_limit_from_velocity("robot", arm, 0.02) is None
+    assert step_limit_from_velocity(None, arm, 0.02) is None
+    explicit = step_limit_from_velocity(2.0, arm, 0.01)
+    assert explicit is not None
+    np.testing.assert_array_equal(explicit, np.full(4, 2.0 * (0.01 * VELOCITY_SAFETY)))
+    per_joint = step_limit_from_velocity([1.0, 2.0, 3.0, np.inf], arm, 0.5)
+    assert per_joint is not None
+    np.testing.assert_allclose(per_joint, [0.5, 1.0, 1.5, np.inf], rtol=2e-6)
+    assert np.all(per_joint[:3] < [0.5, 1.0, 1.5])
+    with pytest.raises(ValueError, match=r"velocity_limit is in rad/s .* unknown"):
+        step_limit_from_velocity(1.0, arm, float("nan"))
+    with pytest.raises(ValueError, match=r"velocity_limit\[1\] must be > 0 \(rad/s"):
+        step_limit_from_velocity([1.0, 0.0, 1.0, 1.0], arm, 0.02)
+    with pytest.raises(ValueError, match=r"velocity_limit must be a number or have shape \(4,\)"):
+        step_limit_from_velocity([1.0, 1.0], arm, 0.02)
+    with pytest.raises(ValueError, match=r"velocity_limit must be 'robot', a number"):
+        step_limit_from_velocity("urdf", arm, 0.02)
+    arm.velocity_limit = np.ones(3)  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match=r"robot\.velocity_limit must have shape \(4,\)"):
+        step_limit_from_velocity("robot", arm, 0.02)
+
+
+# ----------------------------------------------------------------------------- limits, reach
+@pytest.mark.parametrize("step_limit", [None, [0.02, 0.05, 0.03, 0.04]])
+@pytest.mark.parametrize("use", [None, ["joint"], ["a"], ["a", "b"]])
+def test_reproduction_never_leaves_the_joint_limits(
+    use: list[str] | None, step_limit: list[float] | None
+) -> None:
     rng = np.random.default_rng(7)
     arm = ToyArm(lower=-0.8, upper=0.8)
     c = make_constraints(rng)  # theta_hat leaves [-0.8, 0.8] (lift to -1.2)
     objs = {k: np.array([0.1, 0.6, 0.1]) for k in c.object_names}  # pulls the arm around
-    res = reproduce(arm, c, objs, use=use)
+    res = reproduce(arm, c, objs, use=use, step_limit=step_limit)
     assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
     assert np.all(res.joints >= arm.lower) and np.all(res.joints <= arm.upper)
     assert np.any(np.isclose(res.joints, arm.lower, atol=0, rtol=0) | (res.joints == arm.upper))
+    if step_limit is not None:  # clipping only shortens a bounded step
+        assert np.all(np.abs(np.diff(res.joints, axis=0)) <= np.array(step_limit) * (1 + 1e-12))
 
 
 @pytest.mark.parametrize("use", [None, ["a"]])
@@ -337,6 +545,10 @@ def test_singular_posture_stays_finite() -> None:
     for use in (None, ["a"]):
         res = reproduce(arm, c, objs, q0=straight, use=use)
         assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
+        # The hand-space shares need no inverse of the rank-2 J Sigma_theta J^T at step 0.
+        np.testing.assert_allclose(sum(res.influence.values()), 1.0, rtol=0, atol=1e-9)
+        for share in res.influence.values():
+            assert np.all(np.isfinite(share)) and np.all((share >= 0) & (share <= 1 + 1e-12))
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -360,6 +572,14 @@ def test_singular_posture_stays_finite() -> None:
         ({"alpha": -0.5}, r"alpha must be finite and >= 0"),
         ({"alpha": float("nan")}, r"alpha must be finite"),
         ({"on_unreachable": "ignore"}, r"on_unreachable must be 'raise' or 'warn'"),
+        ({"max_step": 0.0}, r"max_step must be finite and > 0"),
+        ({"step_limit": 0.0}, r"step_limit\[0\] must be > 0 \(rad per step; inf leaves"),
+        ({"step_limit": [0.1, -0.1, 0.1, 0.1]}, r"step_limit\[1\] must be > 0 .* got -0.1"),
+        ({"step_limit": [0.1, 0.1, np.nan, 0.1]}, r"step_limit\[2\] must be > 0 .* got nan"),
+        ({"step_limit": -np.inf}, r"step_limit\[0\] must be > 0 .* got -inf"),
+        ({"step_limit": [0.1, 0.1]}, r"step_limit must be a number or have shape \(4,\)"),
+        ({"step_limit": [[0.1] * 4]}, r"step_limit must be 0-D or 1-D, got 2-D"),
+        ({"step_limit": "fast"}, r"step_limit must be an array of numbers, got str"),
     ],
 )
 def test_reproduce_rejects_bad_input(kwargs: dict[str, object], match: str) -> None:

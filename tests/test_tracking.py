@@ -151,6 +151,12 @@ def test_observed_objects_passes_fixed_objects_through() -> None:
             observed_objects(sim, tracker, fixed={"glass": truth["glass"]})
         with pytest.raises(ValueError, match=r"fixed\['basin'\] must be a finite \(3,\)"):
             observed_objects(sim, tracker, fixed={"basin": [0.0, np.nan, 0.0]})
+    # The experiment's observe(): given the glass only, the scene still has the basin at its
+    # fixed place and the robot knows it (a skill without a basin constraint ignores it).
+    told = E.observe("basin", {"glass": truth["glass"]}, tracker, arm=_arm(1))
+    assert list(told) == ["glass", "basin"]
+    np.testing.assert_array_equal(told["basin"], truth["basin"])
+    np.testing.assert_allclose(told["glass"], seen["glass"], rtol=0, atol=1e-12)
 
 
 def test_bad_objects_are_named() -> None:

@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ._io import atomic_write_bytes
+from .gmm import MAX_COMPONENTS
 
 app = typer.Typer(
     add_completion=False,
@@ -44,7 +45,9 @@ def _write_json(path: Path, data: object) -> None:
     atomic_write_bytes(path, text.encode())
 
 
-def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) -> dict[str, object]:
+def run_lasa_demo(
+    out: Path, shape: str = "GShape", max_components: int = MAX_COMPONENTS
+) -> dict[str, object]:
     """Learn a LASA handwriting shape with GMM/GMR and write a figure and metrics.json.
 
     Returns the metrics written.
@@ -57,9 +60,11 @@ def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) ->
     demos = load_lasa(shape)
     n_steps = demos[0].pos.shape[0]
     t = np.linspace(0.0, 1.0, n_steps)
-    x = np.vstack([np.column_stack([t, d.pos]) for d in demos])
+    # EM sees 100 evenly spaced steps per demonstration, as Skill.learn (fit_samples).
+    fit_steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(100, n_steps))).astype(int))
+    x = np.vstack([np.column_stack([t[fit_steps], d.pos[fit_steps]]) for d in demos])
     start = time.perf_counter()
-    gmm = GMM("bic", max_components=max_components).fit(x)
+    gmm = GMM("auto", max_components=max_components).fit(x)
     learn_s = time.perf_counter() - start
     start = time.perf_counter()
     mean, cov = gmm.regress(t[:, None])
@@ -77,7 +82,7 @@ def run_lasa_demo(out: Path, shape: str = "GShape", max_components: int = 10) ->
         "n_demonstrations": len(demos),
         "n_steps": n_steps,
         "n_components": gmm.n_components_,
-        "bic_scores": {str(k): v for k, v in gmm.bic_scores_.items()},
+        "selection": gmm.selection_.as_dict(),
         "rmse_gmr_to_demos": rmse(mean),
         "rmse_pointwise_mean_to_demos": rmse(positions.mean(axis=0)),
         "final_point_error": float(np.linalg.norm(mean[-1] - positions[:, -1].mean(axis=0))),
@@ -100,6 +105,14 @@ GroundTruthOption = Annotated[
         help="Tell the skill the true object positions (default: the stereo cameras').",
     ),
 ]
+ConstrainFixedOption = Annotated[
+    bool,
+    typer.Option(
+        "--constrain-fixed",
+        help="Also learn a task-space constraint relative to fixed objects (the basin), which "
+        "the paper does not (default: joint space and the moving objects only).",
+    ),
+]
 
 
 @app.command()
@@ -113,6 +126,7 @@ def demo(
     ] = 0,
     shape: Annotated[str, typer.Option(help="LASA shape (task lasa only).")] = "GShape",
     ground_truth: GroundTruthOption = False,
+    constrain_fixed: ConstrainFixedOption = False,
 ) -> None:
     """Run the main job: demonstrations -> skill -> new situation -> physics, with figures,
     a video, report.html and metrics.json in OUT."""
@@ -139,7 +153,12 @@ def demo(
     try:
         with console.status("starting ...") as st:
             robot_metrics = run_robot_demo(
-                task, out, seed=seed, status=lambda m: st.update(m), ground_truth=ground_truth
+                task,
+                out,
+                seed=seed,
+                status=lambda m: st.update(m),
+                ground_truth=ground_truth,
+                constrain_fixed=constrain_fixed,
             )
     except ObjectNotSeenError as exc:
         console.print(f"[red]error:[/red] {exc}")
@@ -156,8 +175,7 @@ def demo(
         cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
         table.add_row(name, *cells)
     console.print(table)
-    ks = ", ".join(f"{k}: {v}" for k, v in metrics["n_components"].items())
-    console.print(f"K by BIC per space: {ks}")
+    _print_components(task, metrics["n_components"])
     tracking = metrics["tracking"]
     _print_tracking(metrics["vision"], tracking["tracking_error_mm"] if tracking else None)
     secs = metrics["seconds"]
@@ -200,9 +218,20 @@ def learn(
     tip: Annotated[str | None, typer.Option(help="Tip frame (URDF robots).")] = None,
     out: Annotated[Path, typer.Option(help="Output skill file.")] = Path("skill.npz"),
     n_steps: Annotated[int, typer.Option(help="Steps of the time grid.")] = 1000,
-    max_components: Annotated[int, typer.Option(help="Largest K tried by BIC.")] = 10,
+    max_components: Annotated[
+        int, typer.Option(help="Largest K tried (K is chosen per space by cross-validation).")
+    ] = MAX_COMPONENTS,
+    task_space: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--task-space",
+            help="An object that gets a task-space constraint (repeat for several; default: "
+            "every recorded object). The paper's basin task: --task-space glass (the basin is "
+            "fixed).",
+        ),
+    ] = None,
 ) -> None:
-    """Learn a skill (one GMM per space, K by BIC) from demonstrations."""
+    """Learn a skill (one GMM per space, K chosen by cross-validation) from demonstrations."""
     from . import robots
     from .demos import load_demonstrations
     from .robot import Robot
@@ -220,11 +249,13 @@ def learn(
         )
     with console.status("learning ..."):
         start = time.perf_counter()
-        skill = Skill.learn(items, arm, n_steps=n_steps, max_components=max_components)
+        skill = Skill.learn(
+            items, arm, n_steps=n_steps, max_components=max_components, objects=task_space or None
+        )
         seconds = time.perf_counter() - start
     skill.save(out)
     ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components.items())
-    console.print(f"learned in {seconds:.2f} s; K by BIC per space: {ks}; wrote {out}")
+    console.print(f"learned in {seconds:.2f} s; K per space: {ks}; wrote {out}")
 
 
 def _parse_object(text: str) -> tuple[str, np.ndarray]:
@@ -278,6 +309,7 @@ def evaluate(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
     ground_truth: GroundTruthOption = False,
+    constrain_fixed: ConstrainFixedOption = False,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
@@ -302,7 +334,14 @@ def evaluate(
         def tick(done: int, total: int) -> None:
             bar.update(job, description=f"{task}: executing", completed=done, total=total)
 
-        result = sim_evaluate(task, trials, seed, progress=tick, ground_truth=ground_truth)
+        result = sim_evaluate(
+            task,
+            trials,
+            seed,
+            progress=tick,
+            ground_truth=ground_truth,
+            constrain_fixed=constrain_fixed,
+        )
     if json_path is not None:
         _write_json(json_path, result)
     table = Table(title=f"{task}: {trials} new placements (seed {seed})")
@@ -315,14 +354,22 @@ def evaluate(
         )
         table.add_row(name, f"{100 * row['success_rate']:.0f}%", med)
     console.print(table)
-    ks = ", ".join(f"{k}: {v}" for k, v in result["n_components"].items())
-    console.print(f"K by BIC per space: {ks}")
+    _print_components(task, result["n_components"])
     _print_tracking(result["vision"], result["tracking_error_mm"])
     if result["tracking_failures"]:
         console.print(
             f"[red]{result['tracking_failures']} placement(s) where the cameras did not locate "
             "every object (counted as failures)"
         )
+
+
+def _print_components(task: str, n_components: dict[str, int]) -> None:
+    from .sim.tasks import fixed_objects
+
+    ks = ", ".join(f"{k}: {v}" for k, v in n_components.items())
+    fixed = [k for k in n_components if k in fixed_objects(task)]
+    note = f" ({', '.join(fixed)}: fixed, learned with --constrain-fixed)" if fixed else ""
+    console.print(f"K per space (chosen by leaving one demonstration out): {ks}{note}")
 
 
 def _print_tracking(vision: bool, stats: dict[str, Any] | None) -> None:

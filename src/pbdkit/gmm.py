@@ -30,8 +30,8 @@ p(K) = (K - 1) + K D + K D (D + 1) / 2 free parameters for full covariances.
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -42,7 +42,15 @@ from threadpoolctl import threadpool_limits
 from ._validation import check_array, check_int, check_positive_float
 from .gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 
-__all__ = ["GMM", "effective_bic", "n_parameters", "time_based_init"]
+__all__ = [
+    "GMM",
+    "ModelSelection",
+    "effective_bic",
+    "n_parameters",
+    "pooled_spread",
+    "sequences_from_time",
+    "time_based_init",
+]
 
 Float = NDArray[np.float64]
 
@@ -61,6 +69,129 @@ def effective_bic(log_likelihood: float, n_samples: int, n_eff: float, n_params:
 def count_sequences(t: Float) -> int:
     """Number of sequences stacked in a time column: one plus the number of times it decreases."""
     return int(1 + np.count_nonzero(np.diff(t) < 0))
+
+
+def sequences_from_time(t: Float) -> NDArray[np.intp]:
+    """Sequence label of every row of a stacked time column: a new sequence where time decreases.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+
+    Returns
+    -------
+    groups : ndarray of int, shape (N,)
+        0 for the first sequence, 1 for the second, ...
+    """
+    return np.concatenate([[0], np.cumsum(np.diff(t) < 0)]).astype(np.intp)
+
+
+# ----------------------------------------------------------------------------- EM core
+# Pure functions on float64 arrays; the estimator below is a thin shell around them.
+# Parameters travel as (weights (K,), means (K, D), covariances (K, D, D)); precisions as upper
+# factors U_k with Sigma_k^-1 = U_k U_k^T (scikit-learn's precisions_cholesky_ convention).
+Params = tuple[Float, Float, Float]
+
+
+def _outer_rows(x: Float) -> Float:
+    """x_j x_j^T of every row, flattened: (N, D) -> (N, D*D); precomputed once per fit."""
+    n, d = x.shape
+    return (x[:, :, None] * x[:, None, :]).reshape(n, d * d)
+
+
+def _sufficient_stats(x: Float, x2: Float, resp: Float) -> tuple[Float, Float, Float]:
+    """sum_j r_jk, sum_j r_jk x_j and sum_j r_jk x_j x_j^T: (K,), (K, D), (K, D, D)."""
+    d = x.shape[1]
+    return resp.sum(axis=0), resp.T @ x, (resp.T @ x2).reshape(-1, d, d)
+
+
+def _params_from_stats(s0: Float, s1: Float, s2: Float, floor: Float) -> Params:
+    """M-step: weights, means and covariances (+ the per-dimension floor on the diagonal)."""
+    nk = s0 + 10.0 * np.finfo(np.float64).eps  # scikit-learn's guard against empty components
+    means = s1 / nk[:, None]
+    cov = s2 / nk[:, None, None] - means[:, :, None] * means[:, None, :]
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    idx = np.arange(cov.shape[-1])
+    cov[:, idx, idx] += floor
+    return nk / nk.sum(), means, cov
+
+
+def _precision_factors(covariances: Float) -> Float:
+    """U_k with Sigma_k^-1 = U_k U_k^T (U_k = L_k^-T for Sigma_k = L_k L_k^T), batched."""
+    try:
+        chol = np.linalg.cholesky(covariances)
+    except np.linalg.LinAlgError:
+        raise ValueError(
+            "a component's covariance is not positive definite (degenerate data); "
+            "increase reg_covar, or scale the input data"
+        ) from None
+    eye = np.broadcast_to(np.eye(covariances.shape[-1]), covariances.shape)
+    return np.swapaxes(np.linalg.solve(chol, eye), -1, -2)
+
+
+def _log_gauss(x: Float, x2: Float, means: Float, factors: Float) -> Float:
+    """log N(x_j; mu_k, Sigma_k) for every row and component: (N, K).
+
+    Mahalanobis terms from one product with the precomputed x x^T rows:
+    (x - mu)^T P (x - mu) = vec(x x^T) . vec(P) - 2 x . P mu + mu^T P mu, P = U U^T.
+    Callers centre x (a shift of every mean leaves the mixture unchanged), which keeps the
+    expansion free of cancellation.
+    """
+    k, d = means.shape
+    prec = factors @ np.swapaxes(factors, -1, -2)  # (K, D, D)
+    p_mu = np.einsum("kij,kj->ki", prec, means)
+    maha = x2 @ prec.reshape(k, d * d).T - 2.0 * (x @ p_mu.T) + np.einsum("ki,ki->k", means, p_mu)
+    # log|Sigma|^(-1/2) = sum log diag(U)
+    half_log_det = np.log(np.diagonal(factors, axis1=1, axis2=2)).sum(axis=1)
+    return np.asarray(half_log_det - 0.5 * (d * np.log(2.0 * np.pi) + np.maximum(maha, 0.0)))
+
+
+def _e_step(x: Float, x2: Float, params: Params) -> tuple[Float, float]:
+    """Responsibilities (N, K) in the log domain, and the mean log-likelihood per sample."""
+    weights, means, cov = params
+    with np.errstate(divide="ignore"):
+        lp = _log_gauss(x, x2, means, _precision_factors(cov)) + np.log(weights)
+    top = lp.max(axis=1, keepdims=True)
+    e = np.exp(lp - top)
+    total = e.sum(axis=1, keepdims=True)
+    return e / total, float(np.mean(top[:, 0] + np.log(total[:, 0])))
+
+
+def _em(
+    x: Float, resp: Float, floor: Float, max_iter: int, tol: float
+) -> tuple[Params, Float, int, bool, float]:
+    """EM for a full-covariance GMM from initial responsibilities (N, K).
+
+    Stops when the mean log-likelihood per sample gains less than ``tol`` (scikit-learn's rule).
+
+    Returns
+    -------
+    params, resp, n_iter, converged, log_likelihood (total over the rows)
+    """
+    x2 = _outer_rows(x)
+    params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+    prev = -np.inf
+    converged = False
+    n_iter = 0
+    for n_iter in range(1, max_iter + 1):  # noqa: B007 (n_iter is reported)
+        resp, ll = _e_step(x, x2, params)
+        params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+        if abs(ll - prev) < tol:
+            converged = True
+            break
+        prev = ll
+    resp, ll = _e_step(x, x2, params)
+    return params, resp, n_iter, converged, ll * x.shape[0]
+
+
+def _time_bins_resp(x: Float, n_components: int, time_dim: int) -> Float:
+    """Hard responsibilities of K consecutive bins of equal count along time: (N, K)."""
+    n = x.shape[0]
+    order = np.argsort(x[:, time_dim], kind="stable")
+    resp = np.zeros((n, n_components))
+    for k, b in enumerate(np.array_split(order, n_components)):
+        resp[b, k] = 1.0
+    return resp
 
 
 def time_based_init(
@@ -84,23 +215,15 @@ def time_based_init(
     means : ndarray, shape (K, D)
     precisions : ndarray, shape (K, D, D)
     """
-    n, d = X.shape
-    order = np.argsort(X[:, time_dim], kind="stable")
-    bins = np.array_split(order, n_components)
-    weights = np.array([len(b) / n for b in bins])
-    means = np.stack([X[b].mean(axis=0) for b in bins])
+    x = np.asarray(X, dtype=np.float64)
+    resp = _time_bins_resp(x, n_components, time_dim)
     # Floor each bin's covariance with a fraction of the global variance so that a bin of
     # (nearly) constant data still gives a usable start.
-    floor = 1e-3 * np.var(X, axis=0) + reg_covar
-    covs = np.empty((n_components, d, d))
-    for k, b in enumerate(bins):
-        diff = X[b] - means[k]
-        covs[k] = diff.T @ diff / max(len(b), 1) + np.diag(floor)
-    chol = np.linalg.cholesky(covs)
-    eye = np.broadcast_to(np.eye(d), covs.shape)
-    chol_inv = np.linalg.solve(chol, eye)
-    precisions = np.swapaxes(chol_inv, -1, -2) @ chol_inv
-    return weights, means, 0.5 * (precisions + np.swapaxes(precisions, -1, -2))
+    floor = 1e-3 * np.var(x, axis=0) + reg_covar
+    w, m, cov = _params_from_stats(*_sufficient_stats(x, _outer_rows(x), resp), floor)
+    u = _precision_factors(cov)
+    prec = u @ np.swapaxes(u, -1, -2)
+    return w, m, 0.5 * (prec + np.swapaxes(prec, -1, -2))
 
 
 def _check_covariances(covariances: Float, name: str) -> Float:
@@ -120,33 +243,223 @@ def _check_covariances(covariances: Float, name: str) -> Float:
     return chol
 
 
+# ----------------------------------------------------------------------------- choosing K
+def pooled_spread(x: Float, groups: NDArray[np.intp], time_dim: int) -> Float:
+    """Variance of every column across sequences at equal times, pooled over time: (D,).
+
+    The rows are sorted by time and cut into bins of as many rows as there are sequences (on a
+    shared time grid, one bin per time step holding one sample of every sequence); the
+    within-bin variances are averaged. It is the squared error of the pointwise mean of the
+    sequences: the floor no time-indexed model can go below (the demonstrations' variability).
+    """
+    n_groups = int(groups.max()) + 1
+    order = np.argsort(x[:, time_dim], kind="stable")
+    n_bins = max(1, x.shape[0] // n_groups)
+    bins = np.array_split(order, n_bins)
+    return np.asarray(
+        np.average(
+            np.stack([x[b].var(axis=0) for b in bins]), axis=0, weights=[len(b) for b in bins]
+        )
+    )
+
+
+@dataclass(frozen=True)
+class ModelSelection:
+    """How K was chosen for one GMM (see the module docstring, "Choosing K").
+
+    Attributes
+    ----------
+    method : str
+        ``"cv"``: cross-validation over left-out sequences; ``"bic"``: effective-sample-size BIC;
+        ``"fixed"``: K given.
+    candidates : tuple of int
+        The K tried, ascending.
+    scores : ndarray, shape (len(candidates),)
+        ``"cv"``: mean over left-out sequences of the normalized squared error of the GMR mean
+        (1 = the demonstrations' own variability); ``"bic"``: BIC_eff. Lower is better.
+    fold_scores : ndarray, shape (len(candidates), n_folds)
+        ``"cv"``: the error of each left-out sequence (``scores`` is their mean); empty for
+        other methods.
+    best : int
+        K with the lowest score.
+    chosen : int
+        The K kept: for ``"cv"`` the smallest K whose score is within :data:`CV_TOLERANCE` of
+        the best's; otherwise the best.
+    n_folds : int
+        Sequences left out one at a time (``"cv"``), else 0.
+    """
+
+    method: str
+    candidates: tuple[int, ...]
+    scores: Float
+    fold_scores: Float
+    best: int
+    chosen: int
+    n_folds: int
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready copy."""
+        return {
+            "method": self.method,
+            "candidates": list(self.candidates),
+            "scores": [float(v) for v in self.scores],
+            "fold_scores": self.fold_scores.tolist(),
+            "best": self.best,
+            "chosen": self.chosen,
+            "n_folds": self.n_folds,
+        }
+
+
+_Fit = tuple[Params, Float, int, bool, float]  # params, resp, n_iter, converged, log L
+
+
+def candidate_grid(max_components: int) -> list[int]:
+    """The K that ``"auto"`` tries first: every K up to 8, then steps of about 20 %, and the cap.
+
+    Between the chosen grid point and the one below it every K is tried too (see
+    :func:`_select_by_cv`), so the grid only saves the fits far from the choice.
+    """
+    grid = list(range(1, min(8, max_components) + 1))
+    while grid[-1] < max_components:
+        grid.append(min(max_components, max(grid[-1] + 1, round(grid[-1] * 1.2))))
+    return grid
+
+
+#: Default largest K tried when K is chosen (Skill.learn, the CLI). The demonstrations of the
+#: simulated tasks need 8-20 components per space (benchmarks/bench_selection.py).
+MAX_COMPONENTS = 30
+#: EM tolerance of the fits screened while choosing K (the kept fit is refined to ``tol``).
+SWEEP_TOL = 1e-2
+#: "auto": a K whose cross-validated error is within this fraction of the best K's is as good
+#: as the best. It is the accuracy of the approximate leave-one-out of :func:`_cv_errors`
+#: against exact refits (``benchmarks/bench_selection.py``): smaller differences are not
+#: resolved by it.
+CV_TOLERANCE = 0.015
+
+
+def _select_by_cv(
+    candidates: Sequence[int], cv: Callable[[int], Float], n_folds: int
+) -> ModelSelection:
+    """The smallest K whose cross-validated error is within :data:`CV_TOLERANCE` of the best.
+
+    ``cv(k)`` gives the error of every left-out sequence, (n_folds,). K is searched on
+    :func:`candidate_grid` of ``max(candidates)``; then every K between the grid point chosen
+    and the one below it is tried, in increasing order, against the same best.
+    """
+    errors: dict[int, Float] = {k: cv(k) for k in candidate_grid(max(candidates))}
+    best = min(errors, key=lambda k: float(errors[k].mean()))
+    bound = (1.0 + CV_TOLERANCE) * float(errors[best].mean())
+
+    def good(k: int) -> bool:
+        return float(errors[k].mean()) <= bound
+
+    grid = sorted(errors)
+    chosen = next(k for k in grid if good(k))
+    below = max([k for k in grid if k < chosen], default=chosen)
+    for k in range(below + 1, chosen):
+        errors[k] = cv(k)
+        if good(k):
+            chosen = k
+            break
+    tried = sorted(errors)
+    return ModelSelection(
+        "cv",
+        tuple(tried),
+        np.array([errors[k].mean() for k in tried]),
+        np.stack([errors[k] for k in tried]),
+        best,
+        chosen,
+        n_folds,
+    )
+
+
+def _drop_empty(params: Params, min_weight: float) -> Params:
+    w, m, c = params
+    keep = w > min_weight
+    if keep.all():
+        return params
+    return w[keep] / w[keep].sum(), m[keep], c[keep]
+
+
+def _cv_errors(
+    x: Float,
+    x2: Float,
+    resp: Float,
+    groups: NDArray[np.intp],
+    floor: Float,
+    time_dim: int,
+    score_dims: Sequence[int],
+    scale: Float,
+) -> Float:
+    """Leave-one-sequence-out error of the GMR mean for one K: (n_groups,).
+
+    For the fold without sequence m the model is the fitted one with m's contributions removed
+    from the sufficient statistics, followed by one EM iteration on the remaining rows (exact
+    refits move the errors by a few percent and cost 5-10 times more). The error of fold m is
+    the mean over ``score_dims`` of the squared difference between sequence m and the fold's
+    GMR mean at m's times, divided by ``scale`` (the pooled spread of each dimension).
+    """
+    stats = _sufficient_stats(x, x2, resp)
+    n_groups = int(groups.max()) + 1
+    out_dims = [i for i in range(x.shape[1]) if i != time_dim]
+    pos = [out_dims.index(i) for i in score_dims]
+    errors = np.empty(n_groups)
+    for m in range(n_groups):
+        held = groups == m
+        rest = ~held
+        own = _sufficient_stats(x[held], x2[held], resp[held])
+        s0 = stats[0] - own[0]
+        # A component (nearly) made of sequence m alone has no support left in the fold: drop
+        # it (its downdated moments are rounding noise).
+        keep = s0 >= 1.0
+        params = _params_from_stats(
+            s0[keep], (stats[1] - own[1])[keep], (stats[2] - own[2])[keep], floor
+        )
+        n_rest = float(np.count_nonzero(rest))
+        r, _ = _e_step(x[rest], x2[rest], params)
+        params = _drop_empty(
+            _params_from_stats(*_sufficient_stats(x[rest], x2[rest], r), floor), 0.5 / n_rest
+        )
+        model = gmr_precompute(*params, (time_dim,))
+        mean, _ = gmr_batch(model, x[held][:, [time_dim]], None)
+        err = (x[held][:, score_dims] - mean[:, pos]) ** 2
+        errors[m] = float(np.mean(err.mean(axis=0) / scale))
+    return errors
+
+
 class GMM:
-    """Gaussian mixture model with time-based EM initialisation and BIC model selection.
+    """Gaussian mixture model with time-based EM initialisation and a choice of K.
 
     Parameters
     ----------
-    n_components : int or "bic"
-        Number of components K, or ``"bic"`` to choose K in 1..``max_components`` by the
-        effective-sample-size BIC described in the module docstring.
+    n_components : int, "auto" or "bic"
+        Number of components K; ``"auto"`` chooses K in 1..``max_components`` by
+        cross-validation over the sequences (module docstring, "Choosing K"; needs a time
+        column and at least 2 sequences); ``"bic"`` by the effective-sample-size BIC.
     max_components : int
-        Largest K tried when ``n_components="bic"``.
-    reg_covar : float
-        Added to the diagonal of every covariance (scikit-learn's ``reg_covar``).
+        Largest K tried when K is chosen.
+    reg_covar : float or array-like, shape (D,)
+        Added to the diagonal of every covariance: one value for every dimension, or one per
+        dimension. In the units of the data squared, it is a floor on the variability a
+        component can claim (scikit-learn's ``reg_covar``, per dimension).
     max_iter : int
         Maximum number of EM iterations per fit.
     tol : float
         EM convergence threshold on the per-sample log-likelihood gain.
     random_state : int, numpy RandomState or None
-        Seed for scikit-learn (used only when ``init="kmeans"``; time-based EM is deterministic).
+        Seed of the k-means initialisation (``init="kmeans"``); time-based EM is deterministic.
     time_dim : int or None
-        Column holding time; used for the time-based initialisation and to count sequences.
-        ``None`` falls back to k-means initialisation.
+        Column holding time; used for the time-based initialisation, to find the sequences and
+        as the input of the GMR that ``"auto"`` cross-validates. ``None`` falls back to k-means
+        initialisation.
     init : {"time", "kmeans"}
         Initialisation of EM.
+    score_dims : sequence of int, optional
+        Dimensions whose GMR error ``"auto"`` scores (default: every dimension but time).
     bic_samples_per_sequence : float
-        Effective number of samples per demonstration in the BIC (default 100).
+        ``"bic"`` only: effective number of samples per sequence (default 20).
     bic_samples : int, optional
-        Total effective sample size for the BIC; overrides ``bic_samples_per_sequence``.
+        ``"bic"`` only: total effective sample size; overrides ``bic_samples_per_sequence``.
 
     Attributes
     ----------
@@ -154,28 +467,31 @@ class GMM:
     means_ : ndarray, shape (K, D)
     covariances_ : ndarray, shape (K, D, D)
     n_components_ : int
-        K (chosen by BIC when ``n_components="bic"``).
+        K (chosen when ``n_components`` is ``"auto"`` or ``"bic"``).
     converged_ : bool
         Whether EM converged for the kept model.
     n_iter_ : int
         EM iterations for the kept model.
+    selection_ : ModelSelection
+        The K tried, their scores and the K kept.
     bic_scores_ : dict of int to float
-        Effective BIC of every K tried (only the fitted K without selection).
+        ``"bic"``: effective BIC of every K tried; empty otherwise.
     bic_effective_samples_ : float
-        n_eff used in the BIC.
+        ``"bic"``: n_eff used in the BIC; NaN otherwise.
     """
 
     def __init__(
         self,
-        n_components: int | Literal["bic"] = 5,
+        n_components: int | Literal["auto", "bic"] = 5,
         *,
         max_components: int = 10,
-        reg_covar: float = 1e-6,
+        reg_covar: float | npt.ArrayLike = 1e-6,
         max_iter: int = 100,
         tol: float = 1e-3,
         random_state: int | np.random.RandomState | None = None,
         time_dim: int | None = 0,
         init: Literal["time", "kmeans"] = "time",
+        score_dims: Sequence[int] | None = None,
         bic_samples_per_sequence: float = 20.0,
         bic_samples: int | None = None,
     ) -> None:
@@ -187,13 +503,20 @@ class GMM:
         self.random_state = random_state
         self.time_dim = time_dim
         self.init = init
+        self.score_dims = score_dims
         self.bic_samples_per_sequence = bic_samples_per_sequence
         self.bic_samples = bic_samples
 
     # ------------------------------------------------------------------ fitting
-    def _check_params(self, n_samples: int, n_dims: int) -> list[int]:
-        reg = check_positive_float(self.reg_covar, "reg_covar", allow_zero=True)
-        del reg
+    def _check_params(self, n_samples: int, n_dims: int) -> tuple[str, list[int], Float]:
+        """Validated (method, candidate Ks, per-dimension floor)."""
+        reg = self.reg_covar
+        if np.ndim(reg) == 0:
+            floor = np.full(n_dims, check_positive_float(reg, "reg_covar", allow_zero=True))
+        else:
+            floor = check_array(reg, "reg_covar", shape=(n_dims,))
+            if np.any(floor < 0):
+                raise ValueError(f"reg_covar must be >= 0 in every dimension, got {floor.tolist()}")
         check_int(self.max_iter, "max_iter", minimum=1)
         check_positive_float(self.tol, "tol", allow_zero=True)
         if self.init not in ("time", "kmeans"):
@@ -203,91 +526,160 @@ class GMM:
             if td >= n_dims:
                 raise ValueError(f"time_dim must be in [0, {n_dims}) for X with {n_dims} columns")
         if isinstance(self.n_components, str):
-            if self.n_components != "bic":
+            if self.n_components not in ("auto", "bic"):
                 raise ValueError(
-                    f"n_components must be a positive integer or 'bic', got {self.n_components!r}"
+                    "n_components must be a positive integer, 'auto' or 'bic', "
+                    f"got {self.n_components!r}"
+                )
+            if self.n_components == "auto" and self.time_dim is None:
+                raise ValueError(
+                    "n_components='auto' cross-validates a regression on time and needs "
+                    "time_dim; use n_components='bic' or an integer"
                 )
             kmax = check_int(self.max_components, "max_components", minimum=1)
             kmax = min(kmax, n_samples)
-            return list(range(1, kmax + 1))
+            return self.n_components, list(range(1, kmax + 1)), floor
         k = check_int(self.n_components, "n_components", minimum=1)
         if k > n_samples:
             raise ValueError(
                 f"X has too few samples for n_components={k}: need at least {k} rows, "
                 f"got {n_samples}; lower n_components or give more data"
             )
-        return [k]
+        return "fixed", [k], floor
 
-    def _n_eff(self, X: Float) -> float:
-        n = X.shape[0]
+    def _n_eff(self, n: int, n_seq: int) -> float:
         if self.bic_samples is not None:
             return float(min(check_int(self.bic_samples, "bic_samples", minimum=1), n))
         per = check_positive_float(self.bic_samples_per_sequence, "bic_samples_per_sequence")
-        n_seq = count_sequences(X[:, self.time_dim]) if self.time_dim is not None else 1
         return float(min(n, per * n_seq))
 
-    def _fit_one(self, X: Float, k: int) -> tuple[Any, float]:
-        from sklearn.exceptions import ConvergenceWarning
-        from sklearn.mixture import GaussianMixture
+    def _check_groups(self, groups: npt.ArrayLike | None, x: Float) -> NDArray[np.intp]:
+        if groups is None:
+            if self.time_dim is None:
+                return np.zeros(x.shape[0], dtype=np.intp)
+            return sequences_from_time(x[:, self.time_dim])
+        g = np.asarray(groups)
+        if g.shape != (x.shape[0],):
+            raise ValueError(f"groups must have shape ({x.shape[0]},), got {g.shape}")
+        _, labels = np.unique(g, return_inverse=True)
+        return np.asarray(labels, dtype=np.intp).reshape(-1)
 
-        kwargs: dict[str, Any] = {}
+    def _initial_resp(self, x: Float, k: int) -> Float:
         if self.init == "time" and self.time_dim is not None:
-            w, m, p = time_based_init(X, k, self.time_dim, self.reg_covar)
-            kwargs = {"weights_init": w, "means_init": m, "precisions_init": p}
-        gm = GaussianMixture(
-            n_components=k,
-            covariance_type="full",
-            reg_covar=self.reg_covar,
-            max_iter=self.max_iter,
-            tol=self.tol,
-            random_state=self.random_state,
-            **kwargs,
-        )
-        with warnings.catch_warnings():
-            # Non-convergence is reported through converged_, not as a warning.
-            warnings.simplefilter("ignore", ConvergenceWarning)
-            gm.fit(X)
-        log_lik = float(gm.score(X) * X.shape[0])
-        return gm, log_lik
+            return _time_bins_resp(x, k, self.time_dim)
+        from sklearn.cluster import KMeans
 
-    def fit(self, X: npt.ArrayLike) -> GMM:
-        """Fit the mixture to X by EM (choosing K by BIC if asked).
+        labels = KMeans(n_clusters=k, n_init=1, random_state=self.random_state).fit(x).labels_
+        resp = np.zeros((x.shape[0], k))
+        resp[np.arange(x.shape[0]), labels] = 1.0
+        return resp
+
+    def fit(self, X: npt.ArrayLike, groups: npt.ArrayLike | None = None) -> GMM:
+        """Fit the mixture to X by EM (choosing K if asked).
 
         Parameters
         ----------
         X : array-like, shape (N, D)
             Samples in rows; column ``time_dim`` (0 by default) holds time.
+        groups : array-like, shape (N,), optional
+            Sequence (demonstration) of every row. Default: a new sequence wherever the time
+            column decreases (stacked demonstrations), or one sequence without a time column.
 
         Returns
         -------
         self : GMM
         """
-        x = check_array(X, "X", ndim=2, min_rows=2)
-        n, d = x.shape
-        candidates = self._check_params(n, d)
-        n_eff = self._n_eff(x)
-        scores: dict[int, float] = {}
-        best: tuple[float, Any] | None = None
+        x_raw = check_array(X, "X", ndim=2, min_rows=2)
+        n, d = x_raw.shape
+        method, candidates, floor = self._check_params(n, d)
+        grp = self._check_groups(groups, x_raw)
+        n_seq = int(grp.max()) + 1
+        if method == "auto" and n_seq < 2:
+            raise ValueError(
+                "n_components='auto' leaves one sequence out at a time and needs at least 2 "
+                f"sequences, got {n_seq}; pass groups=, or use n_components='bic' or an integer"
+            )
+        # One canonical row order (by sequence, then time): the fit does not depend on how the
+        # rows were given. A shift of every mean leaves the mixture unchanged; centring keeps
+        # the Mahalanobis expansion of _log_gauss free of cancellation.
+        order = np.lexsort((x_raw[:, self.time_dim], grp)) if self.time_dim is not None else None
+        if order is not None:
+            x_raw, grp = x_raw[order], grp[order]
+        center = x_raw.mean(axis=0)
+        x = x_raw - center
+        x2 = _outer_rows(x)
+        max_iter, tol = int(self.max_iter), float(self.tol)
+        fits: dict[int, _Fit] = {}
+
+        # Screening fits of a sweep stop at a looser tolerance; the kept one is refined below.
+        sweep_tol = tol if method == "fixed" else max(tol, SWEEP_TOL)
+
+        def fit_k(k: int) -> _Fit:
+            if k not in fits:
+                fits[k] = _em(x, self._initial_resp(x, k), floor, max_iter, sweep_tol)
+            return fits[k]
+
+        n_eff = float("nan")
         with threadpool_limits(limits=1, user_api="blas"):
-            for k in candidates:
-                gm, log_lik = self._fit_one(x, k)
-                score = effective_bic(log_lik, n, n_eff, n_parameters(k, d))
-                scores[k] = score
-                if best is None or score < best[0]:
-                    best = (score, gm)
-        assert best is not None
-        gm = best[1]
-        self.weights_ = np.asarray(gm.weights_, dtype=np.float64)
-        self.means_ = np.asarray(gm.means_, dtype=np.float64)
-        cov = np.asarray(gm.covariances_, dtype=np.float64)
+            if method == "auto":
+                assert self.time_dim is not None
+                td = int(self.time_dim)
+                score_dims = self._check_score_dims(d, td)
+                scale = np.maximum(pooled_spread(x, grp, td)[score_dims], floor[score_dims])
+                scale = np.where(scale > 0, scale, 1.0)
+
+                def cv(k: int) -> Float:
+                    return _cv_errors(x, x2, fit_k(k)[1], grp, floor, td, score_dims, scale)
+
+                self.selection_ = _select_by_cv(candidates, cv, n_seq)
+            else:
+                if method == "bic":
+                    n_eff = self._n_eff(n, n_seq)
+                    scores = [
+                        effective_bic(fit_k(k)[4], n, n_eff, n_parameters(k, d)) for k in candidates
+                    ]
+                    best = candidates[int(np.argmin(scores))]
+                else:
+                    fit_k(candidates[0])
+                    scores, best = [float("nan")], candidates[0]
+                self.selection_ = ModelSelection(
+                    method, tuple(candidates), np.asarray(scores), np.zeros((0, 0)), best, best, 0
+                )
+        chosen = self.selection_.chosen
+        fit = fits[chosen]
+        if sweep_tol > tol:
+            with threadpool_limits(limits=1, user_api="blas"):
+                more = _em(x, fit[1], floor, max_iter, tol)
+            fit = (more[0], more[1], fit[2] + more[2], more[3], more[4])
+        (weights, means, cov), _, n_iter, converged, _ = fit
+        self.weights_ = np.asarray(weights, dtype=np.float64)
+        self.means_ = np.asarray(means + center, dtype=np.float64)
         self.covariances_ = 0.5 * (cov + np.swapaxes(cov, -1, -2))
         self.n_components_ = int(self.weights_.shape[0])
-        self.converged_ = bool(gm.converged_)
-        self.n_iter_ = int(gm.n_iter_)
-        self.bic_scores_ = scores
+        self.converged_ = bool(converged)
+        self.n_iter_ = int(n_iter)
+        sel = self.selection_
+        self.bic_scores_ = (
+            dict(zip(sel.candidates, sel.scores.tolist(), strict=True)) if method == "bic" else {}
+        )
         self.bic_effective_samples_ = n_eff
         self._finalize()
         return self
+
+    def _check_score_dims(self, n_dims: int, time_dim: int) -> list[int]:
+        if self.score_dims is None:
+            return [i for i in range(n_dims) if i != time_dim]
+        dims = [check_int(i, "score_dims", minimum=0) for i in self.score_dims]
+        if (
+            not dims
+            or any(i >= n_dims or i == time_dim for i in dims)
+            or len(set(dims)) < len(dims)
+        ):
+            raise ValueError(
+                f"score_dims must be distinct dimensions in [0, {n_dims}) other than time "
+                f"({time_dim}), got {list(self.score_dims)}"
+            )
+        return dims
 
     @classmethod
     def from_params(
@@ -326,6 +718,9 @@ class GMM:
         gmm.n_iter_ = 0
         gmm.bic_scores_ = {}
         gmm.bic_effective_samples_ = float("nan")
+        gmm.selection_ = ModelSelection(
+            "fixed", (k,), np.full(1, np.nan), np.zeros((0, 0)), k, k, 0
+        )
         gmm._finalize()
         return gmm
 

@@ -36,6 +36,7 @@ __all__ = [
     "plot_influence",
     "plot_lasa_summary",
     "plot_reproductions",
+    "plot_selection",
     "save_figure",
     "space_data",
 ]
@@ -45,6 +46,7 @@ CONTROLLER_STYLES = {"fused": "-", "joint": "--"}
 OBJECT_STYLES = ["-.", ":", (0, (5, 1, 1, 1, 1, 1)), (0, (1, 3))]
 SPACE_COLORS = ["tab:red", "tab:blue", "tab:purple", "tab:brown"]
 JOINT_COLOR = "tab:green"
+UNCONSTRAINED_COLOR = "0.3"  # an object the skill has no constraint on (the fixed basin)
 
 Float = NDArray[np.float64]
 
@@ -199,23 +201,9 @@ def space_data(skill: Skill, demos: Sequence[Demonstration]) -> dict[str, Float]
     data : dict str -> ndarray, shape (M, T, D)
         ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of T steps.
     """
-    out: dict[str, Float] = {}
-    t = np.arange(skill.n_steps, dtype=np.float64)
-    joint_rows: list[Float] = []
-    task_rows: dict[str, list[Float]] = {k: [] for k in skill.object_names}
-    for demo in demos:
-        r = demo.rescaled(skill.n_steps)
-        cols = [t[:, None], r.joints]
-        if skill.has_gripper and r.gripper is not None:
-            cols.append(r.gripper[:, None])
-        joint_rows.append(np.hstack(cols))
-        x = np.asarray(skill.robot.fk(r.joints), dtype=np.float64)
-        for k in skill.object_names:
-            task_rows[k].append(np.hstack([t[:, None], x - r.objects[k]]))
-    out["joint"] = np.stack(joint_rows)
-    for k in skill.object_names:
-        out[k] = np.stack(task_rows[k])
-    return out
+    from .skill import space_data as skill_space_data
+
+    return skill_space_data(list(demos), skill.robot, skill.object_names, skill.n_steps)
 
 
 def _dim_labels(skill: Skill, name: str) -> list[str]:
@@ -285,9 +273,25 @@ def plot_demonstrations_3d(
     reproduction: ReproductionResult | None = None,
 ) -> Figure:
     """The paper's Fig. 3: demonstrated hand paths in 3-D with the objects' positions (left) and
-    the reproduction for a new situation (right)."""
+    the reproduction for a new situation (right).
+
+    Every recorded object is drawn: those of the skill in their constraint's colour, the others
+    (a fixed basin the skill has no constraint on) in grey, labelled "(no constraint)".
+    """
     plt = _pyplot()
     markers = ["+", "x", "^", "s"]
+    recorded = list(dict.fromkeys(k for demo in demos for k in demo.objects))
+    extra = [k for k in recorded if k not in skill.object_names]
+    if objects is not None:
+        extra += [k for k in objects if k not in skill.object_names and k not in extra]
+    shown = [*skill.object_names, *extra]
+
+    def color(name: str) -> str:
+        return _space_color(skill, name) if name in skill.object_names else UNCONSTRAINED_COLOR
+
+    def label(name: str) -> str:
+        return name if name in skill.object_names else f"{name} (no constraint)"
+
     ncols = 2 if reproduction is not None else 1
     fig = plt.figure(figsize=(6.0 * ncols, 5.2))
     ax = fig.add_subplot(1, ncols, 1, projection="3d")
@@ -302,14 +306,15 @@ def plot_demonstrations_3d(
             label="demonstrations" if k == 0 else None,
         )
         ax.scatter(*x[0], color="k", s=12)
-        for i, name in enumerate(skill.object_names):
-            o = demo.objects[name]
+        for i, name in enumerate(shown):
+            if name not in demo.objects:
+                continue
             ax.scatter(
-                *o,
+                *demo.objects[name],
                 marker=markers[i % 4],
-                color=_space_color(skill, name),
+                color=color(name),
                 s=50,
-                label=name if k == 0 else None,
+                label=label(name) if k == 0 else None,
             )
     ax.set_title(f"{len(demos)} demonstrations (dots: start)")
     _label_3d(ax)
@@ -319,15 +324,15 @@ def plot_demonstrations_3d(
         p = reproduction.positions
         ax2.plot(p[:, 0], p[:, 1], p[:, 2], color="k", lw=2, label="reproduction")
         ax2.scatter(*p[0], color="k", s=12)
-        for i, name in enumerate(skill.object_names):
+        for i, name in enumerate(shown):
             if objects is not None and name in objects:
                 ax2.scatter(
                     *objects[name],
                     marker=markers[i % 4],
-                    color=_space_color(skill, name),
+                    color=color(name),
                     s=90,
                     linewidths=2.5,
-                    label=f"{name} (new)",
+                    label=f"{label(name)} (new)" if name in skill.object_names else label(name),
                 )
         ax2.set_title("reproduction for a new situation")
         _label_3d(ax2)
@@ -345,14 +350,18 @@ def _label_3d(ax: Any) -> None:
 
 
 def plot_influence(ax: Axes, skill: Skill, result: ReproductionResult) -> None:
-    """Stacked shares of each constraint in the fused controller over time."""
+    """Stacked shares of each constraint in the fused controller over time.
+
+    ``result.influence``: each constraint's share of the information on the hand's position
+    (hand space, summing to 1; see :mod:`pbdkit.reproduce`, "Influence").
+    """
     names = [n for n in ("joint", *skill.object_names) if n in result.influence]
     shares = np.stack([result.influence[n] for n in names])
     colors = [_space_color(skill, n) for n in names]
     labels = ["joint space" if n == "joint" else f"relative to the {n}" for n in names]
     ax.stackplot(result.t, shares, labels=labels, colors=colors, alpha=0.6)
     ax.set_ylim(0.0, 1.0)
-    ax.set_ylabel("influence", fontsize=8)
+    ax.set_ylabel("share (hand space)", fontsize=8)
     ax.set_xlabel("time step", fontsize=8)
     ax.legend(fontsize=7, loc="upper right")
     ax.set_title("which constraint drives the fused controller", fontsize=9)
@@ -429,6 +438,51 @@ def plot_reproductions(
         axes[rows - 1, 1].set_visible(False)
     for ax in axes.ravel():
         ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+def plot_selection(skill: Skill) -> Figure:
+    """How K was chosen in every space: the cross-validated error of each K tried.
+
+    One panel per space: the mean error over the left-out demonstrations (1 = the
+    demonstrations' own variability about their mean), the bound within which a K counts as
+    good as the best (:data:`pbdkit.gmm.CV_TOLERANCE`), the best K and the K kept.
+    """
+    from .gmm import CV_TOLERANCE
+
+    plt = _pyplot()
+    from matplotlib.ticker import FormatStrFormatter
+
+    names = [*skill.object_names, "joint"]
+    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 2.8), squeeze=False)
+    for ax, name in zip(axes[0], names, strict=True):
+        sel = skill.selection_[name]
+        color = _space_color(skill, name)
+        title = "joint space" if name == "joint" else f"relative to the {name}"
+        if sel.method != "cv":
+            label = f"K = {sel.chosen} ({sel.method})"
+            ax.text(0.5, 0.5, label, ha="center", transform=ax.transAxes)
+            ax.set_title(title, fontsize=9)
+            continue
+        ks = np.asarray(sel.candidates)
+        ax.plot(ks, sel.scores, "o-", color=color, ms=3, lw=1)
+        best = float(sel.scores[list(sel.candidates).index(sel.best)])
+        ax.axhline((1 + CV_TOLERANCE) * best, color="0.5", lw=0.8, ls="--")
+        ax.axvline(sel.chosen, color="k", lw=1)
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+        ax.set_title(f"{title}: K = {sel.chosen} (best {sel.best})", fontsize=9)
+        ax.set_xlabel("K", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("left-out demo error", fontsize=8)
+    fig.suptitle(
+        "Choosing K: error predicting a left-out demonstration (dashed: within "
+        f"{100 * CV_TOLERANCE:.1f} % of the best; line: K kept)",
+        fontsize=9,
+    )
     fig.tight_layout()
     figure: Figure = fig
     return figure

@@ -39,13 +39,54 @@ Joint limits. After every step theta_{j+1} is clipped to [lower, upper]: the rep
 leaves the limits; a constraint that would push a joint beyond its limit is followed as far as
 the limit allows (the next steps correct from the clipped posture, the loop being closed).
 
-Step size. Table II takes the full linearized step. When a target is far from the hand (out of
-reach, or a tight constraint at t_0 far from theta_0) the linearization is invalid and a full step
-can throw the arm against its limits, folded. Each step is therefore scaled down, keeping its
-direction, to a joint-space length (Euclidean norm over the joints) of at most ``max_step``
-(default 0.1 rad; a Katana at its top speed of 68 deg/s moves 0.012 rad per joint in a 10 ms
-step, so skills tracked at a feasible speed are never affected). ``max_step=None`` restores the
-paper's full step.
+Step size. Table II takes the full linearized step, however far the target. Two bounds scale a
+step down, both uniformly (the step keeps its direction, only its length shrinks):
+
+- ``step_limit`` (rad per step, per joint): |dtheta_i| <= step_limit_i for every joint i. A
+  :class:`pbdkit.Skill` derives it from the arm's velocity limits v_i in rad/s (the URDF's, by
+  default) and the time a step takes when the reproduction is executed,
+  dt = duration / (T - 1) (:meth:`pbdkit.Skill.times`): step_limit_i = v_i dt (1 - 1e-6), the
+  factor keeping floating-point rounding from ever putting a played speed above v_i. Without it,
+  reproductions of the simulated coaster task (1000 steps over 18.6 s) commanded up to
+  3.2-3.6 x the Katana's 1.19 rad/s in their first steps, whose targets are far from
+  theta_hat_0 (and the fused one 3.8 x while placing the glass).
+- ``max_step`` (rad, Euclidean norm over the joints): a trust region of the linearization. When a
+  target is far from the hand (out of reach, or a tight constraint at t_0 far from theta_0) a
+  full step can throw the arm against its limits, folded. It is a length in rad, whatever the
+  timing; on the paper's grid (1000 steps over ~20 s, 0.024 rad per joint and step at the
+  Katana's top speed, <= 0.053 rad over its 5 joints) the velocity bound is the tighter one and
+  the default 0.1 rad never binds. ``max_step=None`` drops it.
+
+The step is scaled by the smaller of the two factors, then theta_{j+1} is clipped to the joint
+limits (which only shortens a step further). Why uniform scaling rather than clipping each joint
+to its bound: the direction of the fused step is what the constraints agree on (the
+precision-weighted compromise of eq. (1)); saturating some joints while others complete their
+motion would turn the step toward a posture none of the constraints asks for. Scaled uniformly,
+the arm moves along the agreed direction, at the top speed of the joint that binds, and the
+closed loop re-linearizes from where it got. A q0 far from theta_hat_0 is therefore reached
+without a jump: the first steps run the binding joint at its top speed until the posture has
+caught up with the constraints; after that the bound binds only where the constraints
+themselves move faster than the arm can.
+``ReproductionResult.limited`` marks the steps that were scaled down.
+
+Stability. Each step of the fused loop is one Gauss-Newton step on the fused energy of that step,
+
+    E_j(theta) = 1/2 |theta - theta_hat_j|^2_(Lambda_theta)
+                 + 1/2 sum_n |f(theta) - o(n) - x_hat^(n)_j|^2_(P_n),
+
+whose minimum is the product of the Gaussians. Gauss-Newton drops the curvature of f weighted by
+the residual P_n (f(theta) - o(n) - x_hat^(n)); where the constraints disagree (a residual) and a
+tight task constraint (P_n ~ 1e6 m^-2 at a 1 mm spread) meets a loose joint constraint, that
+curvature outweighs the joint precision in the directions the task leaves free, and the loop
+oscillates with growing amplitude: on ``benchmarks/bench_skill.py``'s skill the joints of the
+paper's loop jump by 0.34 rad per step near the end (Table II as written) and a velocity limit
+only turns that into chatter at top speed. So every step is checked: if it raises E_j, it is
+halved (up to ``MAX_HALVINGS`` times; a Gauss-Newton step is a descent direction of E_j, so a
+short enough step lowers it), the standard line search that globalizes Gauss-Newton (Nocedal &
+Wright, Numerical Optimization, ch. 10). The check reuses f(theta_{j+1}), which the next step
+needs anyway; it changes nothing where Table II converges (the steps lower E_j already), and
+there the joints move smoothly (0.0011 rad second differences instead of 0.34).
+``line_search=False`` gives the paper's loop as written.
 
 Reach. With ``reach`` given (a :class:`pbdkit.Skill` passes its estimate, see
 :func:`reach_from_samples`), every object in use is checked before the loop: at the step where
@@ -56,16 +97,33 @@ of reach: ``on_unreachable="raise"`` (default) raises ValueError, ``"warn"`` iss
 short; the result stays finite and within the limits (damped pseudo-inverse, step size,
 clipping).
 
-Influence of the constraints (paper Fig. 6). With Sigma the fused covariance and Lambda_c the
-precision of constraint c in joint space, the share of c at a step is
+Influence of the constraints (paper Fig. 6). Fig. 6 shows which constraint drives the hand when,
+so the share of a constraint is measured in the hand's space. With Sigma the fused covariance of
+the posture and J the Jacobian of the step, the hand's covariance is S = J Sigma J^T (3 x 3). By
+Woodbury, with Sigma = (Lambda_theta + J^T P J)^-1 and P = sum_n P_n,
 
-    share_c = tr(Sigma Lambda_c) / n,      sum_c share_c = tr(Sigma sum_c Lambda_c) / n = 1.
+    S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n       (precisions add in hand space),
 
-Each share is in [0, 1], is invariant to any linear change of joint coordinates (units), and is
-the fraction of the fused information contributed by c, averaged over the n directions of joint
-space. A task constraint informs at most 3 of the n directions, so with the joint constraint in
-use its share is at most 3/n (0.6 on the 5-DOF Katana, whose wrist roll only the joint constraint
-governs). Task-only controllers use the same formula in task space (n replaced by 3).
+so the share of task constraint n and that of the joint constraint are
+
+    share_n = tr(S P_n) / 3,      share_joint = 1 - sum_n share_n
+                                              (= tr(S (J Sigma_theta J^T)^-1) / 3, J of full rank).
+
+Computing share_joint as 1 - sum avoids inverting J Sigma_theta J^T near a singularity. Each
+share is in [0, 1], they sum to 1, and a tight task constraint reaches ~1: it then dictates the
+hand's position. The shares do not change under a linear change of joint or hand coordinates
+(units). Task-only controllers fuse the task constraints in task space first:
+share_n = tr(S_fused P_n) / 3 with S_fused = (sum_n P_n)^-1; the joint-only controller has
+share_joint = 1.
+
+``ReproductionResult.influence_joint_space`` keeps the share in joint space,
+tr(Sigma Lambda_c) / n (Lambda_c the joint-space precision of constraint c, J^T P_n J for task
+constraint n), also summing to 1. It tells who governs the posture, including the directions the
+hand position does not see (on the 5-DOF Katana the wrist roll, which only the joint constraint
+governs): a task constraint informs at most 3 of the n directions, so its share there is at most
+3/n (0.6 on the Katana) and never looks dominant, which is why it is not the headline measure.
+For the task-only controllers it equals ``influence`` (their covariance J+ S_fused J+^T has rank
+3: there is no joint-space precision to compare).
 
 Performance. Every GMR output is independent of the state, so :class:`Constraints` evaluates
 them once over the whole grid and precomputes, batched, the joint precisions and information
@@ -74,11 +132,14 @@ every task constraint shares J, sum_n J^T P_n J = J^T (sum_n P_n) J and
 sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x_j) with h = sum_n P_n (o(n) + x_hat^(n)), both sums
 precomputed for all steps: inside the loop there are only the robot's fk/Jacobian, a few products
 of (n, 3) matrices and one n x n Cholesky solve (LAPACK ``dposv``), whatever the number of
-objects. Covariances and influences are computed after the loop, batched.
+objects; a step is bounded by ``step_limit`` and ``max_step`` at the cost of one comparison of
+its squared length unless it is long enough for a bound to bind. Covariances and influences are
+computed after the loop, batched.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -100,10 +161,15 @@ __all__ = [
     "check_objects",
     "reach_from_samples",
     "reproduce",
+    "step_limit_from_velocity",
 ]
 
 Float = NDArray[np.float64]
 JOINT = "joint"
+# Line search of the fused loop: at most this many halvings of a step (module docstring).
+MAX_HALVINGS = 8
+# step_limit = v dt VELOCITY_SAFETY: floating-point rounding never plays a step above v.
+VELOCITY_SAFETY = 1.0 - 1e-6
 
 
 @runtime_checkable
@@ -267,12 +333,21 @@ class ReproductionResult:
     gripper_signal : ndarray, shape (T,) or None
         The generalized (continuous) gripper signal, None if the skill has no gripper.
     influence : dict str -> ndarray, shape (T,)
-        Share of each constraint in use, tr(Sigma Lambda_c) / n, summing to 1 at each step.
+        Share of each constraint in use in the hand's space (paper Fig. 6): tr(S P_n) / 3 for
+        task constraint n, S = J Sigma J^T the hand's covariance, and 1 - their sum for the joint
+        constraint. Each in [0, 1], summing to 1 at each step (module docstring, "Influence").
+    influence_joint_space : dict str -> ndarray, shape (T,)
+        Share of each constraint in joint space, tr(Sigma Lambda_c) / n, summing to 1: who
+        governs the posture, including the directions the hand does not see (a task
+        constraint's share is at most 3/n there). Task-only controllers: equal to ``influence``.
     task_errors : dict str -> ndarray, shape (T,)
         For every object (in use or not): ||x_j - (o(n) + x_hat^(n)_j)|| in metres, the distance
         from the hand to where that object's constraint expects it.
     used : tuple of str
         The constraints in use.
+    limited : ndarray of bool, shape (T,)
+        True at the steps j whose step theta_{j-1} -> theta_j was scaled down by ``step_limit``
+        (the velocity limit) or ``max_step``; False at step 0.
     """
 
     t: Float
@@ -282,8 +357,10 @@ class ReproductionResult:
     gripper: NDArray[np.bool_]
     gripper_signal: Float | None
     influence: dict[str, Float]
+    influence_joint_space: dict[str, Float]
     task_errors: dict[str, Float]
     used: tuple[str, ...]
+    limited: NDArray[np.bool_]
 
 
 def check_objects(objects: object, names: Sequence[str], name: str = "objects") -> dict[str, Float]:
@@ -369,8 +446,10 @@ def reproduce(
     use: Sequence[str] | str | None = None,
     alpha: float = 0.5,
     max_step: float | None = 0.1,
+    step_limit: npt.ArrayLike | None = None,
     reach: float | None = None,
     on_unreachable: Literal["raise", "warn"] = "raise",
+    line_search: bool = True,
 ) -> ReproductionResult:
     """Closed-loop reproduction of Table II for new object positions.
 
@@ -393,13 +472,21 @@ def reproduce(
         when ``"joint"`` is in use (see the module docstring).
     max_step : float or None
         Largest joint-space step (Euclidean norm over the joints, rad): a longer step is scaled
-        down, keeping its direction (module docstring, "Step size"). None: the paper's full step.
+        down, keeping its direction (module docstring, "Step size"). None: no such bound.
+    step_limit : float or array-like, shape (n,), optional
+        Largest step of each joint (rad per step; a number applies to every joint, inf leaves a
+        joint unbounded): a step with |dtheta_i| > step_limit_i for some joint is scaled down
+        uniformly, keeping its direction, before ``max_step`` applies. Velocity limits v (rad/s)
+        give v dt (:func:`step_limit_from_velocity`). None (default): no per-joint bound.
     reach : float, optional
         Reach of the arm (m, from the base origin). If given, the most constrained target
         o + x_hat of every object in use is checked against it.
     on_unreachable : {"raise", "warn"}
         Raise ValueError, or warn with :class:`ReachWarning` and reproduce anyway (the hand then
         stops short; the result stays finite and within limits).
+    line_search : bool
+        Fused controller: shorten a step that would raise the fused energy of its step (module
+        docstring, "Stability"). False: the paper's loop as written.
 
     Returns
     -------
@@ -415,6 +502,7 @@ def reproduce(
     used = _check_use(use, c.names)
     alpha = check_positive_float(alpha, "alpha", allow_zero=True)
     step_cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
+    bound = _check_step_limit(step_limit, n)
     if on_unreachable not in ("raise", "warn"):
         raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
     if reach is not None:
@@ -427,18 +515,21 @@ def reproduce(
 
     tasks = [u for u in used if u != JOINT]
     if JOINT in used and tasks:
-        joints, positions, covs, influence = _fused_loop(
-            robot, c, objs, tasks, theta0, lower, upper, step_cap
+        joints, positions, covs, influence, influence_js, limited = _fused_loop(
+            robot, c, objs, tasks, theta0, lower, upper, step_cap, bound, bool(line_search)
         )
     elif JOINT in used:
-        joints = _joint_only(c.joint_mean, theta0, lower, upper, step_cap)
+        joints, limited = _joint_only(c.joint_mean, theta0, lower, upper, step_cap, bound)
         positions = np.asarray(robot.fk(joints), dtype=np.float64)
         covs = c.joint_cov.copy()
         influence = {JOINT: np.ones(c.n_steps)}
+        influence_js = {JOINT: np.ones(c.n_steps)}
     else:
-        joints, positions, covs, influence = _task_loop(
-            robot, c, objs, tasks, theta0, lower, upper, alpha, step_cap
+        joints, positions, covs, influence, limited = _task_loop(
+            robot, c, objs, tasks, theta0, lower, upper, alpha, step_cap, bound
         )
+        # Rank-3 covariance: no joint-space precision to compare; the task-space shares.
+        influence_js = {k: v.copy() for k, v in influence.items()}
 
     task_errors = {
         k: np.linalg.norm(positions - (o + c.task_mean[k]), axis=1) for k, o in objs.items()
@@ -453,34 +544,164 @@ def reproduce(
         gripper=closed,
         gripper_signal=signal,
         influence=influence,
+        influence_joint_space=influence_js,
         task_errors=task_errors,
         used=tuple(used),
+        limited=limited,
     )
 
 
+def step_limit_from_velocity(
+    velocity_limit: float | npt.ArrayLike | Literal["robot"] | None,
+    robot: KinematicModel,
+    dt: float,
+) -> Float | None:
+    """Per-joint step bound for :func:`reproduce` from joint velocity limits.
+
+    Parameters
+    ----------
+    velocity_limit : "robot", float, array-like of shape (n,), or None
+        In rad/s. ``"robot"``: ``robot.velocity_limit`` (a :class:`pbdkit.Robot` has its URDF's)
+        with the joints whose limit is 0, negative, NaN or inf left unlimited; no limit if the
+        robot has no such attribute or ``dt`` is unknown. A number (every joint) or one value
+        per joint, > 0 (inf leaves a joint unlimited). None: no limit.
+    robot : KinematicModel
+    dt : float
+        Time a step takes when the reproduction is executed (s), > 0; NaN when unknown.
+
+    Returns
+    -------
+    step_limit : ndarray, shape (n,), or None
+        v dt (1 - 1e-6) in rad per step, the factor keeping floating-point rounding from ever
+        playing a step above v; inf for an unlimited joint; None when no joint is limited.
+
+    Raises
+    ------
+    ValueError
+        An explicit limit with an unknown ``dt``, or a limit that is not > 0.
+    """
+    n = int(robot.n_joints)
+    known = bool(np.isfinite(dt) and dt > 0)
+    if velocity_limit is None:
+        return None
+    if isinstance(velocity_limit, str):
+        if velocity_limit != "robot":
+            raise ValueError(
+                f"velocity_limit must be 'robot', a number or an array of shape ({n},) in rad/s, "
+                f"or None, got {velocity_limit!r}"
+            )
+        urdf = getattr(robot, "velocity_limit", None)
+        if urdf is None or not known:
+            return None
+        v = check_array(urdf, "robot.velocity_limit", shape=(n,), finite=False)
+        # A URDF writes 0 (or leaves out) the limit of a joint it does not limit.
+        v = np.where(np.isfinite(v) & (v > 0), v, np.inf)
+    else:
+        if not known:
+            raise ValueError(
+                "velocity_limit is in rad/s and needs the duration of a step to bound the steps; "
+                f"it is unknown (dt = {dt!r}: the skill has no known duration): pass "
+                "velocity_limit=None, or bound the steps in rad with max_step"
+            )
+        v = _check_positive_bounds(velocity_limit, n, "velocity_limit", "rad/s")
+    return _check_step_limit(v * (dt * VELOCITY_SAFETY), n)
+
+
+def _check_positive_bounds(value: npt.ArrayLike, n: int, name: str, unit: str) -> Float:
+    """A number or (n,) values, each > 0 or inf (unbounded) -> ndarray (n,)."""
+    scalar = np.ndim(value) == 0  # check_array makes a scalar (1,)
+    arr = check_array(value, name, ndim=(0, 1), finite=False)
+    if scalar:
+        arr = np.full(n, arr.item())
+    elif arr.shape[0] != n:
+        raise ValueError(
+            f"{name} must be a number or have shape ({n},) (one value per joint), "
+            f"got shape ({arr.shape[0]},)"
+        )
+    bad = np.flatnonzero(~(arr > 0))  # zero, negative or NaN
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name}[{i}] must be > 0 ({unit}; inf leaves that joint unbounded), got {arr[i]:.6g}"
+        )
+    return arr
+
+
+def _check_step_limit(step_limit: npt.ArrayLike | None, n: int) -> Float | None:
+    """step_limit as ndarray (n,), or None when no joint is bounded."""
+    if step_limit is None:
+        return None
+    arr = _check_positive_bounds(step_limit, n, "step_limit", "rad per step")
+    return None if bool(np.all(np.isinf(arr))) else arr
+
+
+def _free_step2(max_step: float, step_limit: Float | None) -> float:
+    """Squared length below which no bound can bind (with a margin against rounding)."""
+    free = max_step if step_limit is None else min(max_step, float(step_limit.min()))
+    return free * free * (1.0 - 1e-9)
+
+
+def _step_scale(step: Float, step2: float, step_limit: Float | None, max_step: float) -> float:
+    """Factor in (0, 1] that brings ``step`` within ``step_limit`` and then ``max_step``.
+
+    Both bounds scale the whole step (its direction is kept), so the factor is the smaller of
+    the two: max_i |step_i| / step_limit_i <= 1 and ||step|| <= max_step afterwards.
+    """
+    scale = 1.0
+    if step_limit is not None:
+        ratio = float((np.abs(step) / step_limit).max())
+        if ratio > 1.0:
+            scale = 1.0 / ratio
+    if step2 > max_step * max_step:
+        scale = min(scale, max_step / math.sqrt(step2))
+    return scale
+
+
+def _limited_mask(n_steps: int, steps: list[int]) -> NDArray[np.bool_]:
+    mask = np.zeros(n_steps, dtype=bool)
+    mask[steps] = True
+    return mask
+
+
 def _joint_only(
-    theta_hat: Float, theta0: Float, lower: Float, upper: Float, max_step: float
-) -> Float:
+    theta_hat: Float,
+    theta0: Float,
+    lower: Float,
+    upper: Float,
+    max_step: float,
+    step_limit: Float | None,
+) -> tuple[Float, NDArray[np.bool_]]:
     """Joint-space controller: theta_{j+1} = theta_j + (theta_hat_{j+1} - theta_j) (Table II).
 
     That is theta_hat itself (clipped to the limits), except where a step would exceed
-    ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those steps are scaled.
+    ``step_limit`` or ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those
+    steps are scaled. Returns the joints and the mask of the scaled steps.
     """
     target = np.clip(theta_hat, lower, upper)
     joints = target.copy()
     joints[0] = theta0
+    n_steps = joints.shape[0]
     d = np.diff(joints, axis=0)
-    if np.all(np.einsum("ij,ij->i", d, d) <= max_step * max_step):
-        return joints
+    # The same tests as _step_scale, for all steps at once: nothing binds -> theta_hat itself.
+    fits = np.einsum("ij,ij->i", d, d) <= max_step * max_step
+    if step_limit is not None:
+        fits &= (np.abs(d) / step_limit).max(axis=1) <= 1.0
+    if np.all(fits):
+        return joints, np.zeros(n_steps, dtype=bool)
+    free2 = _free_step2(max_step, step_limit)
+    limited: list[int] = []
     theta = theta0
-    for j in range(1, joints.shape[0]):
+    for j in range(1, n_steps):
         step = target[j] - theta
         step2 = step @ step
-        if step2 > max_step * max_step:
-            step = step * (max_step / np.sqrt(step2))
+        if step2 > free2:
+            scale = _step_scale(step, step2, step_limit, max_step)
+            if scale < 1.0:
+                step = step * scale
+                limited.append(j)
         theta = theta + step  # stays in the box: a point between theta and target[j]
         joints[j] = theta
-    return joints
+    return joints, _limited_mask(n_steps, limited)
 
 
 def _check_q0(q0: npt.ArrayLike, lower: Float, upper: Float) -> Float:
@@ -504,8 +725,14 @@ def _fused_loop(
     lower: Float,
     upper: Float,
     max_step: float,
-) -> tuple[Float, Float, Float, dict[str, Float]]:
-    """Table II with eq. (1) in information form; returns joints, positions, covs, influence."""
+    step_limit: Float | None,
+    line_search: bool,
+) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+    """Table II with eq. (1) in information form.
+
+    Returns joints, positions, covariances, influence (hand space), influence in joint space
+    and the mask of the steps scaled down.
+    """
     n_steps, n = c.n_steps, c.n_joints
     # Everything that does not depend on the state, for all steps at once.
     # Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
@@ -520,30 +747,58 @@ def _fused_loop(
     # cheaper to index in the loop than the arrays.
     g = list(np.concatenate([p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
     prec_list, eta_list = list(prec_j), list(eta_j)
+    # The fused energy of step j in z = [theta | f(theta)]: E_j = 1/2 z^T Q_j z - z . b_j + c
+    # with Q_j = diag(Lambda_theta_j, sum_n P_n), b_j = [eta_j | h_j]; the line search compares
+    # E_j(z_new) - E_j(z) = d . (Q_j (z_new + z) / 2 - b_j), d = z_new - z (exact: quadratic).
+    half_q = np.zeros((n_steps, n + 3, n + 3))
+    half_q[:, :n, :n] = 0.5 * prec_j
+    half_q[:, n:, n:] = 0.5 * p_sum
+    q_list, b_list = list(half_q), list(np.concatenate([eta_j, h], axis=1))
+    concat = np.concatenate
     # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
     fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
     lo, hi = np.maximum, np.minimum
-    max_step2 = max_step * max_step
+    # A step shorter than this fits every bound: one comparison in the loop (module docstring).
+    free2 = _free_step2(max_step, step_limit)
+    limited: list[int] = []
     theta = theta0
     x, jac = fk_jac(theta)
+    z = concat((theta, x))
     # Python lists: appending costs less than writing rows into arrays, step by step.
     joints_l, positions_l, jacs_l = [theta], [x], [jac]
     for j in range(1, n_steps):
         # x, jac are f(theta_{j-1}) and J(theta_{j-1}): Table II linearizes at the current posture.
-        m = jac.T @ g[j]  # (n, 4): [J^T P | J^T h]
+        # ndarray.dot rather than @ in this loop: for these tiny operands it has half the call
+        # overhead (1 us against 2 us per product, measured).
+        m = jac.T.dot(g[j])  # (n, 4): [J^T P | J^T h]
         a = m[:, :3]
-        lam_j = prec_list[j] + a @ jac  # eq. (1) in information form: precisions add
+        lam_j = prec_list[j] + a.dot(jac)  # eq. (1) in information form: precisions add
         # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
         # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
-        _, target, info = dposv(lam_j, eta_list[j] + m[:, 3] + a @ (jac @ theta - x))
+        _, target, info = dposv(lam_j, eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x))
         if info != 0:
             raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
         step = target - theta
-        step2 = step @ step
-        if step2 > max_step2:  # trust region of the linearization (module docstring)
-            target = theta + step * (max_step / np.sqrt(step2))
-        theta = hi(lo(target, lower), upper)
-        x, jac = fk_jac(theta)
+        step2 = step.dot(step)
+        if step2 > free2:  # velocity bound, trust region of the linearization (module docstring)
+            scale = _step_scale(step, step2, step_limit, max_step)
+            if scale < 1.0:
+                target = theta + step * scale
+                limited.append(j)
+        new = hi(lo(target, lower), upper)
+        x, jac = fk_jac(new)
+        if line_search:
+            # The step must lower the fused energy of step j (module docstring, "Stability").
+            z_new = concat((new, x))
+            q_t, b_t = q_list[j], b_list[j]
+            halvings = 0
+            while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
+                halvings += 1
+                new = theta + 0.5 * (new - theta)
+                x, jac = fk_jac(new)
+                z_new = concat((new, x))
+            z = z_new
+        theta = new
         # Entry j holds the state theta_j and the Jacobian that step j+1 will use.
         joints_l.append(theta)
         positions_l.append(x)
@@ -554,11 +809,16 @@ def _fused_loop(
     jt = np.swapaxes(jac_used, -1, -2)
     lam = prec_j + jt @ p_sum @ jac_used
     cov = _spd_inverse(lam)
-    influence: dict[str, Float] = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
-    jcj = jac_used @ cov @ jt  # (T, 3, 3): tr(Sigma J^T P J) = tr(J Sigma J^T P)
-    for i, k in enumerate(tasks):
-        influence[k] = np.einsum("tij,tji->t", jcj, prec[:, i]) / n
-    return joints, positions, cov, influence
+    # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
+    # share_n = tr(S P_n) / 3 and the joint constraint has the rest (module docstring).
+    s_hand = jac_used @ cov @ jt  # (T, 3, 3)
+    traces = [np.einsum("tij,tji->t", s_hand, prec[:, i]) for i in range(len(tasks))]
+    influence = {k: tr / 3 for k, tr in zip(tasks, traces, strict=True)}
+    influence = {JOINT: np.clip(1.0 - sum(influence.values()), 0.0, 1.0), **influence}
+    # Joint space: tr(Sigma Lambda_c) / n, with tr(Sigma J^T P_n J) = tr(S P_n).
+    influence_js = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
+    influence_js.update({k: tr / n for k, tr in zip(tasks, traces, strict=True)})
+    return joints, positions, cov, influence, influence_js, _limited_mask(n_steps, limited)
 
 
 def _spd_inverse(a: Float) -> Float:
@@ -577,7 +837,8 @@ def _task_loop(
     upper: Float,
     alpha: float,
     max_step: float,
-) -> tuple[Float, Float, Float, dict[str, Float]]:
+    step_limit: Float | None,
+) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
     """Task-only controller of Table II (objects in ``tasks`` fused in task space first)."""
     n_steps, n = c.n_steps, c.n_joints
     prec = np.stack([c.task_prec[k] for k in tasks], axis=1)  # (T, m, 3, 3)
@@ -593,6 +854,8 @@ def _task_loop(
     # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
     fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
     eye = np.eye(n)
+    free2 = _free_step2(max_step, step_limit)
+    limited: list[int] = []
     theta = theta0
     x, jac = fk_jac(theta)
     jp = damped_pinv(jac)
@@ -602,16 +865,20 @@ def _task_loop(
         # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
         step = jp @ (target[j] - x) + alpha * ((eye - jp @ jac) @ d_hat)
         step2 = step @ step
-        if step2 > max_step * max_step:
-            step *= max_step / np.sqrt(step2)
+        if step2 > free2:
+            scale = _step_scale(step, step2, step_limit, max_step)
+            if scale < 1.0:
+                step *= scale
+                limited.append(j)
         theta = np.minimum(np.maximum(theta + step, lower), upper)
         x, jac = fk_jac(theta)
         pinvs[j] = jp
         jp = damped_pinv(jac)
         joints[j], positions[j] = theta, x
     covs = pinvs @ s_fused @ np.swapaxes(pinvs, -1, -2)
+    # Already in hand space: share_n = tr(S_fused P_n) / 3, S_fused = (sum_n P_n)^-1.
     influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}
-    return joints, positions, covs, influence
+    return joints, positions, covs, influence, _limited_mask(n_steps, limited)
 
 
 def reach_from_samples(

@@ -28,6 +28,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Literal
 
 import numpy as np
@@ -37,7 +38,7 @@ from numpy.typing import NDArray
 from ._io import load_npz_safe, save_npz_atomic
 from ._validation import check_int, check_positive_float
 from .demos import Demonstration, check_demonstrations
-from .gmm import GMM
+from .gmm import GMM, MAX_COMPONENTS, ModelSelection
 from .reproduce import (
     JOINT,
     Constraints,
@@ -45,11 +46,18 @@ from .reproduce import (
     ReproductionResult,
     reach_from_samples,
     reproduce,
+    step_limit_from_velocity,
 )
 
-__all__ = ["Skill"]
+__all__ = ["MAX_COMPONENTS", "VARIABILITY_FLOOR", "Skill", "space_data"]
 
 Float = NDArray[np.float64]
+#: Default variability floors (variances): joint angles (rad^2), gripper signal, hand position
+#: relative to an object (m^2). See :meth:`Skill.learn`.
+VARIABILITY_FLOOR: Mapping[str, float] = MappingProxyType(
+    {"joint": 0.01**2, "gripper": 0.1**2, "task": 0.001**2}
+)
+TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
 CovarianceMode = Literal["exact", "paper"]
@@ -115,6 +123,15 @@ class Skill:
         """K of each constraint space's GMM."""
         return {k: int(g.n_components_) for k, g in self.gmms.items()}
 
+    @property
+    def selection_(self) -> dict[str, ModelSelection]:
+        """How K was chosen in each space: the K tried, their scores, the best and the kept K.
+
+        For a skill loaded from a file, the selection recorded when it was learned (method
+        ``"fixed"`` for files written before it was recorded).
+        """
+        return {k: g.selection_ for k, g in self.gmms.items()}
+
     def times(self, result: ReproductionResult) -> Float:
         """Time stamps in seconds for executing a reproduction: its steps spread over
         :attr:`duration`.
@@ -145,9 +162,9 @@ class Skill:
         demos: Sequence[Demonstration],
         robot: KinematicModel,
         n_steps: int = 1000,
-        n_components: int | Literal["bic"] = "bic",
-        max_components: int = 10,
-        reg_covar: float = 1e-6,
+        n_components: int | Literal["auto", "bic"] = "auto",
+        max_components: int = MAX_COMPONENTS,
+        reg_covar: float | Mapping[str, float] | None = None,
         random_state: int | None = 0,
         fit_samples: int | None = 100,
         bic_samples_per_sequence: float = 20.0,
@@ -164,20 +181,24 @@ class Skill:
             The arm (e.g. :func:`pbdkit.robots.katana`); its forward kinematics gives x.
         n_steps : int
             Steps of the time grid (the paper: 1000).
-        n_components : int or "bic"
-            K of every GMM, or ``"bic"`` to choose it per space in 1..``max_components``.
+        n_components : int, "auto" or "bic"
+            K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
+            by leaving one demonstration out at a time (:mod:`pbdkit.gmm`, "Choosing K"): the
+            smallest K whose generalized trajectory predicts a left-out demonstration as well
+            as the best K does, within one standard error; ``"bic"``: the effective-sample-
+            size BIC of earlier versions (kept for comparison).
         max_components : int
-            Largest K tried with ``"bic"``.
-        reg_covar : float
-            Added to the diagonal of every GMM covariance (rad^2 in joint space, m^2 in task
-            space): a floor on the variability of a constraint.
+            Largest K tried.
+        reg_covar : float, dict or None
+            The variability floor added to the diagonal of every GMM covariance: no constraint
+            is tighter than it. None: :data:`VARIABILITY_FLOOR` (joint angles 0.01 rad, gripper
+            0.1, hand positions 1 mm, as standard deviations). A dict overrides some of its
+            keys ``"joint"`` (rad^2), ``"gripper"``, ``"task"`` (m^2); a float applies to every
+            dimension of every space (the units mix: rad^2 and m^2).
         random_state : int or None
             Seed passed to the GMMs.
         bic_samples_per_sequence : float
-            Effective number of samples per demonstration in the BIC (see :mod:`pbdkit.gmm`):
-            larger values favour more components. Measured on the simulated coaster task
-            (10 new placements): 20 gives K = 3/6/5 (joint/glass/coaster) and 10/10 fused
-            successes; 50 gives K = 8/8/8 and 8/10.
+            ``n_components="bic"`` only: effective number of samples per demonstration.
         objects : sequence of str, optional
             The objects that get a task-space constraint, among those the demonstrations
             record (default: all). An object that never moves (the basin of the paper's
@@ -208,7 +229,7 @@ class Skill:
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
         n_steps = check_int(n_steps, "n_steps", minimum=2)
-        check_positive_float(reg_covar, "reg_covar", allow_zero=True)
+        floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
         if objects is None:
             names = recorded
@@ -227,29 +248,29 @@ class Skill:
         n_fit = n_steps if fit_samples is None else check_int(fit_samples, "fit_samples", minimum=2)
         steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
 
-        resampled = [d.rescaled(n_steps) for d in items]
-        t = np.tile(steps.astype(np.float64), len(items))[:, None]  # restarts per demonstration
-        theta = np.concatenate([d.joints[steps] for d in resampled])  # (M T_fit, n)
-        x = np.asarray(robot.fk(theta), dtype=np.float64)  # (M T_fit, 3), one batched call
-        blocks = [t, theta]
-        if has_gripper:
-            grip = [d.gripper[steps] for d in resampled if d.gripper is not None]
-            blocks.append(np.concatenate(grip)[:, None])
-        data = {JOINT: np.hstack(blocks)}
-        for k in names:
-            o = np.repeat(np.stack([d.objects[k] for d in items]), steps.shape[0], axis=0)
-            data[k] = np.hstack([t, x - o])
-
+        spaces = space_data(items, robot, names, n_steps, steps)
+        data = {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
+        groups = np.repeat(np.arange(len(items)), steps.shape[0])  # the demonstration of a row
+        # Per dimension: time (steps; a jitter only), then the space's own units.
+        space_floor = {
+            JOINT: np.r_[TIME_FLOOR, np.full(n, floors["joint"])]
+            if not has_gripper
+            else np.r_[TIME_FLOOR, np.full(n, floors["joint"]), floors["gripper"]],
+            **{k: np.r_[TIME_FLOOR, np.full(3, floors["task"])] for k in names},
+        }
         gmms = {
             k: GMM(
                 n_components=n_components,
                 max_components=max_components,
-                reg_covar=reg_covar,
+                reg_covar=space_floor[k],
                 random_state=random_state,
+                # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
+                score_dims=list(range(1, n + 1)) if k == JOINT else None,
                 bic_samples_per_sequence=bic_samples_per_sequence,
-            ).fit(X)
+            ).fit(X, groups=groups)
             for k, X in data.items()
         }
+        theta = data[JOINT][:, 1 : n + 1]
         reach = reach_from_samples(robot, theta)
         return cls(
             robot,
@@ -312,8 +333,15 @@ class Skill:
         covariance: CovarianceMode = "exact",
         max_step: float | None = 0.1,
         on_unreachable: Literal["raise", "warn"] = "raise",
+        *,
+        velocity_limit: float | npt.ArrayLike | Literal["robot"] | None = "robot",
+        line_search: bool = True,
     ) -> ReproductionResult:
         """Reproduce the skill for new object positions (paper Table II).
+
+        Every step is bounded so that the reproduction, executed over :meth:`times`, never
+        commands a joint faster than ``velocity_limit`` (see :mod:`pbdkit.reproduce`,
+        "Step size").
 
         Parameters
         ----------
@@ -329,19 +357,52 @@ class Skill:
         covariance : {"exact", "paper"}
             GMR covariance mode.
         max_step : float or None
-            Largest joint-space step (Euclidean norm, rad); longer steps are scaled down (see
-            :mod:`pbdkit.reproduce`, "Step size"). None: the paper's full step.
+            Largest joint-space step (Euclidean norm, rad): the trust region of the
+            linearization; longer steps are scaled down, keeping their direction. None: no such
+            bound (with ``velocity_limit=None`` too, the paper's full step). The default stays
+            0.1 rad although the velocity limit is the tighter bound on the paper's grid
+            (1000 steps over ~20 s: at most 0.024 rad per joint, 0.053 rad over the Katana's
+            5 joints, so 0.1 never binds): it is a length in rad, not a speed, and still guards
+            the linearization where no velocity limit applies (unknown :attr:`duration`, a
+            robot without limits, ``velocity_limit=None``) or where the steps are coarse (few
+            steps over a long duration).
         on_unreachable : {"raise", "warn"}
             What to do when an object's most constrained target o + x_hat is beyond
             :attr:`reach`: raise ValueError, or warn (:class:`pbdkit.reproduce.ReachWarning`)
             and reproduce anyway (the hand stops short; never NaN).
+        velocity_limit : "robot", float, array-like of shape (n,), or None
+            Largest joint speeds (rad/s) when the reproduction is executed over :meth:`times`.
+            ``"robot"`` (default): the robot's ``velocity_limit`` (the URDF's), joints whose
+            limit is 0, negative or inf being unlimited; no limit if the robot has none or the
+            skill's :attr:`duration` is unknown (NaN). A number (every joint) or one value per
+            joint, > 0 (inf: that joint unlimited); it needs a known :attr:`duration`. None: no
+            limit. Converted to a bound per step with dt = duration / (n_steps - 1), the timing
+            of :meth:`times`, times 1 - 1e-6 so that rounding never plays a speed above it; a
+            step that would exceed it is scaled down uniformly (its direction kept).
+        line_search : bool
+            Fused controller: halve a step that would raise the fused energy of its step, which
+            keeps the loop from oscillating where a tight task constraint and a loose joint
+            constraint disagree (:mod:`pbdkit.reproduce`, "Stability"). False: Table II as
+            written.
 
         Returns
         -------
         result : ReproductionResult
             t (T,), joints (T, n), positions (T, 3), covariances (T, n, n), gripper (T,) bool,
-            influence dict name -> (T,), task_errors dict name -> (T,).
+            influence and influence_joint_space dict name -> (T,), task_errors dict
+            name -> (T,), limited (T,) bool (the steps the velocity limit or ``max_step``
+            scaled down).
+
+        Raises
+        ------
+        ValueError
+            Bad input, an object out of reach (``on_unreachable="raise"``), or an explicit
+            ``velocity_limit`` for a skill whose :attr:`duration` is unknown.
         """
+        known = bool(np.isfinite(self.duration) and self.duration > 0)
+        # The timing of times(): steps 0 .. n_steps-1 spread over the duration.
+        dt = self.duration / (self.n_steps - 1) if known else float("nan")
+        step_limit = step_limit_from_velocity(velocity_limit, self.robot, dt)
         return reproduce(
             self.robot,
             self.constraints(covariance),
@@ -350,8 +411,10 @@ class Skill:
             use=use,
             alpha=alpha,
             max_step=max_step,
+            step_limit=step_limit,
             reach=self.reach,
             on_unreachable=on_unreachable,
+            line_search=line_search,
         )
 
     # ------------------------------------------------------------------ I/O
@@ -387,6 +450,12 @@ class Skill:
             arrays[f"gmm_{key}_weights"] = g.weights_
             arrays[f"gmm_{key}_means"] = g.means_
             arrays[f"gmm_{key}_covariances"] = g.covariances_
+            sel = g.selection_
+            arrays[f"sel_{key}_method"] = np.array(sel.method)
+            arrays[f"sel_{key}_candidates"] = np.asarray(sel.candidates, dtype=np.int64)
+            arrays[f"sel_{key}_scores"] = np.asarray(sel.scores, dtype=np.float64)
+            arrays[f"sel_{key}_fold_scores"] = np.asarray(sel.fold_scores, dtype=np.float64)
+            arrays[f"sel_{key}_best_chosen"] = np.array([sel.best, sel.chosen], dtype=np.int64)
         save_npz_atomic(path, arrays)
 
     @classmethod
@@ -444,6 +513,8 @@ class Skill:
                     data[f"gmm_{key}_means"],
                     data[f"gmm_{key}_covariances"],
                 )
+                if f"sel_{key}_method" in data:  # files before the selection was recorded lack it
+                    gmms[k].selection_ = _selection_from_arrays(data, key, k)
         except KeyError as exc:
             raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
         except (TypeError, ValueError) as exc:
@@ -487,3 +558,86 @@ class Skill:
             reach=reach,
             duration=duration,
         )
+
+
+def _variability_floor(reg_covar: float | Mapping[str, float] | None) -> dict[str, float]:
+    """The floors per kind of dimension, from Skill.learn's ``reg_covar``."""
+    if reg_covar is None:
+        return dict(VARIABILITY_FLOOR)
+    if isinstance(reg_covar, Mapping):
+        unknown = [k for k in reg_covar if k not in VARIABILITY_FLOOR]
+        if unknown:
+            raise ValueError(f"reg_covar: unknown key(s) {unknown}; use {list(VARIABILITY_FLOOR)}")
+        out = dict(VARIABILITY_FLOOR)
+        for k, v in reg_covar.items():
+            out[k] = check_positive_float(v, f"reg_covar[{k!r}]", allow_zero=True)
+        return out
+    v = check_positive_float(reg_covar, "reg_covar", allow_zero=True)
+    return dict.fromkeys(VARIABILITY_FLOOR, v)
+
+
+def space_data(
+    demos: Sequence[Demonstration],
+    robot: KinematicModel,
+    object_names: Sequence[str],
+    n_steps: int,
+    steps: npt.ArrayLike | None = None,
+) -> dict[str, Float]:
+    """The data of every constraint space, per demonstration (paper Table I).
+
+    Each demonstration is rescaled to ``n_steps`` steps and sampled at ``steps``; the hand
+    positions x = f(theta) come from one batched forward-kinematics call.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        Validated, with the same structure (:func:`pbdkit.demos.check_demonstrations`).
+    robot : KinematicModel
+    object_names : sequence of str
+        The objects that get a task space.
+    n_steps : int
+    steps : array-like of int, optional
+        The steps kept (default: all ``n_steps``).
+
+    Returns
+    -------
+    data : dict str -> ndarray, shape (M, T', D)
+        ``"joint"``: {t, theta (n), gripper (if the demonstrations have one)}; each object:
+        {t, x - o}; M demonstrations, T' = len(steps) steps, time in steps.
+    """
+    idx = np.arange(n_steps) if steps is None else np.asarray(steps, dtype=np.intp)
+    resampled = [d.rescaled(n_steps) for d in demos]
+    m, t_len = len(resampled), idx.shape[0]
+    t = np.broadcast_to(idx.astype(np.float64)[None, :, None], (m, t_len, 1))
+    theta = np.stack([d.joints[idx] for d in resampled])  # (M, T', n)
+    x = np.asarray(robot.fk(theta.reshape(m * t_len, -1)), dtype=np.float64).reshape(m, t_len, 3)
+    cols = [t, theta]
+    grips = [d.gripper[idx] for d in resampled if d.gripper is not None]
+    if grips:
+        cols.append(np.stack(grips)[..., None])
+    out = {JOINT: np.concatenate(cols, axis=2)}
+    for k in object_names:
+        o = np.stack([d.objects[k] for d in demos])[:, None, :]
+        out[k] = np.concatenate([t, x - o], axis=2)
+    return out
+
+
+def _selection_from_arrays(data: Mapping[str, Any], key: str, name: str) -> ModelSelection:
+    """The ModelSelection stored under ``sel_{key}_*`` by :meth:`Skill.save`."""
+    method = str(data[f"sel_{key}_method"])
+    cand = np.asarray(data[f"sel_{key}_candidates"]).reshape(-1)
+    scores = np.asarray(data[f"sel_{key}_scores"], dtype=np.float64).reshape(-1)
+    folds = np.asarray(data[f"sel_{key}_fold_scores"], dtype=np.float64)
+    best, chosen = (int(v) for v in np.asarray(data[f"sel_{key}_best_chosen"]).reshape(-1)[:2])
+    if (
+        method not in ("cv", "bic", "fixed")
+        or cand.dtype.kind not in "iu"
+        or scores.shape != cand.shape
+        or folds.ndim != 2
+        or (folds.size and folds.shape[0] != cand.shape[0])
+        or best not in cand
+        or chosen not in cand
+    ):
+        raise ValueError(f"the model selection stored for {name!r} is inconsistent")
+    n_folds = folds.shape[1] if method == "cv" else 0
+    return ModelSelection(method, tuple(int(k) for k in cand), scores, folds, best, chosen, n_folds)

@@ -10,7 +10,8 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
 - :mod:`pbdkit.sim.tasks`: object placement ranges (:data:`PLACEMENT_RANGES`,
-  :func:`sample_objects`).
+  :func:`sample_objects`) and which objects move (:func:`tracked_objects`: tracked by the cameras,
+  constrained in task space) or are fixed (:func:`fixed_objects`: the basin).
 
 Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (``osmesa`` if only OSMesa is installed);
 set it before importing this package to choose another backend.
@@ -29,7 +30,16 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
 
 from .execute import ExecutionResult, Outcome, evaluate_outcome, execute
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
-from .tasks import PLACEMENT_RANGES, TASKS, PlacementRange, nominal_objects, sample_objects
+from .tasks import (
+    PLACEMENT_RANGES,
+    TASKS,
+    PlacementRange,
+    fixed_objects,
+    full_placement,
+    nominal_objects,
+    sample_objects,
+    tracked_objects,
+)
 from .teacher import solve_ik, teach, teach_one, tool_pitch
 from .video import save_video
 
@@ -45,6 +55,8 @@ __all__ = [
     "build_scene",
     "evaluate_outcome",
     "execute",
+    "fixed_objects",
+    "full_placement",
     "nominal_objects",
     "sample_objects",
     "save_video",
@@ -52,4 +64,5 @@ __all__ = [
     "teach",
     "teach_one",
     "tool_pitch",
+    "tracked_objects",
 ]

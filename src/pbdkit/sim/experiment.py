@@ -6,6 +6,17 @@ Controllers (paper Sec. II-B and Fig. 6) are named as in ``pbdkit evaluate``'s J
 - ``"joint"``: the joint-space constraint only;
 - ``"task:OBJECT"``: the task-space constraint of one object only (null-space term alpha = 0.5).
 
+Which constraints a task's skill has (:func:`constrained_objects`): the joint space and one
+task-space constraint per object that moves between placements, as in the paper (Sec. III: the
+cameras track the moving objects; the basin of task 2 is fixed and only the gesture, a
+joint-space constraint, relates to it). So the coaster task's controllers are ``"fused"``,
+``"joint"``, ``"task:glass"``, ``"task:coaster"`` and the basin task's ``"fused"``, ``"joint"``,
+``"task:glass"``. ``constrain_fixed=True`` (``pbdkit evaluate --constrain-fixed``) also learns a
+constraint relative to the fixed basin (and adds ``"task:basin"``), which the paper does not.
+The demonstrations record every object either way; the simulated world and the success judge
+always get every object's position (:func:`pbdkit.sim.tasks.full_placement`), the skill only its
+own objects'.
+
 A trial samples new object positions inside the demonstrated ranges
 (:data:`pbdkit.sim.tasks.PLACEMENT_RANGES`), reproduces the skill with a controller, executes the
 joint trajectory under physics over the demonstrations' mean duration, and judges the outcome
@@ -31,6 +42,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ..demos import Demonstration
+from ..gmm import MAX_COMPONENTS
 from ..reproduce import ReachWarning, ReproductionResult
 from ..robots import katana
 from ..skill import Skill
@@ -43,6 +55,7 @@ from .tracking import ObjectNotSeenError, SimTracker, observed_objects
 __all__ = [
     "ControllerRun",
     "TaskSkill",
+    "constrained_objects",
     "controller_names",
     "controller_use",
     "evaluate",
@@ -75,6 +88,26 @@ def controller_use(controller: str, object_names: Sequence[str]) -> list[str] | 
     )
 
 
+def constrained_objects(task: str, *, constrain_fixed: bool = False) -> list[str]:
+    """The objects of ``task`` that get a task-space constraint, in range order.
+
+    Parameters
+    ----------
+    task : {"coaster", "basin"}
+    constrain_fixed : bool
+        False (the paper): only the objects that move (:func:`pbdkit.sim.tasks.tracked_objects`).
+        True: every object, the fixed ones (the basin) too.
+
+    Returns
+    -------
+    names : list of str
+        The ``objects`` argument of :meth:`pbdkit.Skill.learn`.
+    """
+    if constrain_fixed:
+        return list(T.PLACEMENT_RANGES[T.check_task(task)])
+    return list(T.tracked_objects(task))
+
+
 @dataclass
 class TaskSkill:
     """A skill learned from simulated demonstrations of a task."""
@@ -85,18 +118,39 @@ class TaskSkill:
     learn_seconds: float
     teach_seconds: float
 
+    @property
+    def constrain_fixed(self) -> bool:
+        """True if the skill has a task-space constraint relative to a fixed object."""
+        fixed = T.fixed_objects(self.task)
+        return any(k in fixed for k in self.skill.object_names)
+
 
 def learn_task(
-    task: str, *, n_demos: int = 5, seed: int = 0, n_steps: int = 1000, max_components: int = 10
+    task: str,
+    *,
+    n_demos: int = 5,
+    seed: int = 0,
+    n_steps: int = 1000,
+    max_components: int = MAX_COMPONENTS,
+    constrain_fixed: bool = False,
 ) -> TaskSkill:
-    """Demonstrate ``task`` ``n_demos`` times with the simulated teacher and learn the skill."""
+    """Demonstrate ``task`` ``n_demos`` times with the simulated teacher and learn the skill.
+
+    The demonstrations record every object; the skill gets a task-space constraint for the
+    objects of :func:`constrained_objects` (by default the moving ones, as in the paper;
+    ``constrain_fixed=True`` adds the fixed basin).
+    """
     T.check_task(task)
     start = time.perf_counter()
     demos = teach(task, n_demos, seed=seed)
     teach_s = time.perf_counter() - start
     start = time.perf_counter()
     skill = Skill.learn(
-        demos, katana(), n_steps=n_steps, n_components="bic", max_components=max_components
+        demos,
+        katana(),
+        n_steps=n_steps,
+        max_components=max_components,
+        objects=constrained_objects(task, constrain_fixed=constrain_fixed),
     )
     learn_s = time.perf_counter() - start
     return TaskSkill(task, demos, skill, learn_s, teach_s)
@@ -104,7 +158,10 @@ def learn_task(
 
 @dataclass
 class ControllerRun:
-    """One controller's reproduction and its execution under physics."""
+    """One controller's reproduction and its execution under physics.
+
+    ``objects`` holds the positions the skill was told (its own objects only).
+    """
 
     controller: str
     objects: dict[str, Float]
@@ -139,21 +196,32 @@ def run_controller(
 ) -> ControllerRun:
     """Reproduce with one controller for ``objects`` and execute it in a fresh simulation.
 
-    ``objects`` are the positions the skill is told (e.g. from the tracker); ``sim_objects``,
-    the true positions in the simulated world (default: the same).
+    ``objects`` are the positions the robot knows (e.g. from the tracker); ``sim_objects``,
+    the true positions in the simulated world (default: the same). Either may leave out the
+    fixed objects (they are added from :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`) and may hold
+    objects the skill has no constraint on: the skill is told only its own objects, the
+    simulation and the success judge get every object.
+
+    Raises
+    ------
+    ValueError
+        An unknown controller or object, or a moving object without a position.
     """
     use = controller_use(controller, ts.skill.object_names)
+    known = T.full_placement(ts.task, objects)
+    world = T.full_placement(ts.task, sim_objects) if sim_objects is not None else known
+    told = {k: known[k] for k in ts.skill.object_names}
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        res = ts.skill.reproduce(objects, use=use, on_unreachable="warn")
+        res = ts.skill.reproduce(told, use=use, on_unreachable="warn")
     rep_s = time.perf_counter() - start
-    sim = Simulation.from_task(ts.task, sim_objects if sim_objects is not None else objects)
+    sim = Simulation.from_task(ts.task, world)
     try:
         ex = execute(sim, ts.skill.times(res), res.joints, res.gripper, camera=camera, fps=fps)
     finally:
         sim.close()
-    return ControllerRun(controller, objects, res, ex, rep_s, [str(w.message) for w in caught])
+    return ControllerRun(controller, told, res, ex, rep_s, [str(w.message) for w in caught])
 
 
 def start_posture(ts: TaskSkill) -> Float:
@@ -182,7 +250,8 @@ def observe(
     ----------
     task : {"coaster", "basin"}
     truth : dict str -> ndarray, shape (3,)
-        True positions of every object of the task.
+        True positions of the objects of the task; fixed ones may be left out (they are added
+        from :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`).
     tracker : SimTracker
         Calibrated on ``task``.
     arm : array-like, shape (n,), optional
@@ -191,14 +260,15 @@ def observe(
     Returns
     -------
     objects : dict str -> ndarray, shape (3,)
-        Same keys as ``truth``: tracked positions for the tracked objects, ``truth`` for the
-        others (fixed objects, known without vision).
+        Every object of the task, whatever the skill constrains: tracked positions for the
+        tracked objects, the true ones for the others (fixed objects, known without vision).
 
     Raises
     ------
     ObjectNotSeenError
         If a tracked object is not located.
     """
+    truth = T.full_placement(task, truth)
     sim = Simulation.from_task(task, truth)
     try:
         if arm is not None:
@@ -254,6 +324,7 @@ def evaluate(
     task_skill: TaskSkill | None = None,
     ground_truth: bool = False,
     tracker: SimTracker | None = None,
+    constrain_fixed: bool = False,
 ) -> dict[str, Any]:
     """Success rate of every controller over ``trials`` random new placements.
 
@@ -275,11 +346,16 @@ def evaluate(
         Tell the skill the true object positions instead of the tracked ones.
     tracker : SimTracker, optional
         With vision: the tracker to use (default: calibrated here, at the nominal placement).
+    constrain_fixed : bool
+        When learning here: also learn a task-space constraint relative to the fixed objects
+        (the basin), which the paper does not (:func:`learn_task`). With ``task_skill``, the
+        skill's own constraints are used and recorded.
 
     Returns
     -------
     result : dict
-        JSON-ready: ``{"task", "trials", "seed", "n_components", "vision", "controllers":
+        JSON-ready: ``{"task", "trials", "seed", "n_components", "constraints" (the skill's
+        spaces, e.g. ``["joint", "glass"]``), "constrain_fixed", "vision", "controllers":
         {NAME: {"success_rate", "successes", "metrics": {metric: {"mean", "median", "max"}}}},
         "tracking_error_mm": {"mean", "std", "max", "n", "per_object"} or None,
         "tracking_failures", "placements", "observed", "runs"}``.
@@ -287,7 +363,7 @@ def evaluate(
     T.check_task(task)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
-    ts = task_skill or learn_task(task, n_demos=n_demos, seed=seed)
+    ts = task_skill or learn_task(task, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     names = list(controllers) if controllers else controller_names(ts.skill.object_names)
     for name in names:
         controller_use(name, ts.skill.object_names)
@@ -357,6 +433,8 @@ def evaluate(
         "seed": seed,
         "n_demos": n_demos,
         "n_components": ts.skill.n_components,
+        "constraints": list(ts.skill.constraint_names),
+        "constrain_fixed": ts.constrain_fixed,
         "learn_seconds": ts.learn_seconds,
         "vision": vision,
         "controllers": summary,

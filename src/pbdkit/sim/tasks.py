@@ -17,13 +17,22 @@ from the base axis: placements lie 0.45-0.58 m from it.
 Ranges are boxes ``(low, high)`` of shape (3,) each; a range whose low and high are equal is a
 fixed object. Demonstrations sample inside them (:func:`sample_objects`) and so can evaluation
 trials, which then stay inside the demonstrated range.
+
+Fixed and tracked objects (paper Sec. III): the ranges are the one place that says which objects
+move. Those that move (:func:`tracked_objects`) are located by the cameras and get a task-space
+constraint; a fixed one (the basin) is at a known place (:func:`fixed_objects`), carries no
+patch, and gets no constraint in the paper's configuration: its position is the same in every
+demonstration, so the hand's path relative to it is the joint-space constraint seen through the
+forward kinematics. Demonstrations still record it, as a user's recording would.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import NDArray
 
 Float = NDArray[np.float64]
@@ -115,6 +124,59 @@ def check_task(task: str) -> str:
     if task not in PLACEMENT_RANGES:
         raise ValueError(f"task must be one of {list(TASKS)}, got {task!r}")
     return task
+
+
+def tracked_objects(task: str) -> tuple[str, ...]:
+    """Objects of ``task`` that move between placements, in range order (the cameras track them)."""
+    ranges = PLACEMENT_RANGES[check_task(task)]
+    return tuple(name for name, r in ranges.items() if not r.fixed)
+
+
+def fixed_objects(task: str) -> tuple[str, ...]:
+    """Objects of ``task`` that never move (the basin), in range order; known without vision."""
+    ranges = PLACEMENT_RANGES[check_task(task)]
+    return tuple(name for name, r in ranges.items() if r.fixed)
+
+
+def full_placement(task: str, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+    """Every object's position for a placement: ``objects`` plus the fixed objects' positions.
+
+    Use it where a subset of the objects is known (e.g. those of a skill that has no constraint
+    on the fixed ones) and the whole scene is needed (the simulation, the success judge).
+
+    Parameters
+    ----------
+    task : {"coaster", "basin"}
+    objects : dict str -> array-like, shape (3,)
+        Positions of at least every moving object (:func:`tracked_objects`); fixed objects may
+        be given too (they are then kept as given, for :func:`pbdkit.sim.build_scene` to check).
+
+    Returns
+    -------
+    placement : dict str -> ndarray, shape (3,)
+        One position per object of the task, in range order.
+
+    Raises
+    ------
+    ValueError
+        An object that is not one of the task's, or a moving object without a position.
+    """
+    ranges = PLACEMENT_RANGES[check_task(task)]
+    unknown = sorted(set(objects) - set(ranges))
+    if unknown:
+        raise ValueError(
+            f"objects: unknown object(s) {unknown} for task {task!r}; expected {list(ranges)}"
+        )
+    missing = [k for k in tracked_objects(task) if k not in objects]
+    if missing:
+        raise ValueError(
+            f"objects: missing position(s) for {missing}: they move between placements, so the "
+            f"{task!r} task needs them (only fixed objects {list(fixed_objects(task))} are known)"
+        )
+    return {
+        name: np.array(objects[name], dtype=np.float64) if name in objects else r.low.copy()
+        for name, r in ranges.items()
+    }
 
 
 def nominal_objects(task: str) -> dict[str, Float]:

@@ -62,6 +62,7 @@ from .._validation import check_array
 from ..vision import ColorModel, PinholeCamera, StereoTracker, Track
 from . import tasks as T
 from .scene import CAMERAS, Simulation
+from .tasks import tracked_objects  # re-exported: the objects the cameras track
 
 __all__ = [
     "PATCH_GEOM_PREFIX",
@@ -106,15 +107,6 @@ class ObjectNotSeenError(RuntimeError):
             "two blobs, 'inconsistent' = the views disagree. Move the object into both cameras' "
             "view, or run with ground-truth positions (--ground-truth)"
         )
-
-
-def tracked_objects(task: str) -> tuple[str, ...]:
-    """Objects of ``task`` the cameras track: every object that moves between placements.
-
-    Fixed objects (the basin) are at a known place and carry no patch.
-    """
-    ranges = T.PLACEMENT_RANGES[T.check_task(task)]
-    return tuple(name for name, r in ranges.items() if not r.fixed)
 
 
 def patch_geom_ids(model: Any, name: str) -> NDArray[np.intp]:
