@@ -72,16 +72,24 @@ def joint_quality(skill: Skill, demos: list[Demonstration]) -> dict[str, float]:
     }
 
 
-def peak_speed_ratio(skill: Skill, demos: list[Demonstration]) -> float:
-    """Largest joint speed of the fused reproduction over the URDF limit, over several q0."""
+def peak_speed_ratio(skill: Skill, demos: list[Demonstration]) -> tuple[float, float, float]:
+    """Largest joint speed of the fused reproduction over the URDF limit, over several q0; and
+    the largest joint second difference (rad/step^2) after step 20, of the reproduction from
+    q0 = None and of the demonstrations (rescaled), as a smoothness check."""
     vmax = np.asarray(skill.robot.velocity_limit, dtype=np.float64)  # type: ignore[attr-defined]
     objects = {k: np.mean([d.objects[k] for d in demos], axis=0) for k in skill.object_names}
     worst = 0.0
+    jerk = 0.0
     for q0 in [None, *(d.joints[0] for d in demos)]:
         res = skill.reproduce(objects, q0=q0)
         speed = np.abs(np.diff(res.joints, axis=0)) / np.diff(skill.times(res))[:, None]
         worst = max(worst, float(np.max(speed / vmax)))
-    return worst
+        if q0 is None:
+            jerk = float(np.abs(np.diff(res.joints[20:], 2, axis=0)).max())
+    demo_jerk = max(
+        float(np.abs(np.diff(d.rescaled(skill.n_steps).joints, 2, axis=0)).max()) for d in demos
+    )
+    return worst, jerk, demo_jerk
 
 
 # ----------------------------------------------------------------------------- alternatives
@@ -183,11 +191,20 @@ def main() -> None:
             skill = Skill.learn(demos, robot, objects=constrained_objects(task))
             learn_s = time.perf_counter() - start
             q = joint_quality(skill, demos)
-            v = peak_speed_ratio(skill, demos)
+            v, jerk, demo_jerk = peak_speed_ratio(skill, demos)
             ks = " / ".join(f"{k} {n}" for k, n in skill.n_components.items())
             roll = f"{q['roll_end']:.3f} / {q['overshoot']:+.3f}" if task == "basin" else "-"
             rows.append(
-                [task, str(seed), ks, f"{q['ratio']:.2f}", roll, f"{v:.3f}", f"{learn_s:.2f} s"]
+                [
+                    task,
+                    str(seed),
+                    ks,
+                    f"{q['ratio']:.2f}",
+                    roll,
+                    f"{v:.3f}",
+                    f"{1e3 * jerk:.1f} / {1e3 * demo_jerk:.1f}",
+                    f"{learn_s:.2f} s",
+                ]
             )
             cases.append((task, seed, demos, skill, q, v, learn_s))
     print(f"\nDefaults (max_components = {MAX_COMPONENTS}, CV tolerance {CV_TOLERANCE:g}):")
@@ -199,6 +216,7 @@ def main() -> None:
             "joint RMSE / floor (worst joint)",
             "roll end error / overshoot (rad)",
             "peak speed / limit",
+            "max 2nd difference, fused / demos (mrad)",
             "learn",
         ],
         rows,

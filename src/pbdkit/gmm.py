@@ -1,30 +1,48 @@
-"""Gaussian mixture models over trajectories, with time-based initialisation and BIC selection.
+"""Gaussian mixture models over trajectories: time-based EM, and K chosen by cross-validation.
 
 The estimator follows scikit-learn's conventions: ``__init__`` only stores its arguments, ``fit``
-sets every learned attribute (names ending in ``_``), and EM itself is scikit-learn's
-``GaussianMixture`` (full covariances), started from a *time-based* initialisation: the data are
-cut into K consecutive bins along the time column and each bin gives one component's weight,
-mean and covariance. On trajectory data this start is already close to the optimum, so EM needs
-few iterations and the result does not depend on a random seed.
+sets every learned attribute (names ending in ``_``). EM (full covariances, log-domain
+responsibilities) starts from a *time-based* initialisation: the data are cut into K consecutive
+bins along the time column and each bin gives one component's weight, mean and covariance. On
+trajectory data this start is already close to the optimum, so EM needs few iterations and the
+result does not depend on a random seed. EM is a vectorized loop over the private functions
+below (one product with precomputed x x^T rows gives every Mahalanobis distance): a K sweep
+fits about 50 mixtures, and scikit-learn's per-component loops cost 1-3 ms per iteration on
+these tiny problems. ``reg_covar`` (one value or one per dimension) is added to every
+covariance's diagonal: in the data's units squared, a floor on the variability a component
+can claim.
 
-Choosing K. The Bayesian information criterion BIC = -2 log L + p log N treats every sample as
-independent. Samples along a trajectory are not: 1000 steps of one smooth motion carry far less
-information than 1000 independent draws, and on dense data BIC keeps decreasing up to any cap
-(on the LASA handwriting set with 7 x 1000 points the minimum lies at K = 27-30). pbdkit
-therefore scores each K with an *effective sample size* n_eff:
+Choosing K (``n_components="auto"``). The unit of independent evidence is the demonstration,
+not the sample: 1000 steps of one smooth motion are not 1000 independent draws, so the
+Bayesian information criterion, which counts samples, keeps decreasing up to any cap on dense
+trajectories (LASA, 7 x 1000 points: minimum at K = 27-30). pbdkit therefore leaves one
+demonstration (sequence) out at a time and asks how well the GMR mean of the others, the
+generalized trajectory, predicts it:
 
-    BIC_eff(K) = -2 (n_eff / N) log L(X) + p(K) log n_eff
+    score(K) = mean over left-out m of  mean over scored dims d of
+               mean_t (xi_m,d(t) - mu_K^(-m)_d(t))^2 / s_d^2
 
-which is the expected BIC of a subsample of n_eff points, computed from all N points (no random
-subsampling noise). By default n_eff = 20 points per demonstration (``bic_samples_per_sequence``),
-the number of demonstrations being the number of times the time column restarts, plus one.
-Measured on the 26 single-mode LASA shapes (7 x 1000 points, max_components=10): plain BIC
-(n_eff = N) picks the cap on nearly every shape; 100 points per demonstration still puts the
-minimum at K = 17-25 when the cap is raised to 25; 20 points per demonstration gives an interior
-minimum at K = 3-5 (a V-shaped "Angle" gets 3: two strokes and a corner), the range the paper
-found for its two tasks (K = 4 and 5). Pass ``bic_samples`` or ``bic_samples_per_sequence`` to
-trade parsimony for detail.
-p(K) = (K - 1) + K D + K D (D + 1) / 2 free parameters for full covariances.
+with s_d^2 the spread of dimension d across the demonstrations at equal times, pooled over time
+(:func:`pooled_spread`: the squared error of their pointwise mean, the floor no time-indexed
+model beats; 1 = as good as that). The left-out model is the fitted one with m's sufficient
+statistics removed and one EM iteration on the rest (:func:`_cv_errors`; close to exact
+refits at a fraction of their cost). The score falls steeply while components add real
+structure and then flattens; K is the smallest whose score is within :data:`CV_TOLERANCE`
+(1.5 %, the accuracy of the approximation) of the best K's (:func:`_select_by_cv`), searched on
+1..8 and then steps of about 20 % up to ``max_components``. Scores of every K tried, per fold,
+are in ``selection_``.
+
+Why not a likelihood criterion (``benchmarks/README.md``, "Choosing K", measures them on the
+same demonstrations): the BIC with an effective sample size, constant or estimated from the
+autocorrelation, and the held-out log-likelihood lose the basin task's pouring gesture: a tight
+component is penalized for a left-out demonstration that reaches the same place a few steps
+earlier or later, so they prefer few broad components. Plain BIC counts every sample and nears
+the cap. The cross-validated regression error measures what the skill uses, the generalized
+trajectory, with the demonstration as the unit of evidence.
+
+``n_components="bic"`` scores BIC_eff(K) = -2 (n_eff / N) log L + p(K) log n_eff, the expected
+BIC of a subsample of n_eff points (``bic_samples_per_sequence`` per sequence, default 20, or
+``bic_samples``), with p(K) = (K - 1) + K D + K D (D + 1) / 2 free parameters.
 """
 
 from __future__ import annotations

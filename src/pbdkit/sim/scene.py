@@ -443,7 +443,7 @@ def _add_cameras_and_lights(world: Any) -> None:
 def build_scene(
     task: str,
     objects: Mapping[str, npt.ArrayLike] | None = None,
-    seed: int | None = None,
+    seed: int | None = 0,
 ) -> tuple[Any, SceneInfo]:
     """Compile the MuJoCo model of a task.
 
@@ -456,8 +456,10 @@ def build_scene(
         Object positions (base frame; see :mod:`pbdkit.sim.tasks`). Missing objects, or all of
         them if None, are put at the centre of their placement range. Objects rest on their
         support, so z must match the support height (within 2 cm; it is then set exactly).
-    seed : int, optional
-        Seeds the small jitter of the liquid spheres' initial positions.
+    seed : int or None
+        Seeds the small jitter (0.2 mm) of the liquid spheres' initial positions. The default, 0,
+        makes the scene, and so every run under physics, the same each time for the same
+        inputs; None draws a new jitter.
 
     Returns
     -------
@@ -565,7 +567,7 @@ class Simulation:
 
     @classmethod
     def from_task(
-        cls, task: str, objects: Mapping[str, npt.ArrayLike] | None = None, seed: int | None = None
+        cls, task: str, objects: Mapping[str, npt.ArrayLike] | None = None, seed: int | None = 0
     ) -> Simulation:
         """Build the scene of ``task`` (see :func:`build_scene`) and wrap it."""
         model, info = build_scene(task, objects, seed)
