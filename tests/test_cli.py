@@ -1,14 +1,24 @@
-"""The pbdkit command line: the LASA demo writes a valid figure and consistent metrics."""
+"""The pbdkit command line: the LASA demo writes a valid figure and consistent metrics; learn
+and reproduce on tiny inputs; bad paths and options are one-line errors found before any work."""
 
 from __future__ import annotations
 
+import errno
 import json
+import os
+import sys
+import types
 from pathlib import Path
 
-from typer.testing import CliRunner
+import numpy as np
+import pytest
+from typer.testing import CliRunner, Result
 
 from pbdkit.cli import app
+from pbdkit.demos import Demonstration, save_demonstrations
 from pbdkit.gmm import CV_TOLERANCE
+from pbdkit.robots import katana
+from pbdkit.skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -39,3 +49,193 @@ def test_demo_unknown_task_is_a_clear_error(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["demo", "--task", "juggling", "--out", str(tmp_path)])
     assert result.exit_code != 0
     assert "--task" in result.output
+
+
+# ----------------------------------------------------------------------------- learn, reproduce
+def _tiny_demos(path: Path) -> np.ndarray:
+    """Three short katana demonstrations reaching a glass; returns the mean glass position."""
+    robot = katana()
+    rng = np.random.default_rng(3)
+    start = np.array([0.0, 1.2, -1.8, -1.4, 0.0])
+    reach = np.array([0.5, 0.8, -1.8, -1.0, 0.0])
+    demos = []
+    for _ in range(3):
+        s = np.linspace(0.0, 1.0, 30)[:, None]
+        end = reach + rng.normal(0.0, 0.02, 5)
+        joints = start + (end - start) * s
+        glass = robot.fk(end)
+        demos.append(
+            Demonstration(
+                np.linspace(0.0, 2.0, 30), joints, {"glass": glass}, gripper=(s[:, 0] > 0.8)
+            )
+        )
+    save_demonstrations(demos, path)
+    return np.mean([d.objects["glass"] for d in demos], axis=0)
+
+
+def _one_line_error(result: Result, *fragments: str) -> None:
+    assert result.exit_code == 2, result.output
+    text = result.output.strip()
+    assert text.startswith("error: ") and "\n" not in text, text
+    assert "Traceback" not in text
+    for fragment in fragments:
+        assert fragment in text, text
+
+
+def test_learn_and_reproduce_with_tiny_inputs(tmp_path: Path) -> None:
+    glass = _tiny_demos(tmp_path / "demos.npz")
+    runner = CliRunner()
+    skill = tmp_path / "skill.npz"
+    result = runner.invoke(
+        app,
+        [
+            "learn",
+            str(tmp_path / "demos.npz"),
+            "--out",
+            str(skill),
+            "--n-steps",
+            "30",
+            "--max-components",
+            "2",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert skill.is_file()
+    where = ",".join(f"{v:.4f}" for v in glass)
+    out = tmp_path / "repro.npz"
+    result = runner.invoke(
+        app, ["reproduce", str(skill), "--object", f"glass={where}", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    with np.load(out) as data:
+        assert data["joints"].shape == (30, 5)
+
+
+@pytest.fixture
+def no_simulation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Stand-ins for the simulator modules: a command that reaches them fails the test (and
+    none of the simulator's code runs)."""
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the command started working before checking its output paths")
+
+    sim = [f"pbdkit.sim{m}" for m in ("", ".experiment", ".teacher", ".tracking")]
+    names = ["pbdkit.demo", *sim]
+    for name in names:
+        fake = types.ModuleType(name)
+        fake.__getattr__ = lambda attr: refuse  # type: ignore[method-assign]
+        monkeypatch.setitem(sys.modules, name, fake)
+
+
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize("kind", ["directory", "missing parent", "parent is a file", "locked"])
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [
+        (["learn", "demos.npz"], "--out"),
+        (["reproduce", "skill.npz", "--object", "glass=0.3,0,0.1"], "--out"),
+        (["teach", "--demos", "3"], "--out"),
+        (["evaluate", "--trials", "2"], "--json"),
+    ],
+)
+def test_output_paths_are_checked_before_any_work(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: list[str], option: str, kind: str
+) -> None:
+    # The inputs (demos.npz, skill.npz) do not exist: an error about them would mean the
+    # command started before checking where it writes.
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    # (root may write anywhere: an unwritable directory is simulated)
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != locked and real_access(p, mode))
+    path, message = {
+        "directory": ("folder", "is a directory; give a file path"),
+        "missing parent": ("nowhere/out.npz", "nowhere does not exist"),
+        "parent is a file": ("file/out.npz", "file is not a directory"),
+        "locked": ("locked/out.npz", "locked is not writable"),
+    }[kind]
+    result = CliRunner().invoke(app, [*command, option, path])
+    _one_line_error(result, f"{option} {path}", message)
+
+
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize("task", ["lasa", "coaster"])
+def test_demo_out_must_be_a_directory(tmp_path: Path, task: str) -> None:
+    file = tmp_path / "results.txt"
+    file.write_text("keep me")
+    result = CliRunner().invoke(app, ["demo", "--task", task, "--out", str(file)])
+    _one_line_error(result, f"--out {file}", "exists and is not a directory")
+    assert file.read_text() == "keep me"
+    missing = tmp_path / "nowhere" / "results"
+    result = CliRunner().invoke(app, ["demo", "--task", task, "--out", str(missing)])
+    _one_line_error(result, f"--out {missing}", "does not exist")
+
+
+@pytest.mark.parametrize(
+    "error",
+    [
+        PermissionError(errno.EACCES, "Permission denied"),
+        IsADirectoryError(errno.EISDIR, "Is a directory"),
+        FileExistsError(errno.EEXIST, "File exists"),
+        MemoryError("Unable to allocate 7.28 TiB for an array"),
+    ],
+)
+def test_file_system_and_memory_errors_are_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, error: Exception
+) -> None:
+    _tiny_demos(tmp_path / "demos.npz")
+    out = tmp_path / "skill.npz"
+
+    def save(self: Skill, path: Path) -> None:
+        if isinstance(error, OSError):
+            error.filename = str(path)
+        raise error
+
+    monkeypatch.setattr(Skill, "save", save)
+    result = CliRunner().invoke(
+        app,
+        [
+            "learn",
+            str(tmp_path / "demos.npz"),
+            "--out",
+            str(out),
+            "--n-steps",
+            "20",
+            "--max-components",
+            "1",
+        ],
+    )
+    if isinstance(error, MemoryError):
+        _one_line_error(result, "out of memory: Unable to allocate 7.28 TiB")
+    else:
+        _one_line_error(result, f"{error.strerror}: {out}")  # type: ignore[attr-defined]
+
+
+def test_learn_katana_refuses_a_tip(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    _tiny_demos(tmp_path / "demos.npz")
+    result = CliRunner().invoke(
+        app, ["learn", "demos.npz", "--robot", "katana", "--tip", "link3", "--n-steps", "20"]
+    )
+    _one_line_error(result, "--tip applies to a URDF robot; the shipped katana has a fixed tool")
+    assert not (tmp_path / "skill.npz").exists()
+
+
+def test_reproduce_refuses_an_object_given_twice(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        app,
+        [
+            "reproduce",
+            str(tmp_path / "skill.npz"),
+            "--object",
+            "glass=0.3,0,0.1",
+            "--object",
+            "coaster=0.3,0.1,0",
+            "--object",
+            "glass=0.4,0,0.1",
+        ],
+    )
+    _one_line_error(result, "--object glass is given twice")

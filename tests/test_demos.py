@@ -76,6 +76,11 @@ def test_demonstration_fields_are_validated_read_only_copies() -> None:
         ({"objects": [1.0, 2.0, 3.0]}, r"objects must be a dict"),
         ({"gripper": [0.0, 1.0]}, r"gripper must have shape \(3,\), got \(2,\)"),
         ({"gripper": ["a", "b", "c"]}, r"gripper must be an array of numbers"),
+        (
+            {"gripper": [0.0, 1.5, 1.0]},
+            r"gripper\[1\] must be within \[0, 1\] \(0 open, 1 closed\), got 1.5",
+        ),
+        ({"gripper": [-0.25, 0.0, 2.0]}, r"gripper\[0\] must be within \[0, 1\].*got -0.25"),
     ],
 )
 def test_demonstration_rejects_bad_input(kwargs: dict[str, object], match: str) -> None:
@@ -194,7 +199,7 @@ def test_load_rejects_missing_corrupt_foreign_and_other_versions(tmp_path: Path)
         load_demonstrations(tmp_path / "nope.npz")
     bad = tmp_path / "corrupt.npz"
     bad.write_bytes(rng.bytes(200))
-    with pytest.raises(ValueError, match=r"corrupt\.npz is not a (valid|readable)"):
+    with pytest.raises(ValueError, match=r"corrupt\.npz is not a NumPy \.npz archive"):
         load_demonstrations(bad)
     foreign = tmp_path / "foreign.npz"
     np.savez(foreign, x=np.zeros(3))
@@ -220,6 +225,52 @@ def test_load_rejects_missing_corrupt_foreign_and_other_versions(tmp_path: Path)
     with pytest.raises(ValueError, match="pbdkit-demonstrations"):
         load_demonstrations(pickled)
     assert zipfile.is_zipfile(path)
+
+
+def _stored(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path) as data:
+        return {k: data[k] for k in data.files}
+
+
+def _more_joints(a: dict[str, np.ndarray]) -> None:
+    a["demo_1_joints"] = np.hstack([a["demo_1_joints"], a["demo_1_joints"][:, :1]])
+
+
+def _one_more_demo(a: dict[str, np.ndarray]) -> None:
+    for key in [k for k in a if k.startswith("demo_1_")]:
+        a[key.replace("demo_1_", "demo_2_")] = a[key]
+
+
+def _duplicate_names(a: dict[str, np.ndarray]) -> None:
+    a["object_names"] = np.array(["glass", "glass"])
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (_more_joints, r"demo_1_joints has 5 joints, expected 4 like demo_0_joints"),
+        (lambda a: a.update(n_demos=np.array(-1)), r"n_demos must be an integer >= 1, got -1"),
+        (lambda a: a.update(n_demos=np.array(0)), r"n_demos must be an integer >= 1, got 0"),
+        (lambda a: a.update(n_demos=np.array(2.5)), r"n_demos must be an integer >= 1, got 2.5"),
+        (lambda a: a.update(n_demos=np.array(3)), r"missing key 'demo_2_t' \(n_demos is 3\)"),
+        (lambda a: a.update(n_demos=np.array(1)), r"n_demos is 1 but the file holds 'demo_1_"),
+        (_one_more_demo, r"n_demos is 2 but the file holds 'demo_2_"),
+        (lambda a: a.update(has_gripper=np.array([1, 0])), r"has_gripper must be a boolean"),
+        (_duplicate_names, r"object_names must be distinct, got \['glass', 'glass'\]"),
+    ],
+)
+def test_load_rejects_inconsistent_files(tmp_path: Path, change: object, match: str) -> None:
+    rng = np.random.default_rng(11)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    arrays = _stored(path)
+    change(arrays)  # type: ignore[operator]
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **arrays)
+    with pytest.raises(ValueError, match=r"bad\.npz is not a valid pbdkit-demonstrations file: "):
+        load_demonstrations(bad)
+    with pytest.raises(ValueError, match=match):
+        load_demonstrations(bad)
 
 
 def test_load_rejects_truncated_archive(tmp_path: Path) -> None:

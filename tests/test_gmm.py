@@ -171,6 +171,34 @@ def test_fit_bad_input() -> None:
         gmm.score_samples(np.zeros((3, 3)))
 
 
+@pytest.mark.parametrize("n_components", [1, 3, "auto", "bic"])
+@pytest.mark.parametrize("init", ["time", "kmeans"])
+def test_constant_column_without_reg_covar_names_the_dimension(
+    n_components: int | str, init: str
+) -> None:
+    t = np.tile(np.linspace(0.0, 10.0, 40), 3)
+    x = np.column_stack([t, np.sin(t), np.full(t.size, 0.1)])
+    gmm = GMM(n_components, reg_covar=0.0, init=init, max_components=3)  # type: ignore[arg-type]
+    with pytest.raises(
+        ValueError, match=r"X\[:, 2\] is constant \(0.1\) and reg_covar is 0 there.*reg_covar \(e"
+    ):
+        gmm.fit(x)
+    # A floor in that dimension alone is enough.
+    GMM(2, reg_covar=[0.0, 0.0, 1e-6], init=init, random_state=0).fit(x)
+
+
+def test_a_component_without_variance_names_the_component_and_dimension() -> None:
+    # The gripper-like column is 0 over the first half of time and 1 over the second: each
+    # time bin of the initialisation holds one value only.
+    t = np.tile(np.linspace(0.0, 10.0, 40), 3)
+    x = np.column_stack([t, np.sin(t), (t > 5.0).astype(float)])
+    with pytest.raises(
+        ValueError,
+        match=r"component 0 has variance 0 in dimension 2 \(degenerate data\); increase reg_covar",
+    ):
+        GMM(2, reg_covar=0.0).fit(x)
+
+
 def test_bic_cap_is_limited_by_sample_count() -> None:
     x = np.random.default_rng(7).random((4, 2))
     gmm = GMM("bic", max_components=10, reg_covar=1e-3).fit(x)

@@ -96,6 +96,75 @@ def test_far_query_gives_finite_result(n_in: int) -> None:
     assert np.all(np.isfinite(m2))
 
 
+def _fitted_on_0_to_10() -> GMM:
+    rng = np.random.default_rng(21)
+    t = np.tile(np.linspace(0.0, 10.0, 100), 3)
+    y = np.column_stack([np.sin(t), 0.3 * t]) + rng.normal(0.0, 0.1, (t.size, 2))
+    return GMM(4).fit(np.column_stack([t, y]))
+
+
+def _with_an_independent_input(gmm: GMM) -> GMM:
+    """The same GMM plus a last dimension u ~ N(0, 1) in every component, independent of the
+    others: conditioning on (t, u=0) gives the same responsibilities, means and covariances as
+    conditioning on t alone, through the multi-input path."""
+    k, d = gmm.means_.shape
+    means = np.column_stack([gmm.means_, np.zeros(k)])
+    covs = np.zeros((k, d + 1, d + 1))
+    covs[:, :d, :d] = gmm.covariances_
+    covs[:, d, d] = 1.0
+    return GMM.from_params(gmm.weights_, means, covs)
+
+
+def _assert_finite_psd(cov: np.ndarray) -> None:
+    assert np.all(np.isfinite(cov))
+    scale = max(float(np.abs(cov).max()), np.finfo(np.float64).tiny)
+    assert np.linalg.eigvalsh(cov).min() >= -1e-12 * scale
+
+
+@pytest.mark.parametrize(
+    "x", [1e3, 1e5, 1e7, 1e9, 1e12, -1e12, 1e100, 1e154, 1e155, 1e200, 1e300, -1e300]
+)
+def test_one_input_far_from_the_data_equals_the_two_input_path(x: float) -> None:
+    gmm = _fitted_on_0_to_10()
+    d = gmm.n_dims_
+    ref_mean, ref_cov = _with_an_independent_input(gmm).regress([[x, 0.0]], in_dims=[0, d])
+    _assert_finite_psd(ref_cov[0])
+    batch = gmm.regress(np.array([[x], [5.0], [x]]))  # far and near queries in one batch
+    results = [
+        gmm.regress([[x]]),
+        (batch[0][[0]], batch[1][[0]]),
+        (batch[0][[2]], batch[1][[2]]),
+        tuple(a[None] for a in gmm.regress_one(x)),
+    ]
+    for mean, cov in results:
+        assert np.all(np.isfinite(mean))
+        _assert_finite_psd(cov[0])
+        np.testing.assert_allclose(mean, ref_mean, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(cov, ref_cov, rtol=1e-6, atol=1e-9)
+    near_mean, near_cov = gmm.regress([[5.0]])
+    np.testing.assert_allclose(batch[0][1], near_mean[0], rtol=1e-12)
+    np.testing.assert_allclose(batch[1][1], near_cov[0], rtol=1e-9, atol=1e-15)
+    # The paper's covariance takes the same path.
+    mean_p, cov_p = gmm.regress([[x]], covariance="paper")
+    mean_p1, cov_p1 = gmm.regress_one(x, covariance="paper")
+    np.testing.assert_allclose(mean_p, ref_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(mean_p1, ref_mean[0], rtol=1e-9, atol=1e-9)
+    _assert_finite_psd(cov_p[0])
+    _assert_finite_psd(cov_p1)
+
+
+def test_fast_and_safe_one_input_paths_agree_where_they_meet() -> None:
+    gmm = _fitted_on_0_to_10()
+    model = gmm._gmr_model((0,))
+    for edge in (model.near_lo, model.near_hi):
+        inside = np.nextafter(edge, 5.0)
+        outside = np.nextafter(edge, -5.0 if edge < 5.0 else 15.0)
+        m_in, c_in = gmm.regress_one(float(inside))
+        m_out, c_out = gmm.regress_one(float(outside))
+        np.testing.assert_allclose(m_out, m_in, rtol=1e-12)
+        np.testing.assert_allclose(c_out, c_in, rtol=1e-7, atol=1e-12)
+
+
 def test_low_level_functions_skip_covariance() -> None:
     rng = np.random.default_rng(13)
     w, m, c = _random_gmm(rng, 3, 4)

@@ -506,6 +506,63 @@ def test_bad_urdf_sources(tmp_path: Path) -> None:
         Robot.from_urdf(3)  # type: ignore[arg-type]
 
 
+def test_binary_urdf_file_is_a_clear_error(tmp_path: Path) -> None:
+    path = tmp_path / "arm.urdf"
+    path.write_bytes(b"<robot name='x'>\xff\xfe\x00\x81</robot>")
+    with pytest.raises(ValueError, match=r"'.*arm\.urdf' is not a UTF-8 text URDF"):
+        Robot.from_urdf(path)
+    with pytest.raises(ValueError, match=r"'.*arm\.urdf' is not a UTF-8 text URDF"):
+        Robot.from_urdf(str(path))
+
+
+def _with_mimic(text: str, joint: str, follows: str) -> str:
+    return text.replace(
+        f'<joint name="{joint}" type="revolute">',
+        f'<joint name="{joint}" type="revolute"><mimic joint="{follows}" multiplier="1"/>',
+    )
+
+
+def test_mimic_joint_on_the_chain_is_refused() -> None:
+    text = chain_urdf(PANDA_ORIGINS[:3], (0, 0, 0.1))
+    with pytest.raises(
+        ValueError,
+        match=r"joint 'j3' is a <mimic> joint \(it follows 'j2'\).*remove the <mimic> tag.*"
+        r"type=\"fixed\"",
+    ):
+        Robot.from_urdf(_with_mimic(text, "j3", "j2"))
+
+
+def test_mimic_joint_off_the_chain_is_locked_like_any_other() -> None:
+    # A gripper finger that mimics another one does not move the tip: it is locked.
+    branch = (
+        '<link name="f1"/><link name="f2"/>'
+        '<joint name="finger1" type="prismatic"><parent link="l2"/><child link="f1"/>'
+        '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>'
+        '<joint name="finger2" type="prismatic"><parent link="l2"/><child link="f2"/>'
+        '<mimic joint="finger1"/>'
+        '<axis xyz="0 -1 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>'
+    )
+    text = chain_urdf(PANDA_ORIGINS[:2], (0, 0, 0.1)).replace("</robot>", branch + "</robot>")
+    robot = Robot.from_urdf(text, tip="tip")
+    assert robot.joint_names == ["j1", "j2"]
+    with pytest.raises(ValueError, match=r"joint 'finger2' is a <mimic> joint"):
+        Robot.from_urdf(text, tip="f2")
+
+
+def test_from_dh_escapes_names_in_the_xml() -> None:
+    evil = 'x"/><joint name="evil" type="revolute"><parent link="link0"/><child link="tip"/>'
+    robot = Robot.from_dh(
+        [[0, 0, 0.1, 0], [0.2, 0, 0, 0]],
+        name=evil,
+        joint_names=['a"b', "c<d>&e"],
+        tip="t'ip",
+    )
+    assert robot.name == evil
+    assert robot.joint_names == ['a"b', "c<d>&e"]
+    assert robot.tip == "t'ip"
+    np.testing.assert_allclose(robot.fk([0.0, 0.0]), [0.2, 0.0, 0.1], atol=1e-12)
+
+
 def test_malformed_trees() -> None:
     with pytest.raises(ValueError, match=r"the URDF has no <link>"):
         Robot.from_urdf('<robot name="x"></robot>')

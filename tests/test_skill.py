@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from pbdkit.demos import Demonstration, save_demonstrations
+import pbdkit
+from pbdkit.demos import Demonstration, LimitWarning, save_demonstrations
 from pbdkit.gmm import MAX_COMPONENTS
 from pbdkit.reproduce import ReachWarning, ReproductionResult
 from pbdkit.robot import Robot
@@ -433,7 +434,7 @@ def test_load_rejects_missing_corrupt_foreign_and_other_versions(
         Skill.load(tmp_path / "none.npz")
     corrupt = tmp_path / "corrupt.npz"
     corrupt.write_bytes(np.random.default_rng(2).bytes(300))
-    with pytest.raises(ValueError, match=r"corrupt\.npz is not a (valid|readable)"):
+    with pytest.raises(ValueError, match=r"corrupt\.npz is not a NumPy \.npz archive"):
         Skill.load(corrupt)
     save_demonstrations(demos, tmp_path / "demos.npz")
     with pytest.raises(ValueError, match="is not a pbdkit-skill file"):
@@ -461,6 +462,77 @@ def test_load_rejects_missing_corrupt_foreign_and_other_versions(
     np.savez(tmp_path / "urdf.npz", **{**arrays, "robot_urdf": np.array("<robot")})
     with pytest.raises(ValueError, match=r"urdf\.npz is not a valid pbdkit-skill file: its robot"):
         Skill.load(tmp_path / "urdf.npz")
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (
+            {"n_steps": np.array(10**12)},
+            r"n_steps must be an integer in \[2, 1000000\], got 1000000000000",
+        ),
+        ({"n_steps": np.array(1)}, r"n_steps must be an integer in \[2, 1000000\], got 1"),
+        ({"n_steps": np.array(200.5)}, r"n_steps must be an integer in \[2, 1000000\], got 200.5"),
+        ({"n_joints": np.array(0)}, r"n_joints must be an integer >= 1, got 0"),
+        ({"n_joints": np.array(-3)}, r"n_joints must be an integer >= 1, got -3"),
+        (
+            {"n_joints": np.array(4)},
+            r"GMM dimensions \{'joint': 7, 'glass': 4\}, expected \{'joint': 6, 'glass': 4\} "
+            r"for n_joints=4, gripper=True",
+        ),
+    ],
+)
+def test_load_bounds_n_steps_and_checks_n_joints(
+    skill: Skill, tmp_path: Path, change: dict[str, NDArray[np.generic]], match: str
+) -> None:
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{**arrays, **change})
+    with pytest.raises(ValueError, match=r"bad\.npz is not a valid pbdkit-skill file: " + match):
+        Skill.load(bad)
+
+
+def test_learn_bounds_n_steps_like_load(robot: Robot, demos: list[Demonstration]) -> None:
+    with pytest.raises(ValueError, match=r"n_steps must be <= 1000000, got 1000001"):
+        Skill.learn(demos, robot, n_steps=10**6 + 1)
+    from pbdkit.skill import MAX_STEPS
+
+    assert MAX_STEPS == 10**6
+
+
+def _with_joint(demo: Demonstration, sample: int, joint: int, value: float) -> Demonstration:
+    joints = demo.joints.copy()
+    joints[sample, joint] = value
+    return Demonstration(demo.t, joints, dict(demo.objects), demo.gripper)
+
+
+def test_learn_warns_about_joint_angles_outside_the_limits(
+    robot: Robot, demos: list[Demonstration]
+) -> None:
+    assert pbdkit.LimitWarning is LimitWarning and issubclass(LimitWarning, UserWarning)
+    over = float(robot.upper[1]) + 0.01
+    bad = [*demos[:2], _with_joint(demos[2], 7, 1, over), *demos[3:]]
+    t7 = float(demos[2].t[7])
+    with pytest.warns(
+        LimitWarning,
+        match=rf"demos\[2\]: joint 'lift1' reaches {over:.6g} rad at t={t7:.6g} \(sample 7\), "
+        r"outside its limits \[-0.135228, 2.16857\] by 0.01",
+    ) as record:
+        Skill.learn(bad, robot, n_steps=50, max_components=2)
+    assert len(record) == 1
+    under = float(robot.lower[4]) - 0.2
+    worse = [_with_joint(demos[0], 3, 4, under), *demos[1:3], _with_joint(demos[3], 5, 1, over)]
+    with pytest.warns(LimitWarning) as record:
+        Skill.learn(worse, robot, n_steps=50, max_components=2)
+    assert [str(w.message)[:8] for w in record] == ["demos[0]", "demos[3]"]
+    assert "joint 'wrist_roll'" in str(record[0].message)
+    # Recorded encoders may graze a limit: within LIMIT_TOLERANCE (1e-6 rad), no warning
+    # (pytest turns any warning into an error).
+    graze = float(robot.upper[1]) + 0.5e-6
+    Skill.learn([*demos[:2], _with_joint(demos[2], 7, 1, graze)], robot, n_steps=50)
 
 
 # ----------------------------------------------------------------------------- bad input

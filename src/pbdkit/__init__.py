@@ -33,6 +33,7 @@ from __future__ import annotations
 from . import gaussian, robots
 from .demos import (
     Demonstration,
+    LimitWarning,
     demonstration_from_csv,
     load_demonstrations,
     save_demonstrations,
@@ -46,6 +47,7 @@ from .skill import Skill
 __all__ = [
     "GMM",
     "Demonstration",
+    "LimitWarning",
     "ReachWarning",
     "ReproductionResult",
     "Robot",

@@ -80,13 +80,17 @@ def check_array(
     return arr
 
 
-def check_int(value: object, name: str, *, minimum: int | None = None) -> int:
-    """Check that ``value`` is an integer (not a bool) at least ``minimum``."""
+def check_int(
+    value: object, name: str, *, minimum: int | None = None, maximum: int | None = None
+) -> int:
+    """Check that ``value`` is an integer (not a bool) in [``minimum``, ``maximum``]."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"{name} must be an integer, got {value!r}")
     v = int(value)
     if minimum is not None and v < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {v}")
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {v}")
     return v
 
 

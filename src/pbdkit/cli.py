@@ -6,15 +6,19 @@ commands expose one step each.
 
 from __future__ import annotations
 
+import functools
 import json
+import os
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn, TypeVar, cast
 
 import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from ._io import atomic_write_bytes
 from .gmm import MAX_COMPONENTS
@@ -33,6 +37,75 @@ def _root() -> None:
     """Teach a robot arm a skill from a few demonstrations (Calinon & Billard, IROS 2008)."""
 
 
+# ----------------------------------------------------------------------------- errors
+# Errors a command reports in one line with exit status 2 (bad input from the library, and the
+# file-system and memory failures a user can fix), instead of a traceback.
+_USER_ERRORS = (
+    ValueError,
+    FileNotFoundError,
+    PermissionError,
+    IsADirectoryError,
+    NotADirectoryError,
+    FileExistsError,
+    MemoryError,
+)
+_Command = TypeVar("_Command", bound=Callable[..., Any])
+
+
+def _fail(message: str) -> NoReturn:
+    """Print ``error: message`` on one line (no wrapping, no markup) and exit with status 2."""
+    console.print(Text.assemble(("error: ", "bold red"), message), soft_wrap=True)
+    raise typer.Exit(2)
+
+
+def _error_message(exc: BaseException) -> str:
+    """One line for a user error, naming the path of an OS error when it has one."""
+    if isinstance(exc, MemoryError):
+        return f"out of memory: {exc}" if str(exc) else "out of memory"
+    if isinstance(exc, OSError) and exc.filename is not None:
+        where = f"{exc.filename} -> {exc.filename2}" if exc.filename2 is not None else exc.filename
+        return f"{exc.strerror or type(exc).__name__}: {where}"
+    return " ".join(str(exc).split())
+
+
+def _reports_errors(command: _Command) -> _Command:
+    """Run a command body; a user error (:data:`_USER_ERRORS`) becomes a one-line message."""
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except _USER_ERRORS as exc:
+            _fail(_error_message(exc))
+
+    return cast(_Command, run)
+
+
+def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
+    """Fail unless ``path`` can be written: a file (its directory exists and is writable), or
+    with ``folder`` a directory to write into (existing, or to be created in a writable one).
+
+    Called before any work, so that a long run does not end on a path it cannot write. A
+    symbolic link is judged by the file it points to (that file is what gets written).
+    """
+    real = Path(os.path.realpath(path))
+    if folder and real.exists():
+        if not real.is_dir():
+            _fail(f"{option} {path}: exists and is not a directory; give a directory")
+        if not os.access(real, os.W_OK | os.X_OK):
+            _fail(f"{option} {path}: the directory is not writable")
+        return
+    if real.is_dir():
+        _fail(f"{option} {path}: is a directory; give a file path")
+    parent = real.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        _fail(f"{option} {path}: the directory {parent} {what}")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        _fail(f"{option} {path}: the directory {parent} is not writable")
+
+
+# ----------------------------------------------------------------------------- commands
 def _write_json(path: Path, data: object) -> None:
     def default(value: object) -> object:
         if isinstance(value, np.ndarray):
@@ -116,6 +189,7 @@ ConstrainFixedOption = Annotated[
 
 
 @app.command()
+@_reports_errors
 def demo(
     out: Annotated[Path, typer.Option(help="Folder for the results.")] = Path("demo-output"),
     task: Annotated[
@@ -134,6 +208,7 @@ def demo(
         raise typer.BadParameter(
             f"task must be one of {', '.join(TASKS)}; got {task!r}", param_hint="--task"
         )
+    _check_output(out, "--out", folder=True)
     if task == "lasa":
         with console.status(f"learning LASA shape {shape} ..."):
             lasa_metrics = run_lasa_demo(out, shape)
@@ -187,6 +262,7 @@ def demo(
 
 
 @app.command()
+@_reports_errors
 def teach(
     task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
     demos: Annotated[int, typer.Option(help="Number of demonstrations.")] = 5,
@@ -194,9 +270,6 @@ def teach(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """Record simulated kinesthetic demonstrations of a task."""
-    from .demos import save_demonstrations
-    from .sim.teacher import teach as sim_teach
-
     if task not in ("coaster", "basin"):
         raise typer.BadParameter(
             f"task must be coaster or basin, got {task!r}", param_hint="--task"
@@ -205,6 +278,10 @@ def teach(
         raise typer.BadParameter(
             f"need at least 2 demonstrations, got {demos}", param_hint="--demos"
         )
+    _check_output(out, "--out")
+    from .demos import save_demonstrations
+    from .sim.teacher import teach as sim_teach
+
     with console.status(f"teaching {demos} demonstrations ..."):
         items = sim_teach(task, demos, seed=seed)
     save_demonstrations(items, out)
@@ -212,6 +289,7 @@ def teach(
 
 
 @app.command()
+@_reports_errors
 def learn(
     demos: Annotated[Path, typer.Argument(help="Demonstrations (.npz from `pbdkit teach`).")],
     robot: Annotated[str, typer.Option(help="katana, panda, or a URDF file.")] = "katana",
@@ -237,8 +315,12 @@ def learn(
     from .robot import Robot
     from .skill import Skill
 
+    shipped = robot in robots.available()
+    if shipped and tip is not None:
+        _fail(f"--tip applies to a URDF robot; the shipped {robot} has a fixed tool frame")
+    _check_output(out, "--out")
     items = load_demonstrations(demos)
-    if robot in robots.available():
+    if shipped:
         arm = robots.load(robot)
     elif Path(robot).is_file():
         arm = Robot.from_urdf(Path(robot), tip=tip)
@@ -258,6 +340,17 @@ def learn(
     console.print(f"learned in {seconds:.2f} s; K per space: {ks}; wrote {out}")
 
 
+def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]:
+    """The --object options as a dict; an object given twice is an error."""
+    objects: dict[str, np.ndarray] = {}
+    for text in texts:
+        name, position = _parse_object(text)
+        if name in objects:
+            _fail(f"--object {name} is given twice; give each object once")
+        objects[name] = position
+    return objects
+
+
 def _parse_object(text: str) -> tuple[str, np.ndarray]:
     name, sep, rest = text.partition("=")
     try:
@@ -272,6 +365,7 @@ def _parse_object(text: str) -> tuple[str, np.ndarray]:
 
 
 @app.command()
+@_reports_errors
 def reproduce(
     skill_path: Annotated[Path, typer.Argument(metavar="SKILL", help="Skill file (.npz).")],
     obj: Annotated[
@@ -286,8 +380,9 @@ def reproduce(
     from ._io import save_npz_atomic
     from .skill import Skill
 
+    objects = _parse_objects(obj)
+    _check_output(out, "--out")
     skill = Skill.load(skill_path)
-    objects = dict(_parse_object(o) for o in obj)
     res = skill.reproduce(objects, use=use or None)
     arrays = {
         "t": res.t,
@@ -303,6 +398,7 @@ def reproduce(
 
 
 @app.command()
+@_reports_errors
 def evaluate(
     task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
     trials: Annotated[int, typer.Option(help="Number of new placements.")] = 50,
@@ -312,16 +408,18 @@ def evaluate(
     constrain_fixed: ConstrainFixedOption = False,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-    from .sim.experiment import evaluate as sim_evaluate
-
     if task not in ("coaster", "basin"):
         raise typer.BadParameter(
             f"task must be coaster or basin, got {task!r}", param_hint="--task"
         )
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    if json_path is not None:
+        _check_output(json_path, "--json")
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from .sim.experiment import evaluate as sim_evaluate
+
     with Progress(
         "[progress.description]{task.description}",
         BarColumn(),
@@ -388,13 +486,14 @@ def _print_tracking(vision: bool, stats: dict[str, Any] | None) -> None:
 def main() -> None:
     """Entry point of the ``pbdkit`` console script.
 
-    Bad input (a ValueError or a missing file from the library) ends with a one-line message
-    and exit status 2, not a traceback.
+    Bad input (a ValueError or a missing file from the library), an output path that cannot be
+    written, a file-system error or exhausted memory end with a one-line message and exit
+    status 2, not a traceback (each command reports its own; this catches the rest).
     """
     try:
         app()
-    except (ValueError, FileNotFoundError) as exc:
-        console.print(f"[red]error:[/red] {exc}")
+    except _USER_ERRORS as exc:
+        console.print(Text.assemble(("error: ", "bold red"), _error_message(exc)), soft_wrap=True)
         raise SystemExit(2) from None
 
 

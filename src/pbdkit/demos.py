@@ -65,7 +65,9 @@ from ._validation import check_array, check_int
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "LIMIT_TOLERANCE",
     "Demonstration",
+    "LimitWarning",
     "check_demonstrations",
     "demonstration_from_csv",
     "load_demonstrations",
@@ -75,8 +77,20 @@ __all__ = [
 FORMAT_NAME = "pbdkit-demonstrations"
 FORMAT_VERSION = 1
 RESERVED_NAMES = frozenset({"joint"})
+#: How far (rad, or m for a prismatic joint) a demonstrated joint angle may lie outside the
+#: robot's limits before :meth:`pbdkit.Skill.learn` warns (:class:`LimitWarning`): recorded
+#: encoders can graze a limit.
+LIMIT_TOLERANCE = 1e-6
 
 Float = NDArray[np.float64]
+
+
+class LimitWarning(UserWarning):
+    """A demonstrated joint angle lies outside the robot's joint limits.
+
+    Issued by :meth:`pbdkit.Skill.learn` (the demonstrations need the robot to be judged);
+    learning goes on, and reproductions are clipped to the limits anyway.
+    """
 
 
 def _check_objects(objects: object, name: str = "objects") -> dict[str, Float]:
@@ -114,7 +128,12 @@ class Demonstration:
         Position o(n) of each object in the robot's base frame (metres), constant during the
         demonstration. The name ``"joint"`` is reserved. May be empty (joint-space skill only).
     gripper : array-like, shape (T,), optional
-        Gripper signal (0 open, 1 closed; booleans accepted), one value per time stamp.
+        Gripper signal (0 open, 1 closed; booleans accepted), one value per time stamp, within
+        [0, 1] (a value in between is a partly closed gripper, or a resampled transition).
+
+    Joint limits are not checked here (a demonstration does not know its robot):
+    :meth:`pbdkit.Skill.learn` warns (:class:`LimitWarning`) about angles outside the robot's
+    limits by more than :data:`LIMIT_TOLERANCE`.
 
     Attributes
     ----------
@@ -131,8 +150,9 @@ class Demonstration:
     ------
     ValueError
         If a shape is wrong, a value is NaN or infinite, t is not strictly increasing, there are
-        fewer than 2 samples, or an object position is not (3,). The message names the argument,
-        the expected and the actual value.
+        fewer than 2 samples, an object position is not (3,), or a gripper value is outside
+        [0, 1] (the first such sample is named). The message names the argument, the expected
+        and the actual value.
     """
 
     t: Float
@@ -165,6 +185,13 @@ class Demonstration:
         gripper_: Float | None = None
         if gripper is not None:
             gripper_ = check_array(gripper, "gripper", shape=(t_.shape[0],)).copy()
+            outside = (gripper_ < 0.0) | (gripper_ > 1.0)
+            if outside.any():
+                i = int(np.argmax(outside))
+                raise ValueError(
+                    f"gripper[{i}] must be within [0, 1] (0 open, 1 closed), "
+                    f"got {float(gripper_[i])!r}"
+                )
             gripper_.setflags(write=False)
         t_.setflags(write=False)
         joints_.setflags(write=False)
@@ -352,35 +379,80 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
         If ``path`` does not exist.
     ValueError
         If the file is corrupt, not a pbdkit demonstrations file, of another version, or holds
-        invalid data.
+        invalid or inconsistent data: ``n_demos`` not an integer >= 1, demonstrations missing
+        or beyond ``n_demos``, different joint counts, duplicate object names, or any
+        :class:`Demonstration` check. The message names the file and the key.
     """
     p = Path(path)
     data = load_npz_safe(p, what=FORMAT_NAME + " file")
     _header(data, p, FORMAT_NAME, FORMAT_VERSION)
     try:
-        n_demos = int(data["n_demos"])
-        names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
-        has_gripper = bool(data["has_gripper"])
-        demos = []
-        for i in range(n_demos):
-            pos = np.asarray(data[f"demo_{i}_objects"], dtype=np.float64)
-            if pos.shape != (len(names), 3):
-                raise ValueError(
-                    f"demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}"
-                )
-            demos.append(
-                Demonstration(
-                    t=data[f"demo_{i}_t"],
-                    joints=data[f"demo_{i}_joints"],
-                    objects={n: pos[k] for k, n in enumerate(names)},
-                    gripper=data[f"demo_{i}_gripper"] if has_gripper else None,
-                )
-            )
+        demos = _demonstrations_from_arrays(data)
     except KeyError as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
     return demos
+
+
+def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demonstration]:
+    """The demonstrations of a loaded file, checked against its header keys (n_demos, ...)."""
+    n_arr = np.asarray(data["n_demos"])
+    n_demos = int(n_arr) if n_arr.shape == () and n_arr.dtype.kind in "iu" else -1
+    if n_demos < 1:
+        value = n_arr.tolist() if n_arr.size < 10 else f"an array of shape {n_arr.shape}"
+        raise ValueError(f"n_demos must be an integer >= 1, got {value}")
+    names_arr = np.asarray(data["object_names"])
+    if names_arr.ndim != 1 or (names_arr.size and names_arr.dtype.kind != "U"):
+        raise ValueError(f"object_names must be a 1-D array of strings, got {names_arr!r}")
+    names = [str(s) for s in names_arr]
+    if len(set(names)) != len(names):
+        raise ValueError(f"object_names must be distinct, got {names}")
+    grip_arr = np.asarray(data["has_gripper"])
+    if grip_arr.shape != () or grip_arr.dtype.kind != "b":
+        raise ValueError(f"has_gripper must be a boolean, got {grip_arr!r}")
+    has_gripper = bool(grip_arr)
+    fields = ("t", "joints", "objects", "gripper") if has_gripper else ("t", "joints", "objects")
+    expected = [f"demo_{i}_{f}" for i in range(n_demos) for f in fields]
+    for key in expected:
+        if key not in data:
+            raise ValueError(f"missing key {key!r} (n_demos is {n_demos})")
+    header = {"format", "version", "n_demos", "object_names", "has_gripper"}
+    extra = sorted(set(data) - set(expected) - header, key=_demo_key_order)
+    if extra:
+        shown = ", ".join(repr(k) for k in extra[:4]) + (", ..." if len(extra) > 4 else "")
+        raise ValueError(
+            f"n_demos is {n_demos} but the file holds {shown}, which it does not describe"
+        )
+    demos: list[Demonstration] = []
+    for i in range(n_demos):
+        pos = np.asarray(data[f"demo_{i}_objects"], dtype=np.float64)
+        if pos.shape != (len(names), 3):
+            raise ValueError(f"demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}")
+        try:
+            demo = Demonstration(
+                t=data[f"demo_{i}_t"],
+                joints=data[f"demo_{i}_joints"],
+                objects={n: pos[k] for k, n in enumerate(names)},
+                gripper=data[f"demo_{i}_gripper"] if has_gripper else None,
+            )
+        except ValueError as exc:
+            raise ValueError(f"demo_{i}: {exc}") from exc
+        if demos and demo.n_joints != demos[0].n_joints:
+            raise ValueError(
+                f"demo_{i}_joints has {demo.n_joints} joints, expected {demos[0].n_joints} "
+                "like demo_0_joints"
+            )
+        demos.append(demo)
+    return demos
+
+
+def _demo_key_order(key: str) -> tuple[int, str]:
+    """Sort ``demo_{i}_*`` keys by demonstration number (demo_2 before demo_10)."""
+    parts = key.split("_", 2)
+    if len(parts) == 3 and parts[0] == "demo" and parts[1].isdigit():
+        return int(parts[1]), parts[2]
+    return -1, key
 
 
 def demonstration_from_csv(

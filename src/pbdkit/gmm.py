@@ -139,12 +139,31 @@ def _precision_factors(covariances: Float) -> Float:
     try:
         chol = np.linalg.cholesky(covariances)
     except np.linalg.LinAlgError:
-        raise ValueError(
-            "a component's covariance is not positive definite (degenerate data); "
-            "increase reg_covar, or scale the input data"
-        ) from None
+        raise ValueError(_not_positive_definite(covariances)) from None
     eye = np.broadcast_to(np.eye(covariances.shape[-1]), covariances.shape)
     return np.swapaxes(np.linalg.solve(chol, eye), -1, -2)
+
+
+def _not_positive_definite(covariances: Float) -> str:
+    """Error message naming the first component whose covariance has no Cholesky factor."""
+    k = 0
+    for k in range(covariances.shape[0]):
+        try:
+            np.linalg.cholesky(covariances[k])
+        except np.linalg.LinAlgError:
+            break
+    cov = covariances[k]
+    var = np.diagonal(cov)
+    j = int(np.argmin(var))
+    if var[j] <= 1e-12 * max(float(var.max()), np.finfo(np.float64).tiny):
+        what = f"component {k} has variance {var[j]:.3g} in dimension {j}"
+    else:
+        what = (
+            f"component {k} has a covariance that is not positive definite (smallest "
+            f"eigenvalue {np.linalg.eigvalsh(cov).min():.3g}: its data lie on a lower-"
+            "dimensional subspace)"
+        )
+    return f"{what} (degenerate data); increase reg_covar, or scale the input data"
 
 
 def _log_gauss(x: Float, x2: Float, means: Float, factors: Float) -> Float:
@@ -610,6 +629,16 @@ class GMM:
         x_raw = check_array(X, "X", ndim=2, min_rows=2)
         n, d = x_raw.shape
         method, candidates, floor = self._check_params(n, d)
+        # A constant column with no floor gives every component a zero variance there.
+        flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (floor <= 0.0))
+        if flat.size:
+            j = int(flat[0])
+            also = f" (so are dimensions {flat[1:].tolist()})" if flat.size > 1 else ""
+            raise ValueError(
+                f"X[:, {j}] is constant ({float(x_raw[0, j])!r}) and reg_covar is 0 there"
+                f"{also}: every component would have zero variance in that dimension; "
+                "increase reg_covar (e.g. 1e-6, or one value per dimension), or drop the column"
+            )
         grp = self._check_groups(groups, x_raw)
         n_seq = int(grp.max()) + 1
         if method == "auto" and n_seq < 2:

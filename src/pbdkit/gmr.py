@@ -16,6 +16,18 @@ factors of Sigma^II and the log normalizers) is computed once in :func:`gmr_prec
 :func:`gmr_step` evaluates one query with the smallest possible number of numpy calls (for a
 control loop). Responsibilities are computed in the log domain (log-sum-exp), so a query far
 from every component still gives finite weights (the nearest component takes them all).
+
+Far queries. The one-input fast paths (:func:`gmr_step_1d` and the batch of one input) form the
+second moments sum_k beta_k m_k m_k^T about a fixed centre and subtract m m^T: one product with
+a precomputed table, but the subtraction cancels when the conditional means are large, as they
+are far from the data (m_k grows with x - mu_k): at x = 1e7 for data in [0, 10] the covariance
+came out indefinite. So a query more than :data:`FAR_SIGMAS` standard deviations beyond every
+component (outside ``[GMRModel.near_lo, GMRModel.near_hi]``, two comparisons) takes the centred
+formulation of the multi-input path instead, sum_k beta_k (C_k + d_k d_k^T) with d_k = m_k - m,
+which is positive semi-definite by construction. Where even (x - mu)^2 / sigma^2 overflows
+(|x| > ~1e154), the responsibilities are computed from (x - mu) / r with r = max |x - mu|, the
+differences of the log-densities formed before multiplying by r^2: the result stays finite for
+any finite query whose conditional mean is representable.
 """
 
 from __future__ import annotations
@@ -27,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "FAR_SIGMAS",
     "CovarianceMode",
     "GMRModel",
     "gmr_batch",
@@ -37,6 +50,10 @@ __all__ = [
 
 Float = NDArray[np.float64]
 CovarianceMode = Literal["exact", "paper"]
+#: One input: a query more than this many standard deviations beyond every component is "far"
+#: and takes the centred formulation (module docstring). At the switch the fast path's
+#: cancellation error is about eps * FAR_SIGMAS^2 ~ 2e-13 of the output variances.
+FAR_SIGMAS = 30.0
 
 
 @dataclass(frozen=True)
@@ -74,6 +91,10 @@ class GMRModel:
         so that unnormalized weights w give every moment and their normalizer in one product.
     log_norm_shifted : ndarray, shape (K,)
         log_norm - max(log_norm): exp(log_norm_shifted - s^2 / (2 var)) <= 1 never overflows.
+    near_lo, near_hi : float
+        For one input dimension: queries in [near_lo, near_hi] (within :data:`FAR_SIGMAS`
+        standard deviations of some component's reach) take the fast path, the others the
+        centred formulation. -inf and inf for several inputs.
     """
 
     in_dims: tuple[int, ...]
@@ -89,6 +110,8 @@ class GMRModel:
     half_prec: Float
     table: Float
     log_norm_shifted: Float
+    near_lo: float
+    near_hi: float
 
     @property
     def n_components(self) -> int:
@@ -135,8 +158,13 @@ def gmr_precompute(
     k, d_out = mu_out.shape
     half_prec = np.zeros(k)
     table = np.zeros((3 * k, d_out + d_out * d_out + 1))
+    near_lo, near_hi = -np.inf, np.inf
     if len(in_dims) == 1:
         half_prec = 0.5 / s_ii[:, 0, 0]
+        used = np.isfinite(log_norm)  # components of weight 0 never take a query
+        reach = FAR_SIGMAS * np.sqrt(s_ii[used, 0, 0])
+        near_lo = float(np.min(means[used, i_idx[0]] - reach))
+        near_hi = float(np.max(means[used, i_idx[0]] + reach))
         c = mu_out - center
         a = gain[:, :, 0]
         table[:k, :d_out] = c
@@ -161,18 +189,43 @@ def gmr_precompute(
         half_prec=half_prec,
         table=table,
         log_norm_shifted=log_norm - np.max(log_norm[np.isfinite(log_norm)], initial=0.0),
+        near_lo=near_lo,
+        near_hi=near_hi,
     )
+
+
+def _log_p_scaled(model: GMRModel, diff: Float) -> Float:
+    """log p_k - max_i log p_i for queries where (x - mu)^T Sigma^-1 (x - mu) overflows.
+
+    diff = x - mu^I of shape (..., K, D_in). With r = max |x - mu| and u_k = (x - mu_k) / r:
+    log p_k = r^2 (log_norm_k / r^2 - 0.5 |u_k U_k|^2); the difference to the largest is formed
+    before multiplying by r, twice (r^2 may overflow), so no inf - inf arises.
+    """
+    r = np.abs(diff).max(axis=(-2, -1), keepdims=True)  # (..., 1, 1), > 0 here
+    z = np.einsum("...ki,kij->...kj", diff / r, model.prec_chol_in)
+    r1 = r[..., 0]
+    q = model.log_norm / r1 / r1 - 0.5 * np.einsum("...kj,...kj->...k", z, z)
+    q -= q.max(axis=-1, keepdims=True)
+    with np.errstate(over="ignore"):  # -inf: a component infinitely less likely than the best
+        out: Float = r1 * (r1 * q)
+    return out
 
 
 def _responsibilities(model: GMRModel, diff: Float) -> Float:
     """beta (T, K) from diff = x - mu^I of shape (T, K, D_in), by log-sum-exp."""
-    if diff.shape[-1] == 1:
-        z = diff[..., 0] * model.prec_chol_in[:, 0, 0]
-        log_p = model.log_norm - 0.5 * z * z
-    else:
-        z = np.einsum("tki,kij->tkj", diff, model.prec_chol_in)
-        log_p = model.log_norm - 0.5 * np.einsum("tkj,tkj->tk", z, z)
-    log_p -= log_p.max(axis=1, keepdims=True)
+    with np.errstate(over="ignore", invalid="ignore"):  # a far query: handled below
+        if diff.shape[-1] == 1:
+            z = diff[..., 0] * model.prec_chol_in[:, 0, 0]
+            log_p = model.log_norm - 0.5 * z * z
+        else:
+            z = np.einsum("tki,kij->tkj", diff, model.prec_chol_in)
+            log_p = model.log_norm - 0.5 * np.einsum("tkj,tkj->tk", z, z)
+    top = log_p.max(axis=1, keepdims=True)
+    if not np.isfinite(top).all():  # every Mahalanobis distance of a query overflowed
+        bad = ~np.isfinite(top[:, 0])
+        log_p[bad] = _log_p_scaled(model, diff[bad])
+        top[bad] = 0.0
+    log_p -= top
     beta = np.exp(log_p)
     beta /= beta.sum(axis=1, keepdims=True)
     return beta
@@ -198,12 +251,22 @@ def gmr_batch(
     """
     if X_in.shape[1] == 1:
         return _gmr_batch_1d(model, X_in[:, 0], covariance)
+    return _gmr_batch_centred(model, X_in, covariance)
+
+
+def _gmr_batch_centred(
+    model: GMRModel, X_in: Float, covariance: CovarianceMode | None
+) -> tuple[Float, Float | None]:
+    """The reference formulation: any number of inputs, covariance about the mean."""
     diff = X_in[:, None, :] - model.mu_in[None, :, :]  # (T, K, D_in)
     beta = _responsibilities(model, diff)
-    if diff.shape[-1] == 1:
-        means_k = model.mu_out[None] + diff * model.gain[None, :, :, 0]  # (T, K, D_out)
-    else:
-        means_k = model.mu_out[None] + np.einsum("koi,tki->tko", model.gain, diff)
+    with np.errstate(over="ignore", invalid="ignore"):
+        if diff.shape[-1] == 1:
+            means_k = model.mu_out[None] + diff * model.gain[None, :, :, 0]  # (T, K, D_out)
+        else:
+            means_k = model.mu_out[None] + np.einsum("koi,tki->tko", model.gain, diff)
+    if not np.isfinite(means_k).all():  # far away: only components with beta > 0 count
+        means_k = np.where(beta[:, :, None] > 0.0, means_k, 0.0)
     mean = np.einsum("tk,tko->to", beta, means_k)
     if covariance is None:
         return mean, None
@@ -224,7 +287,28 @@ def gmr_batch(
 def _gmr_batch_1d(
     model: GMRModel, x: Float, covariance: CovarianceMode | None
 ) -> tuple[Float, Float | None]:
-    """One input dimension: every moment from one GEMM with the precomputed table.
+    """One input dimension: the fast path, and the centred one for far queries."""
+    lo, hi = model.near_lo, model.near_hi
+    if x.shape[0] == 0 or (lo <= x.min() and x.max() <= hi):
+        return _gmr_batch_1d_near(model, x, covariance)
+    far = (x < lo) | (x > hi)
+    mean_far, cov_far = _gmr_batch_centred(model, x[far, None], covariance)
+    if far.all():
+        return mean_far, cov_far
+    mean_near, cov_near = _gmr_batch_1d_near(model, x[~far], covariance)
+    mean = np.empty((x.shape[0], mean_near.shape[1]))
+    mean[far], mean[~far] = mean_far, mean_near
+    if cov_near is None or cov_far is None:
+        return mean, None
+    cov = np.empty((x.shape[0], *cov_near.shape[1:]))
+    cov[far], cov[~far] = cov_far, cov_near
+    return mean, cov
+
+
+def _gmr_batch_1d_near(
+    model: GMRModel, x: Float, covariance: CovarianceMode | None
+) -> tuple[Float, Float | None]:
+    """One input dimension near the data: every moment from one GEMM with the precomputed table.
 
     Works in (K, T) layout: reductions over the K components then run across contiguous rows of
     length T, which numpy vectorizes (a (T, K) reduction over short rows is several times slower).
@@ -259,8 +343,9 @@ def gmr_step_1d(model: GMRModel, x: float, with_cov: bool = True) -> tuple[Float
     """Exact GMR at one scalar query (one input dimension), in about a dozen numpy calls.
 
     Unnormalized weights w_k = exp(log_norm_k - max_i log_norm_i - s_k^2 / (2 var_k)) cannot
-    overflow; if they all underflow (a query far from every component) the weights are
-    recomputed relative to their maximum in the log domain, so the result is never NaN.
+    overflow; if they all underflow the weights are recomputed relative to their maximum in the
+    log domain, so the result is never NaN. A query beyond ``[near_lo, near_hi]`` takes the
+    centred formulation (module docstring, "Far queries").
 
     Parameters
     ----------
@@ -274,6 +359,8 @@ def gmr_step_1d(model: GMRModel, x: float, with_cov: bool = True) -> tuple[Float
     mean : ndarray, shape (D_out,)
     cov : ndarray, shape (D_out, D_out), or None
     """
+    if not model.near_lo <= x <= model.near_hi:
+        return _gmr_step_centred(model, np.array([x]), "exact" if with_cov else None)
     s = x - model.mu_in[:, 0]
     log_w = model.log_norm_shifted - model.half_prec * s * s
     w = np.exp(log_w)
@@ -312,17 +399,30 @@ def gmr_step(
     """
     if x_in.shape[0] == 1 and covariance != "paper":
         return gmr_step_1d(model, float(x_in[0]), covariance is not None)
+    return _gmr_step_centred(model, x_in, covariance)
+
+
+def _gmr_step_centred(
+    model: GMRModel, x_in: Float, covariance: CovarianceMode | None
+) -> tuple[Float, Float | None]:
+    """:func:`gmr_step` in the reference formulation (any number of inputs)."""
     diff = x_in - model.mu_in  # (K, D_in)
-    if diff.shape[1] == 1:
-        z = diff[:, 0] * model.prec_chol_in[:, 0, 0]
-        log_p = model.log_norm - 0.5 * z * z
-        means_k = model.mu_out + diff * model.gain[:, :, 0]
-    else:
-        z = np.einsum("ki,kij->kj", diff, model.prec_chol_in)
-        log_p = model.log_norm - 0.5 * np.einsum("kj,kj->k", z, z)
-        means_k = model.mu_out + np.einsum("koi,ki->ko", model.gain, diff)
-    beta = np.exp(log_p - log_p.max())
+    with np.errstate(over="ignore", invalid="ignore"):  # a far query: handled below
+        if diff.shape[1] == 1:
+            z = diff[:, 0] * model.prec_chol_in[:, 0, 0]
+            log_p = model.log_norm - 0.5 * z * z
+            means_k = model.mu_out + diff * model.gain[:, :, 0]
+        else:
+            z = np.einsum("ki,kij->kj", diff, model.prec_chol_in)
+            log_p = model.log_norm - 0.5 * np.einsum("kj,kj->k", z, z)
+            means_k = model.mu_out + np.einsum("koi,ki->ko", model.gain, diff)
+    top = log_p.max()
+    if not np.isfinite(top):  # every Mahalanobis distance overflowed
+        log_p, top = _log_p_scaled(model, diff), 0.0
+    beta = np.exp(log_p - top)
     beta /= beta.sum()
+    if not np.isfinite(means_k).all():  # far away: only components with beta > 0 count
+        means_k = np.where(beta[:, None] > 0.0, means_k, 0.0)
     mean = beta @ means_k
     if covariance is None:
         return mean, None

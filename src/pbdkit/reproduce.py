@@ -401,7 +401,17 @@ def _check_use(use: Sequence[str] | str | None, names: Sequence[str]) -> list[st
         return list(names)
     if isinstance(use, str):
         use = [use]
-    out = list(use)
+    given: object = use  # checked at run time: callers may pass anything
+    if (
+        isinstance(given, (bytes, bytearray))
+        or not isinstance(given, (Sequence, np.ndarray))
+        or not all(isinstance(u, str) for u in given)
+    ):
+        raise ValueError(
+            f"use must be None, a constraint name or a sequence of names, got {use!r}; "
+            f"the constraints are {list(names)}"
+        )
+    out = [str(u) for u in use]
     if not out:
         raise ValueError(f"use must name at least one constraint of {list(names)}, got []")
     bad = [u for u in out if u not in names]

@@ -16,8 +16,9 @@ Learning (:meth:`Skill.learn`):
 Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.reproduce.reproduce`.
 
 File format (:meth:`Skill.save` / :meth:`Skill.load`): a NumPy ``.npz`` archive, no pickle,
-written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_steps``,
-``n_joints``, ``object_names`` (N,) unicode, ``has_gripper``, ``reach`` (m), ``robot_urdf``
+written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_steps``
+(2 .. :data:`MAX_STEPS`), ``n_joints`` (matching the GMM dimensions), ``object_names`` (N,)
+unicode, ``has_gripper``, ``reach`` (m), ``robot_urdf``
 (the URDF text, empty if the robot was not built from a URDF), ``robot_tip``, and for each space
 ``gmm_joint_*`` / ``gmm_{i}_*`` (object i in ``object_names`` order) with ``weights`` (K,),
 ``means`` (K, D) and ``covariances`` (K, D, D).
@@ -26,6 +27,7 @@ written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
@@ -37,7 +39,7 @@ from numpy.typing import NDArray
 
 from ._io import load_npz_safe, save_npz_atomic
 from ._validation import check_int, check_positive_float
-from .demos import Demonstration, check_demonstrations
+from .demos import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .gmm import GMM, MAX_COMPONENTS, ModelSelection
 from .reproduce import (
     JOINT,
@@ -49,7 +51,7 @@ from .reproduce import (
     step_limit_from_velocity,
 )
 
-__all__ = ["MAX_COMPONENTS", "VARIABILITY_FLOOR", "Skill", "space_data"]
+__all__ = ["MAX_COMPONENTS", "MAX_STEPS", "VARIABILITY_FLOOR", "Skill", "space_data"]
 
 Float = NDArray[np.float64]
 #: Default variability floors (variances): joint angles (rad^2), gripper signal, hand position
@@ -58,6 +60,11 @@ VARIABILITY_FLOOR: Mapping[str, float] = MappingProxyType(
     {"joint": 0.01**2, "gripper": 0.1**2, "task": 0.001**2}
 )
 TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
+#: Largest number of steps of a skill's time grid (:meth:`Skill.learn` and :meth:`Skill.load`).
+#: The constraints and a reproduction hold several (T, n, n) arrays: 10**6 steps of a 7-joint
+#: arm take over 1 GB, far beyond the paper's 1000 steps; a file asking for more is refused
+#: rather than exhausting memory at the first reproduction.
+MAX_STEPS = 10**6
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
 CovarianceMode = Literal["exact", "paper"]
@@ -176,11 +183,15 @@ class Skill:
         ----------
         demos : sequence of Demonstration
             At least 2, with the robot's joint count, the same object names, and a gripper
-            signal in all or none.
+            signal in all or none. Joint angles outside the robot's limits by more than
+            :data:`pbdkit.demos.LIMIT_TOLERANCE` (1e-6 rad: recorded encoders can graze a
+            limit) give a :class:`pbdkit.demos.LimitWarning` per demonstration, naming the
+            joint, the value and the sample; they are learned as recorded, and reproductions
+            are clipped to the limits anyway.
         robot : KinematicModel
             The arm (e.g. :func:`pbdkit.robots.katana`); its forward kinematics gives x.
         n_steps : int
-            Steps of the time grid (the paper: 1000).
+            Steps of the time grid (the paper: 1000), 2 .. :data:`MAX_STEPS`.
         n_components : int, "auto" or "bic"
             K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
             by leaving one demonstration out at a time (:mod:`pbdkit.gmm`, "Choosing K"): the
@@ -218,6 +229,11 @@ class Skill:
         Returns
         -------
         skill : Skill
+
+        Warns
+        -----
+        LimitWarning
+            A demonstration leaves the robot's joint limits (see ``demos``).
         """
         items = check_demonstrations(demos, min_demos=2)
         if not isinstance(robot, KinematicModel):
@@ -228,7 +244,8 @@ class Skill:
         n = int(robot.n_joints)
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
-        n_steps = check_int(n_steps, "n_steps", minimum=2)
+        n_steps = check_int(n_steps, "n_steps", minimum=2, maximum=MAX_STEPS)
+        _warn_outside_limits(items, robot)
         floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
         if objects is None:
@@ -497,8 +514,16 @@ class Skill:
                 f"this pbdkit reads version {FORMAT_VERSION}"
             )
         try:
-            n_steps = int(data["n_steps"])
-            n_joints = int(data["n_joints"])
+            n_steps = _stored_int(data["n_steps"])
+            if n_steps is None or not 2 <= n_steps <= MAX_STEPS:
+                raise ValueError(
+                    f"n_steps must be an integer in [2, {MAX_STEPS}], got {_shown(data['n_steps'])}"
+                )
+            n_joints = _stored_int(data["n_joints"])
+            if n_joints is None or n_joints < 1:
+                raise ValueError(
+                    f"n_joints must be an integer >= 1, got {_shown(data['n_joints'])}"
+                )
             names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
             has_gripper = bool(data["has_gripper"])
             reach = float(data["reach"])
@@ -527,11 +552,15 @@ class Skill:
         d_joint = 1 + n_joints + int(has_gripper)
         dims = {k: int(g.means_.shape[1]) for k, g in gmms.items()}
         expected = {k: (d_joint if k == JOINT else 4) for k in gmms}
-        if dims != expected or n_steps < 2 or not (np.isfinite(reach) and reach > 0):
+        if dims != expected:
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: GMM dimensions {dims}, expected "
-                f"{expected} for n_joints={n_joints}, gripper={has_gripper}; "
-                f"n_steps={n_steps} (>= 2), reach={reach} (> 0)"
+                f"{expected} for n_joints={n_joints}, gripper={has_gripper} (time, then "
+                "the joints and the gripper; time and x - o for an object)"
+            )
+        if not (np.isfinite(reach) and reach > 0):
+            raise ValueError(
+                f"{p} is not a valid {FORMAT_NAME} file: reach must be > 0, got {reach}"
             )
         if robot is None:
             if not urdf:
@@ -557,6 +586,43 @@ class Skill:
             has_gripper=has_gripper,
             reach=reach,
             duration=duration,
+        )
+
+
+def _stored_int(value: NDArray[Any]) -> int | None:
+    """The integer stored in a 0-d integer array of a file, or None if it holds anything else."""
+    arr = np.asarray(value)
+    return int(arr) if arr.shape == () and arr.dtype.kind in "iu" else None
+
+
+def _shown(value: NDArray[Any]) -> str:
+    arr = np.asarray(value)
+    return repr(arr.tolist()) if arr.size <= 6 else f"an array of shape {arr.shape}"
+
+
+def _warn_outside_limits(demos: Sequence[Demonstration], robot: KinematicModel) -> None:
+    """One LimitWarning per demonstration whose joints leave the limits by > LIMIT_TOLERANCE.
+
+    Names the joint and the sample where the excess is largest.
+    """
+    lower = np.asarray(robot.lower, dtype=np.float64)
+    upper = np.asarray(robot.upper, dtype=np.float64)
+    names = list(getattr(robot, "joint_names", None) or [str(j) for j in range(lower.shape[0])])
+    revolute = getattr(robot, "revolute", None)
+    for i, d in enumerate(demos):
+        excess = np.maximum(lower - d.joints, d.joints - upper)  # (T, n), > 0 outside
+        worst = int(np.argmax(excess))
+        sample, j = divmod(worst, excess.shape[1])
+        if excess[sample, j] <= LIMIT_TOLERANCE:
+            continue
+        unit = "m" if revolute is not None and not revolute[j] else "rad"
+        warnings.warn(
+            f"demos[{i}]: joint '{names[j]}' reaches {d.joints[sample, j]:.6g} {unit} at "
+            f"t={d.t[sample]:.6g} (sample {sample}), outside its limits "
+            f"[{lower[j]:.6g}, {upper[j]:.6g}] by {excess[sample, j]:.3g}; learned as "
+            "recorded, reproductions are clipped to the limits",
+            LimitWarning,
+            stacklevel=3,
         )
 
 
