@@ -103,3 +103,28 @@ def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, li
         "task space only (coaster)",
     ]
     figure_png(fig6)
+
+
+def test_figures_leave_the_users_matplotlib_backend_alone() -> None:
+    # A Jupyter session keeps its inline backend: plotting must not call matplotlib.use.
+    import subprocess
+    import sys
+
+    code = (
+        "import matplotlib; matplotlib.use('svg'); import numpy as np\n"
+        "from pbdkit.plots import figure_png, plot_gmr_tube\n"
+        "from matplotlib.figure import Figure\n"
+        "fig = Figure(); ax = fig.subplots()\n"
+        "t = np.linspace(0, 1, 5); plot_gmr_tube(ax, t, t, 0.1 + 0 * t)\n"
+        "png = figure_png(fig)\n"
+        "assert png[:4] == b'\\x89PNG', png[:4]\n"
+        "from pbdkit import GMM\n"
+        "from pbdkit.plots import plot_lasa_summary\n"
+        "x = np.column_stack([t, t, t])\n"
+        "gmm = GMM.from_params([1.0], [[0.5, 0.5, 0.5]], [np.eye(3)])\n"
+        "m, c = gmm.regress(t[:, None])\n"
+        "figure_png(plot_lasa_summary('demo', t, [x[:, 1:]], gmm, m, c))\n"
+        "print(matplotlib.get_backend())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "svg"

@@ -6,13 +6,20 @@ Each ``check_*`` function returns the cleaned array (float64, C-contiguous) or r
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-__all__ = ["check_array", "check_int", "check_positive_float", "shape_str"]
+__all__ = [
+    "RESERVED_NAMES",
+    "check_array",
+    "check_int",
+    "check_positions",
+    "check_positive_float",
+    "shape_str",
+]
 
 
 def shape_str(shape: Sequence[int | str | None]) -> str:
@@ -103,3 +110,62 @@ def check_positive_float(value: object, name: str, *, allow_zero: bool = False) 
         bound = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
     return v
+
+
+#: Object names that cannot be used: "joint" names the joint-space constraint.
+RESERVED_NAMES = frozenset({"joint"})
+
+
+def check_positions(
+    objects: object,
+    name: str = "objects",
+    *,
+    expected: Sequence[str] | None = None,
+    what: str = "this skill",
+) -> dict[str, NDArray[np.float64]]:
+    """Validate a mapping object name -> position (3,): the one validator of object positions.
+
+    Parameters
+    ----------
+    objects : dict str -> array-like, shape (3,)
+    name : str
+        The argument's name, used in error messages.
+    expected : sequence of str, optional
+        The names there must be, exactly (unknown and missing names are errors); the result
+        follows their order. Default: any non-empty names except the reserved ``"joint"``, in
+        the order given.
+    what : str
+        Who expects the names, for the error messages ("this skill", "the basin task", ...).
+
+    Returns
+    -------
+    positions : dict str -> ndarray, shape (3,)
+        New float64 arrays, finite.
+    """
+    if not isinstance(objects, Mapping):
+        wanted = f"the object names {list(expected)}" if expected is not None else "object names"
+        raise ValueError(
+            f"{name} must be a dict mapping {wanted} to positions (3,), "
+            f"got {type(objects).__name__}"
+        )
+    for key in objects:
+        if not isinstance(key, str) or not key:
+            raise ValueError(f"{name} keys must be non-empty strings, got {key!r}")
+        if key in RESERVED_NAMES:
+            raise ValueError(
+                f"{name}: {key!r} is reserved for the joint-space constraint; rename the object"
+            )
+    keys: list[str] = list(objects)
+    if expected is not None:
+        unknown = [k for k in keys if k not in expected]
+        if unknown:
+            raise ValueError(
+                f"{name}: unknown object name(s) {unknown}; {what} knows {list(expected)}"
+            )
+        missing = [k for k in expected if k not in objects]
+        if missing:
+            raise ValueError(
+                f"{name}: missing position(s) for {missing}; {what} needs {list(expected)}"
+            )
+        keys = list(expected)
+    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)).copy() for k in keys}

@@ -60,7 +60,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ._io import load_npz_safe, save_npz_atomic
-from ._validation import check_array, check_int
+from ._validation import check_array, check_int, check_positions
 
 __all__ = [
     "FORMAT_NAME",
@@ -76,7 +76,6 @@ __all__ = [
 
 FORMAT_NAME = "pbdkit-demonstrations"
 FORMAT_VERSION = 1
-RESERVED_NAMES = frozenset({"joint"})
 #: How far (rad, or m for a prismatic joint) a demonstrated joint angle may lie outside the
 #: robot's limits before :meth:`pbdkit.Skill.learn` warns (:class:`LimitWarning`): recorded
 #: encoders can graze a limit.
@@ -94,23 +93,10 @@ class LimitWarning(UserWarning):
 
 
 def _check_objects(objects: object, name: str = "objects") -> dict[str, Float]:
-    """Validate a mapping object name -> position (3,); return a new dict of float64 arrays."""
-    if not isinstance(objects, Mapping):
-        raise ValueError(
-            f"{name} must be a dict mapping object names to positions (3,), "
-            f"got {type(objects).__name__}"
-        )
-    out: dict[str, Float] = {}
-    for key, value in objects.items():
-        if not isinstance(key, str) or not key:
-            raise ValueError(f"{name} keys must be non-empty strings, got {key!r}")
-        if key in RESERVED_NAMES:
-            raise ValueError(
-                f"{name}: {key!r} is reserved for the joint-space constraint; rename the object"
-            )
-        pos = check_array(value, f"{name}[{key!r}]", shape=(3,)).copy()
+    """Validated positions (:func:`pbdkit._validation.check_positions`), made read-only."""
+    out = check_positions(objects, name)
+    for pos in out.values():
         pos.setflags(write=False)
-        out[key] = pos
     return out
 
 

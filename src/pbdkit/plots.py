@@ -1,9 +1,10 @@
 """Figures: GMM ellipses, GMR mean with its covariance tube, demonstrations.
 
-matplotlib is imported inside each function (the core never needs it), with the non-interactive
-Agg backend so figures render on a machine without a screen. Functions draw on the axes they are
-given or return a new figure; saving is the caller's business (:func:`save_figure` writes a PNG
-atomically).
+matplotlib is imported inside each function (the core never needs it). Figures are built with
+matplotlib's object-oriented API (``matplotlib.figure.Figure``), never through pyplot: they render
+on a machine without a screen and leave the user's backend alone (a Jupyter session stays
+inline, and shows a returned figure). Functions draw on the axes they are given or return a new
+figure; saving is the caller's business (:func:`save_figure` writes a PNG atomically).
 """
 
 from __future__ import annotations
@@ -51,25 +52,22 @@ UNCONSTRAINED_COLOR = "0.3"  # an object the skill has no constraint on (the fix
 Float = NDArray[np.float64]
 
 
-def _pyplot() -> Any:
-    import matplotlib
+def _new_figure(**kwargs: Any) -> Figure:
+    """A figure outside pyplot's registry: no backend is chosen or switched, nothing to close."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    return Figure(**kwargs)
 
 
 def figure_png(fig: Figure, *, dpi: int = 110) -> bytes:
-    """Render ``fig`` to PNG bytes and close it (frees matplotlib's memory)."""
+    """Render ``fig`` to PNG bytes."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    _pyplot().close(fig)
     return buf.getvalue()
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int = 110) -> bytes:
-    """Render ``fig`` to PNG, write it atomically to ``path``, close it; returns the PNG bytes."""
+    """Render ``fig`` to PNG and write it atomically to ``path``; returns the PNG bytes."""
     png = figure_png(fig, dpi=dpi)
     atomic_write_bytes(path, png)
     return png
@@ -160,8 +158,8 @@ def plot_lasa_summary(
     mean : ndarray, shape (T, 2)
     cov : ndarray, shape (T, 2, 2)
     """
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
+    fig = _new_figure(figsize=(13, 4.2))
+    axes = fig.subplots(1, 3)
     ax = axes[0]
     for k, d in enumerate(demos):
         ax.plot(d[:, 0], d[:, 1], color="0.55", lw=1, label="demonstrations" if k == 0 else None)
@@ -229,13 +227,11 @@ def plot_constraints(
     One column per space (each object's frame, then joint space), one row per dimension. A
     narrow tube means the demonstrations agreed: that constraint matters at that time.
     """
-    plt = _pyplot()
     data = space_data(skill, demos)
     names = [*skill.object_names, "joint"]
     n_rows = max(d.shape[2] - 1 for d in data.values())
-    fig, axes = plt.subplots(
-        n_rows, len(names), figsize=(4.2 * len(names), 1.9 * n_rows), sharex=True, squeeze=False
-    )
+    fig = _new_figure(figsize=(4.2 * len(names), 1.9 * n_rows))
+    axes = fig.subplots(n_rows, len(names), sharex=True, squeeze=False)
     t = np.arange(skill.n_steps, dtype=np.float64)
     for col, name in enumerate(names):
         gmm = skill.gmms[name]
@@ -278,7 +274,6 @@ def plot_demonstrations_3d(
     Every recorded object is drawn: those of the skill in their constraint's colour, the others
     (a fixed basin the skill has no constraint on) in grey, labelled "(no constraint)".
     """
-    plt = _pyplot()
     markers = ["+", "x", "^", "s"]
     recorded = list(dict.fromkeys(k for demo in demos for k in demo.objects))
     extra = [k for k in recorded if k not in skill.object_names]
@@ -293,7 +288,7 @@ def plot_demonstrations_3d(
         return name if name in skill.object_names else f"{name} (no constraint)"
 
     ncols = 2 if reproduction is not None else 1
-    fig = plt.figure(figsize=(6.0 * ncols, 5.2))
+    fig = _new_figure(figsize=(6.0 * ncols, 5.2))
     ax = fig.add_subplot(1, ncols, 1, projection="3d")
     for k, demo in enumerate(demos):
         x = np.asarray(skill.robot.fk(demo.joints), dtype=np.float64)
@@ -378,10 +373,10 @@ def plot_reproductions(
     controller) to its reproduction. Line styles follow the paper: fused solid, task-only
     dash-dot (first object) and dotted (second), joint-only dashed.
     """
-    plt = _pyplot()
     n = skill.robot.n_joints
     rows = max(n, 3) + 1
-    fig, axes = plt.subplots(rows, 2, figsize=(11, 1.7 * rows), squeeze=False)
+    fig = _new_figure(figsize=(11, 1.7 * rows))
+    axes = fig.subplots(rows, 2, squeeze=False)
 
     def style(name: str) -> Any:
         if name in CONTROLLER_STYLES:
@@ -450,13 +445,13 @@ def plot_selection(skill: Skill) -> Figure:
     demonstrations' own variability about their mean), the bound within which a K counts as
     good as the best (:data:`pbdkit.gmm.CV_TOLERANCE`), the best K and the K kept.
     """
-    from .gmm import CV_TOLERANCE
-
-    plt = _pyplot()
     from matplotlib.ticker import FormatStrFormatter
 
+    from .gmm import CV_TOLERANCE
+
     names = [*skill.object_names, "joint"]
-    fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 2.8), squeeze=False)
+    fig = _new_figure(figsize=(3.6 * len(names), 2.8))
+    axes = fig.subplots(1, len(names), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         sel = skill.selection_[name]
         color = _space_color(skill, name)

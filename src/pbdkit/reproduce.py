@@ -150,7 +150,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
-from ._validation import check_array, check_positive_float
+from ._validation import check_array, check_positions, check_positive_float
 from .kinematics import damped_pinv
 
 __all__ = [
@@ -378,22 +378,7 @@ def check_objects(objects: object, names: Sequence[str], name: str = "objects") 
     objects : dict str -> ndarray, shape (3,)
         In the order of ``names``.
     """
-    if not isinstance(objects, Mapping):
-        raise ValueError(
-            f"{name} must be a dict mapping the object names {list(names)} to positions (3,), "
-            f"got {type(objects).__name__}"
-        )
-    unknown = [k for k in objects if k not in names]
-    if unknown:
-        raise ValueError(
-            f"{name}: unknown object name(s) {unknown}; this skill knows {list(names)}"
-        )
-    missing = [k for k in names if k not in objects]
-    if missing:
-        raise ValueError(
-            f"{name}: missing position(s) for {missing}; this skill needs {list(names)}"
-        )
-    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)) for k in names}
+    return check_positions(objects, name, expected=names)
 
 
 def _check_use(use: Sequence[str] | str | None, names: Sequence[str]) -> list[str]:
@@ -748,10 +733,7 @@ def _fused_loop(
     # Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
     # sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)):
     # per step the cost does not grow with the number of objects. P_n = (Sigma^x(n))^-1.
-    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)  # (T, m, 3, 3)
-    targets = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
-    p_sum = prec.sum(axis=1)  # (T, 3, 3)
-    h = np.einsum("tkij,tkj->ti", prec, targets)  # (T, 3)
+    prec, p_sum, h = _task_stack(c, objs, tasks)
     prec_j, eta_j = c.joint_prec, c.joint_eta
     # [sum_n P_n | h] so that one product gives J^T P and J^T h; lists of per-step views are
     # cheaper to index in the loop than the arrays.
@@ -831,6 +813,20 @@ def _fused_loop(
     return joints, positions, cov, influence, influence_js, _limited_mask(n_steps, limited)
 
 
+def _task_stack(
+    c: Constraints, objs: Mapping[str, Float], tasks: list[str]
+) -> tuple[Float, Float, Float]:
+    """The task constraints in use, for all steps at once: P_n (T, m, 3, 3), their sum
+    sum_n P_n (T, 3, 3) and h = sum_n P_n (o(n) + x_hat^(n)) (T, 3), P_n = (Sigma^x(n))^-1.
+
+    Their product in task space is N(x; (sum_n P_n)^-1 h, (sum_n P_n)^-1): the fused loop uses
+    the sums in joint space, the task-only loop the product's mean.
+    """
+    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)
+    targets = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
+    return prec, prec.sum(axis=1), np.einsum("tkij,tkj->ti", prec, targets)
+
+
 def _spd_inverse(a: Float) -> Float:
     """Inverse of symmetric positive-definite matrices (..., d, d), symmetrized."""
     inv = np.linalg.inv(a)
@@ -851,12 +847,10 @@ def _task_loop(
 ) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
     """Task-only controller of Table II (objects in ``tasks`` fused in task space first)."""
     n_steps, n = c.n_steps, c.n_joints
-    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)  # (T, m, 3, 3)
-    pos = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
-    prec_sum = prec.sum(axis=1)
+    prec, prec_sum, h = _task_stack(c, objs, tasks)
     s_fused = _spd_inverse(prec_sum)  # (T, 3, 3)
     # Product of the task-space Gaussians: target = S (sum_n P_n (o_n + x_hat_n)).
-    target = np.einsum("tij,tj->ti", s_fused, np.einsum("tkij,tkj->ti", prec, pos))
+    target = np.einsum("tij,tj->ti", s_fused, h)
     theta_hat = c.joint_mean
     joints = np.empty((n_steps, n))
     positions = np.empty((n_steps, 3))
