@@ -46,10 +46,9 @@ step down, both uniformly (the step keeps its direction, only its length shrinks
   :class:`pbdkit.Skill` derives it from the arm's velocity limits v_i in rad/s (the URDF's, by
   default) and the time a step takes when the reproduction is executed,
   dt = duration / (T - 1) (:meth:`pbdkit.Skill.times`): step_limit_i = v_i dt (1 - 1e-6), the
-  factor keeping floating-point rounding from ever putting a played speed above v_i. Without it,
-  reproductions of the simulated coaster task (1000 steps over 18.6 s) commanded up to
-  3.2-3.6 x the Katana's 1.19 rad/s in their first steps, whose targets are far from
-  theta_hat_0 (and the fused one 3.8 x while placing the glass).
+  factor keeping floating-point rounding from ever putting a played speed above v_i. Without it
+  a reproduction's first steps, whose targets are far from theta_hat_0, command several times
+  the arm's limits (measured in the README, "Where we depart from the paper's text").
 - ``max_step`` (rad, Euclidean norm over the joints): a trust region of the linearization. When a
   target is far from the hand (out of reach, or a tight constraint at t_0 far from theta_0) a
   full step can throw the arm against its limits, folded. It is a length in rad, whatever the
@@ -78,15 +77,14 @@ whose minimum is the product of the Gaussians. Gauss-Newton drops the curvature 
 the residual P_n (f(theta) - o(n) - x_hat^(n)); where the constraints disagree (a residual) and a
 tight task constraint (P_n ~ 1e6 m^-2 at a 1 mm spread) meets a loose joint constraint, that
 curvature outweighs the joint precision in the directions the task leaves free, and the loop
-oscillates with growing amplitude: on ``benchmarks/bench_skill.py``'s skill the joints of the
-paper's loop jump by 0.34 rad per step near the end (Table II as written) and a velocity limit
-only turns that into chatter at top speed. So every step is checked: if it raises E_j, it is
-halved (up to ``MAX_HALVINGS`` times; a Gauss-Newton step is a descent direction of E_j, so a
-short enough step lowers it), the standard line search that globalizes Gauss-Newton (Nocedal &
-Wright, Numerical Optimization, ch. 10). The check reuses f(theta_{j+1}), which the next step
-needs anyway; it changes nothing where Table II converges (the steps lower E_j already), and
-there the joints move smoothly (0.0011 rad second differences instead of 0.34).
-``line_search=False`` gives the paper's loop as written.
+oscillates with growing amplitude (``benchmarks/bench_skill.py``'s skill; a velocity limit
+alone only turns that into chatter at top speed). So every step is checked: if it raises E_j,
+it is halved (up to ``MAX_HALVINGS`` times; a Gauss-Newton step is a descent direction of E_j,
+so a short enough step lowers it), the standard line search that globalizes Gauss-Newton
+(Nocedal & Wright, Numerical Optimization, ch. 10). The check reuses f(theta_{j+1}), which the
+next step needs anyway, and changes nothing where Table II converges (the steps lower E_j
+already). It does not remove every oscillation: a limit cycle whose steps each lower E_j
+survives (README, "Known limits"). ``line_search=False`` gives the paper's loop as written.
 
 Reach. With ``reach`` given (a :class:`pbdkit.Skill` passes its estimate, see
 :func:`reach_from_samples`), every object in use is checked before the loop: at the step where
