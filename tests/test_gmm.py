@@ -2,9 +2,20 @@
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import pytest
+import sklearn
+from scipy.special import logsumexp
+from scipy.stats import multivariate_normal
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
 from sklearn.mixture import GaussianMixture
+from sklearn.utils import estimator_checks
+from sklearn.utils.validation import check_is_fitted
 
 from pbdkit import GMM
 from pbdkit.datasets import lasa_names, load_lasa
@@ -31,6 +42,15 @@ def _trajectories(rng: np.random.Generator, n_demos: int = 5, n_steps: int = 400
     return np.vstack(rows)
 
 
+def _known_model() -> GMM:
+    """Two well-separated, correlated components in 2-D."""
+    return GMM.from_params(
+        [0.3, 0.7],
+        [[0.0, 0.0], [3.0, -1.0]],
+        [[[1.0, 0.5], [0.5, 2.0]], [[0.3, -0.1], [-0.1, 0.2]]],
+    )
+
+
 def test_fit_sets_learned_attributes_with_shapes() -> None:
     rng = np.random.default_rng(0)
     x = _trajectories(rng)
@@ -50,6 +70,95 @@ def test_init_stores_arguments_only() -> None:
     gmm = GMM("bic", max_components=3, reg_covar=1e-4, random_state=3)
     assert gmm.n_components == "bic" and gmm.max_components == 3 and gmm.random_state == 3
     assert not hasattr(gmm, "weights_")
+
+
+def test_get_params_lists_every_constructor_argument() -> None:
+    gmm = GMM("auto", max_components=7, reg_covar=np.array([1e-6, 1e-3, 1e-3]), score_dims=[1])
+    params = gmm.get_params()
+    assert set(params) == set(inspect.signature(GMM.__init__).parameters) - {"self"}
+    for name, value in params.items():
+        assert value is getattr(gmm, name), name
+
+
+def test_clone_gives_an_unfitted_estimator_with_equal_params() -> None:
+    rng = np.random.default_rng(21)
+    x = _trajectories(rng)
+    gmm = GMM(3, reg_covar=np.array([1e-6, 1e-4, 1e-4]), tol=1e-4, random_state=5).fit(x)
+    copy = clone(gmm)
+    assert type(copy) is GMM and copy is not gmm
+    assert not hasattr(copy, "weights_") and not hasattr(copy, "n_components_")
+    with pytest.raises(NotFittedError):
+        check_is_fitted(copy)
+    check_is_fitted(gmm)
+    a, b = gmm.get_params(), copy.get_params()
+    assert set(a) == set(b)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name])
+    assert b["reg_covar"] is not a["reg_covar"]  # a copy: refitting one leaves the other alone
+    np.testing.assert_array_equal(copy.fit(x).means_, gmm.means_)
+
+
+def test_set_params_round_trip_and_repr() -> None:
+    gmm = GMM()
+    assert gmm.set_params(n_components="bic", max_components=4, tol=1e-5) is gmm
+    assert gmm.get_params()["n_components"] == "bic" and gmm.tol == 1e-5
+    assert GMM(**gmm.get_params()).get_params() == gmm.get_params()
+    with pytest.raises(ValueError, match="Invalid parameter 'n_states' for estimator"):
+        gmm.set_params(n_states=3)
+    # scikit-learn's repr: the arguments that differ from the defaults, before and after fit.
+    assert repr(GMM()) == "GMM()"
+    assert repr(gmm) == "GMM(max_components=4, n_components='bic', tol=1e-05)"
+    gmm.fit(_trajectories(np.random.default_rng(22), n_demos=2, n_steps=50))
+    assert repr(gmm) == "GMM(max_components=4, n_components='bic', tol=1e-05)"
+
+
+@pytest.mark.parametrize(
+    "check",
+    [
+        "check_get_params_invariance",
+        "check_set_params",
+        "check_estimator_cloneable",
+        "check_estimator_repr",
+        "check_parameters_default_constructible",
+        "check_no_attributes_set_in_init",
+        "check_do_not_raise_errors_in_init_or_set_params",
+        "check_dont_overwrite_parameters",
+        "check_estimators_overwrite_params",
+        "check_estimators_unfitted",
+        "check_fit_check_is_fitted",
+        "check_n_features_in",
+        "check_estimators_pickle",
+        "check_fit_idempotent",
+    ],
+)
+def test_scikit_learn_estimator_checks(check: str) -> None:
+    if not hasattr(estimator_checks, check):  # added in later scikit-learn versions
+        pytest.skip(f"{check} is not in scikit-learn {sklearn.__version__}")
+    getattr(estimator_checks, check)("GMM", GMM())
+
+
+_UNFITTED_CALLS: dict[str, Callable[[GMM], Any]] = {
+    "score_samples": lambda g: g.score_samples(np.zeros((2, 2))),
+    "score": lambda g: g.score(np.zeros((2, 2))),
+    "predict_proba": lambda g: g.predict_proba(np.zeros((2, 2))),
+    "predict": lambda g: g.predict(np.zeros((2, 2))),
+    "bic": lambda g: g.bic(np.zeros((2, 2))),
+    "aic": lambda g: g.aic(np.zeros((2, 2))),
+    "sample": lambda g: g.sample(3),
+    "regress": lambda g: g.regress(np.zeros((2, 1))),
+    "regress_one": lambda g: g.regress_one(0.5),
+    "n_dims_": lambda g: g.n_dims_,
+}
+
+
+@pytest.mark.parametrize("method", sorted(_UNFITTED_CALLS))
+@pytest.mark.parametrize("fresh", [True, False])
+def test_every_method_raises_not_fitted_error_before_fit(method: str, fresh: bool) -> None:
+    # A new estimator, and a clone of a fitted one.
+    gmm = GMM(2) if fresh else clone(_known_model())
+    with pytest.raises(NotFittedError, match=r"not fitted yet: call fit\(X\) or build it") as err:
+        _UNFITTED_CALLS[method](gmm)
+    assert isinstance(err.value, ValueError) and isinstance(err.value, AttributeError)
 
 
 def test_time_based_fit_is_deterministic() -> None:
@@ -81,6 +190,81 @@ def test_score_samples_and_bic_equal_scikit_learn() -> None:
     np.testing.assert_allclose(gmm.bic(x), sk.bic(x), rtol=1e-10)
     resp = gmm.predict_proba(x)
     np.testing.assert_allclose(resp, sk.predict_proba(x), atol=1e-10)
+    np.testing.assert_allclose(gmm.aic(x), sk.aic(x), rtol=1e-10)
+    np.testing.assert_allclose(gmm.score(x), sk.score(x), rtol=1e-10)
+    np.testing.assert_array_equal(gmm.predict(x), sk.predict(x))
+    # Away from the data too (the expansion of _log_gauss is centred on the mixture).
+    q = rng.uniform(-3.0, 3.0, x.shape)
+    np.testing.assert_allclose(gmm.score_samples(q), sk.score_samples(q), rtol=1e-10)
+    np.testing.assert_allclose(gmm.predict_proba(q), sk.predict_proba(q), atol=1e-10)
+
+
+def test_aic_bic_and_score_against_an_independent_log_likelihood() -> None:
+    rng = np.random.default_rng(20)
+    gmm = _known_model()
+    x = rng.normal(size=(50, 2)) * 2.0
+    # Independent: scipy's densities, log L = sum_j log sum_k pi_k N(x_j; mu_k, Sigma_k).
+    log_pdf = np.column_stack(
+        [
+            np.log(w) + multivariate_normal(m, c).logpdf(x)
+            for w, m, c in zip(gmm.weights_, gmm.means_, gmm.covariances_, strict=True)
+        ]
+    )
+    log_density = logsumexp(log_pdf, axis=1)
+    log_l = float(log_density.sum())
+    p = 1 + 2 * 2 + 2 * 3  # (K - 1) weights, K D means, K D (D + 1) / 2 covariances
+    np.testing.assert_allclose(gmm.score_samples(x), log_density, rtol=1e-12)
+    assert gmm.aic(x) == pytest.approx(-2.0 * log_l + 2.0 * p, rel=1e-12)
+    assert gmm.bic(x) == pytest.approx(-2.0 * log_l + p * np.log(len(x)), rel=1e-12)
+    assert gmm.score(x) == pytest.approx(log_l / len(x), rel=1e-12)
+    assert gmm.score(x) == float(np.mean(gmm.score_samples(x)))
+    resp = np.exp(log_pdf - log_density[:, None])
+    np.testing.assert_allclose(gmm.predict_proba(x), resp, atol=1e-12)
+    np.testing.assert_array_equal(gmm.predict(x), np.argmax(resp, axis=1))
+
+
+def test_sample_statistics_match_the_model() -> None:
+    gmm = _known_model()
+    n = 200_000
+    x, labels = gmm.sample(n, random_state=0)
+    assert x.shape == (n, 2) and labels.shape == (n,) and labels.dtype == np.intp
+    # Component frequencies: binomial, standard error sqrt(w (1 - w) / n) = 0.001.
+    np.testing.assert_allclose(np.bincount(labels) / n, gmm.weights_, atol=0.005)
+    # Rows grouped by component, as scikit-learn's.
+    assert np.all(np.diff(labels) >= 0)
+    for k in range(2):
+        xk = x[labels == k]
+        cov = gmm.covariances_[k]
+        se_mean = np.sqrt(np.diag(cov) / len(xk))
+        np.testing.assert_allclose(xk.mean(axis=0), gmm.means_[k], atol=5 * se_mean.max())
+        # Standard error of a sample covariance entry: sqrt((S_ii S_jj + S_ij^2) / n).
+        se_cov = np.sqrt((np.outer(np.diag(cov), np.diag(cov)) + cov**2) / len(xk))
+        assert np.all(np.abs(np.cov(xk.T) - cov) <= 5 * se_cov)
+    # The mixture's moments: m = sum_k pi_k mu_k, S = sum_k pi_k (Sigma_k + mu_k mu_k^T) - m m^T.
+    w, mu, sigma = gmm.weights_, gmm.means_, gmm.covariances_
+    m = w @ mu
+    s = np.einsum("k,kij->ij", w, sigma + mu[:, :, None] * mu[:, None, :]) - np.outer(m, m)
+    np.testing.assert_allclose(x.mean(axis=0), m, atol=0.02)
+    np.testing.assert_allclose(np.cov(x.T), s, atol=0.03)
+
+
+def test_sample_is_seeded() -> None:
+    gmm = _known_model()
+    a, la = gmm.sample(100, random_state=3)
+    b, lb = gmm.sample(100, random_state=np.random.default_rng(3))
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(la, lb)
+    assert not np.array_equal(a, gmm.sample(100, random_state=4)[0])
+    # Without a random_state, the estimator's (scikit-learn's rule).
+    seeded = _known_model().set_params(random_state=3)
+    np.testing.assert_array_equal(seeded.sample(100)[0], a)
+    np.testing.assert_array_equal(seeded.sample(100)[0], a)  # an integer seed: same draws
+    x, labels = gmm.sample(random_state=np.random.RandomState(0))
+    assert x.shape == (1, 2) and labels.shape == (1,)
+    with pytest.raises(ValueError, match="n_samples must be >= 1, got 0"):
+        gmm.sample(0)
+    with pytest.raises(ValueError, match="random_state must be None, an integer"):
+        gmm.sample(2, random_state="seed")  # type: ignore[arg-type]
 
 
 def test_bic_recovers_known_number_of_clusters_on_independent_data() -> None:

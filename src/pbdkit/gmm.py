@@ -1,16 +1,19 @@
 """Gaussian mixture models over trajectories: time-based EM, and K chosen by cross-validation.
 
-The estimator follows scikit-learn's conventions: ``__init__`` only stores its arguments, ``fit``
-sets every learned attribute (names ending in ``_``). EM (full covariances, log-domain
-responsibilities) starts from a *time-based* initialisation: the data are cut into K consecutive
-bins along the time column and each bin gives one component's weight, mean and covariance. On
-trajectory data this start is already close to the optimum, so EM needs few iterations and the
-result does not depend on a random seed. EM is a vectorized loop over the private functions
-below (one product with precomputed x x^T rows gives every Mahalanobis distance): a K sweep
-fits about 50 mixtures, and scikit-learn's per-component loops cost 1-3 ms per iteration on
-these tiny problems. ``reg_covar`` (one value or one per dimension) is added to every
-covariance's diagonal: in the data's units squared, a floor on the variability a component
-can claim.
+The estimator is a scikit-learn estimator (``BaseEstimator``: ``get_params``, ``clone``, ...):
+``__init__`` only stores its arguments, ``fit`` sets every learned attribute (names ending in
+``_``), and ``score_samples``, ``predict_proba``, ``bic``, ``aic``, ``sample`` are
+``GaussianMixture``'s, computed with the log-density EM uses (:func:`_weighted_log_prob`).
+
+EM (full covariances, log-domain responsibilities) starts from a *time-based* initialisation:
+the data are cut into K consecutive bins along the time column and each bin gives one
+component's weight, mean and covariance. On trajectory data this start is already close to the
+optimum, so EM needs few iterations and the result does not depend on a random seed. EM is a
+vectorized loop over the private functions below (one product with precomputed x x^T rows gives
+every Mahalanobis distance): a K sweep fits about 50 mixtures, and scikit-learn's per-component
+loops cost 1-3 ms per iteration on these tiny problems. ``reg_covar`` (one value or one per
+dimension) is added to every covariance's diagonal: in the data's units squared, a floor on the
+variability a component can claim.
 
 Choosing K (``n_components="auto"``). The unit of independent evidence is the demonstration,
 not the sample: 1000 steps of one smooth motion are not 1000 independent draws, so the
@@ -55,6 +58,8 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
+from sklearn.base import BaseEstimator, DensityMixin
+from sklearn.exceptions import NotFittedError
 from threadpoolctl import threadpool_limits
 
 from ._validation import check_array, check_int, check_positive_float
@@ -183,15 +188,34 @@ def _log_gauss(x: Float, x2: Float, means: Float, factors: Float) -> Float:
     return np.asarray(half_log_det - 0.5 * (d * np.log(2.0 * np.pi) + np.maximum(maha, 0.0)))
 
 
-def _e_step(x: Float, x2: Float, params: Params) -> tuple[Float, float]:
-    """Responsibilities (N, K) in the log domain, and the mean log-likelihood per sample."""
-    weights, means, cov = params
-    with np.errstate(divide="ignore"):
-        lp = _log_gauss(x, x2, means, _precision_factors(cov)) + np.log(weights)
+def _weighted_log_prob(x: Float, x2: Float, weights: Float, means: Float, factors: Float) -> Float:
+    """log pi_k + log N(x_j; mu_k, Sigma_k) for every row and component: (N, K).
+
+    The one log-density of the mixture: EM and the estimator's ``score_samples``,
+    ``predict_proba``, ``bic``, ... all call it (x and means centred, see :func:`_log_gauss`).
+    """
+    with np.errstate(divide="ignore"):  # a component of weight 0 has log pi = -inf
+        return _log_gauss(x, x2, means, factors) + np.log(weights)
+
+
+def _log_resp(lp: Float) -> tuple[Float, Float]:
+    """p(k | x_j) (N, K) and log p(x_j) (N,) from the weighted log-probabilities (N, K).
+
+    log p(x) = m + log sum_k exp(lp_k - m), m = max_k lp_k (log-sum-exp, no overflow).
+    """
     top = lp.max(axis=1, keepdims=True)
     e = np.exp(lp - top)
     total = e.sum(axis=1, keepdims=True)
-    return e / total, float(np.mean(top[:, 0] + np.log(total[:, 0])))
+    return e / total, top[:, 0] + np.log(total[:, 0])
+
+
+def _e_step(x: Float, x2: Float, params: Params) -> tuple[Float, float]:
+    """Responsibilities (N, K) in the log domain, and the mean log-likelihood per sample."""
+    weights, means, cov = params
+    resp, log_density = _log_resp(
+        _weighted_log_prob(x, x2, weights, means, _precision_factors(cov))
+    )
+    return resp, float(np.mean(log_density))
 
 
 def _em(
@@ -261,6 +285,22 @@ def time_based_init(
     u = _precision_factors(cov)
     prec = u @ np.swapaxes(u, -1, -2)
     return w, m, 0.5 * (prec + np.swapaxes(prec, -1, -2))
+
+
+def _check_rng(
+    random_state: int | np.random.Generator | np.random.RandomState | None,
+) -> np.random.Generator | np.random.RandomState:
+    """A numpy generator from a seed (``default_rng``), or the generator given."""
+    if isinstance(random_state, (np.random.Generator, np.random.RandomState)):
+        return random_state
+    if random_state is None or (
+        isinstance(random_state, (int, np.integer)) and not isinstance(random_state, bool)
+    ):
+        return np.random.default_rng(random_state)
+    raise ValueError(
+        "random_state must be None, an integer, a numpy Generator or a numpy RandomState, "
+        f"got {random_state!r}"
+    )
 
 
 def _check_covariances(covariances: Float, name: str) -> Float:
@@ -464,8 +504,14 @@ def _cv_errors(
     return errors
 
 
-class GMM:
+class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is untyped
     """Gaussian mixture model with time-based EM initialisation and a choice of K.
+
+    A scikit-learn estimator (``get_params``, ``set_params``, ``sklearn.base.clone``, its repr;
+    :class:`sklearn.exceptions.NotFittedError` before ``fit``) with the methods of
+    ``GaussianMixture`` (``score_samples``, ``score``, ``predict_proba``, ``predict``, ``bic``,
+    ``aic``, ``sample``), all from the log-density EM maximizes. EM is pbdkit's own
+    (module docstring), not scikit-learn's loop.
 
     Parameters
     ----------
@@ -484,7 +530,8 @@ class GMM:
     tol : float
         EM convergence threshold on the per-sample log-likelihood gain.
     random_state : int, numpy RandomState or None
-        Seed of the k-means initialisation (``init="kmeans"``); time-based EM is deterministic.
+        Seed of the k-means initialisation (``init="kmeans"``; time-based EM is deterministic)
+        and of ``sample`` when it is given none.
     time_dim : int or None
         Column holding time; used for the time-based initialisation, to find the sequences and
         as the input of the GMR that ``"auto"`` cross-validates. ``None`` falls back to k-means
@@ -504,7 +551,10 @@ class GMM:
     means_ : ndarray, shape (K, D)
     covariances_ : ndarray, shape (K, D, D)
     n_components_ : int
-        K (chosen when ``n_components`` is ``"auto"`` or ``"bic"``).
+        K (chosen when ``n_components`` is ``"auto"`` or ``"bic"``). The repr shows the
+        constructor's arguments only (scikit-learn's), so K is read here.
+    n_features_in_ : int
+        D, the number of columns of X (scikit-learn's name; also ``n_dims_``).
     converged_ : bool
         Whether EM converged for the kept model.
     n_iter_ : int
@@ -772,12 +822,20 @@ class GMM:
         return gmm
 
     def _finalize(self) -> None:
-        self._chol = _check_covariances(self.covariances_, "covariances_")
+        # What every density needs, computed once: the upper precision factors, and the centre
+        # (sum_k pi_k mu_k: after an M-step the data mean that fit centres by, up to rounding)
+        # that keeps the expansion of _log_gauss free of cancellation.
+        self.n_features_in_ = int(self.means_.shape[1])
+        self._prec_factors = _precision_factors(self.covariances_)
+        self._center = np.asarray(self.weights_ @ self.means_, dtype=np.float64)
         self._gmr_cache: dict[tuple[int, ...], GMRModel] = {}
+
+    def __sklearn_is_fitted__(self) -> bool:
+        return hasattr(self, "covariances_")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "covariances_"):
-            raise ValueError(
+            raise NotFittedError(
                 "this GMM is not fitted yet: call fit(X) or build it with GMM.from_params(...)"
             )
 
@@ -787,24 +845,17 @@ class GMM:
         self._check_fitted()
         return int(self.means_.shape[1])
 
-    def _log_prob_components(self, x: Float) -> Float:
-        """log pi_k + log N(x_j; mu_k, Sigma_k) for every sample and component: (N, K)."""
-        n, d = x.shape
-        k = self.n_components_
-        out = np.empty((n, k))
-        log_2pi = d * np.log(2.0 * np.pi)
-        with np.errstate(divide="ignore"):
-            log_w = np.log(self.weights_)
-        for j in range(k):
-            chol = self._chol[j]
-            z = np.linalg.solve(chol, (x - self.means_[j]).T)
-            log_det = 2.0 * np.sum(np.log(np.diag(chol)))
-            out[:, j] = log_w[j] - 0.5 * (log_2pi + log_det + np.sum(z * z, axis=0))
-        return out
-
     def _check_X(self, X: npt.ArrayLike, name: str = "X") -> Float:
         self._check_fitted()
         return check_array(X, name, shape=(None, self.n_dims_))
+
+    def _densities(self, X: npt.ArrayLike) -> tuple[Float, Float]:
+        """p(k | x) (N, K) and log p(x) (N,): the density EM maximizes (_weighted_log_prob)."""
+        x = self._check_X(X) - self._center
+        lp = _weighted_log_prob(
+            x, _outer_rows(x), self.weights_, self.means_ - self._center, self._prec_factors
+        )
+        return _log_resp(lp)
 
     def score_samples(self, X: npt.ArrayLike) -> Float:
         """Log-density of the mixture at each sample.
@@ -817,22 +868,55 @@ class GMM:
         -------
         log_density : ndarray, shape (N,)
         """
-        x = self._check_X(X)
-        lp = self._log_prob_components(x)
-        m = lp.max(axis=1, keepdims=True)
-        return np.asarray((m + np.log(np.exp(lp - m).sum(axis=1, keepdims=True)))[:, 0])
+        return self._densities(X)[1]
 
-    def bic(self, X: npt.ArrayLike) -> float:
-        """Standard Bayesian information criterion on X: -2 log L(X) + p log N (lower is better).
+    def score(self, X: npt.ArrayLike, y: object = None) -> float:
+        """Mean log-likelihood per sample of X (scikit-learn's ``score``; higher is better).
 
         Parameters
         ----------
         X : array-like, shape (N, D)
+        y : ignored
+            For scikit-learn's API (model selection tools pass it).
+
+        Returns
+        -------
+        score : float
         """
-        x = self._check_X(X)
-        log_lik = float(self.score_samples(x).sum())
+        return float(np.mean(self.score_samples(X)))
+
+    def _information_criterion(self, X: npt.ArrayLike, penalty: Callable[[int], float]) -> float:
+        log_density = self.score_samples(X)
         p = n_parameters(self.n_components_, self.n_dims_)
-        return float(-2.0 * log_lik + p * np.log(x.shape[0]))
+        return float(-2.0 * log_density.sum() + p * penalty(log_density.shape[0]))
+
+    def bic(self, X: npt.ArrayLike) -> float:
+        """Standard Bayesian information criterion on X: -2 log L(X) + p log N (lower is better).
+
+        p = (K - 1) + K D + K D (D + 1) / 2 free parameters (:func:`n_parameters`).
+
+        Parameters
+        ----------
+        X : array-like, shape (N, D)
+
+        Returns
+        -------
+        bic : float
+        """
+        return self._information_criterion(X, lambda n: float(np.log(n)))
+
+    def aic(self, X: npt.ArrayLike) -> float:
+        """Akaike information criterion on X: -2 log L(X) + 2 p (lower is better).
+
+        Parameters
+        ----------
+        X : array-like, shape (N, D)
+
+        Returns
+        -------
+        aic : float
+        """
+        return self._information_criterion(X, lambda n: 2.0)
 
     def predict_proba(self, X: npt.ArrayLike) -> Float:
         """Responsibilities p(k | x) of each component for each sample.
@@ -845,11 +929,60 @@ class GMM:
         -------
         resp : ndarray, shape (N, K)
         """
-        x = self._check_X(X)
-        lp = self._log_prob_components(x)
-        lp -= lp.max(axis=1, keepdims=True)
-        p = np.exp(lp)
-        return np.asarray(p / p.sum(axis=1, keepdims=True))
+        return self._densities(X)[0]
+
+    def predict(self, X: npt.ArrayLike) -> NDArray[np.intp]:
+        """The most probable component of each sample, argmax_k p(k | x).
+
+        Parameters
+        ----------
+        X : array-like, shape (N, D)
+
+        Returns
+        -------
+        labels : ndarray of int, shape (N,)
+        """
+        return np.asarray(np.argmax(self.predict_proba(X), axis=1), dtype=np.intp)
+
+    def sample(
+        self,
+        n_samples: int = 1,
+        random_state: int | np.random.Generator | np.random.RandomState | None = None,
+    ) -> tuple[Float, NDArray[np.intp]]:
+        """Draw samples from the mixture (as scikit-learn's ``GaussianMixture.sample``).
+
+        The number of samples of each component is multinomial with the weights; each sample is
+        mu_k + L_k z with Sigma_k = L_k L_k^T (Cholesky) and z standard normal. As in
+        scikit-learn, the rows are grouped by component (all of component 0 first).
+
+        Parameters
+        ----------
+        n_samples : int
+            Number of samples, >= 1.
+        random_state : int, numpy Generator, numpy RandomState or None
+            Source of randomness: an integer seeds ``numpy.random.default_rng``; ``None``
+            uses the estimator's ``random_state`` (as scikit-learn does), and without one,
+            fresh entropy.
+
+        Returns
+        -------
+        X : ndarray, shape (n_samples, D)
+        labels : ndarray of int, shape (n_samples,)
+            Component of each sample.
+        """
+        self._check_fitted()
+        n = check_int(n_samples, "n_samples", minimum=1)
+        rng = _check_rng(self.random_state if random_state is None else random_state)
+        w = self.weights_ / self.weights_.sum()  # from_params allows a sum 1e-8 off 1
+        counts = rng.multinomial(n, w)
+        chol = np.linalg.cholesky(self.covariances_)
+        z = rng.standard_normal((n, self.n_dims_))
+        labels = np.repeat(np.arange(self.n_components_, dtype=np.intp), counts)
+        x = np.empty_like(z)
+        stop = np.cumsum(counts)
+        for k, (a, b) in enumerate(zip(stop - counts, stop, strict=True)):
+            x[a:b] = self.means_[k] + z[a:b] @ chol[k].T
+        return x, labels
 
     # --------------------------------------------------------------- regression
     def _gmr_model(self, in_dims: Sequence[int] | int) -> GMRModel:
@@ -961,8 +1094,3 @@ class GMM:
             mean, cov = gmr_step(model, x, covariance)
         assert cov is not None
         return mean, cov
-
-    def __repr__(self) -> str:
-        k = getattr(self, "n_components_", None)
-        fitted = f", fitted K={k}" if k is not None else ""
-        return f"GMM(n_components={self.n_components!r}{fitted})"
