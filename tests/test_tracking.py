@@ -164,7 +164,7 @@ def test_bad_objects_are_named() -> None:
         with pytest.raises(ValueError, match=r"\['coaster'\] are not objects of the 'basin'"):
             SimTracker.from_simulation(sim, ["coaster"])
         with pytest.raises(ValueError, match="no colored patch is known for 'basin'"):
-            patch_geom_ids(sim.model, "basin")
+            patch_geom_ids(sim, "basin")
         with pytest.raises(ValueError, match=r"arm must have shape \(5,\)"):
             SimTracker.from_simulation(sim, arm=[0.0, 0.0])
 

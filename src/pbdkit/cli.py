@@ -12,7 +12,7 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar, cast
 
 import numpy as np
 import typer
@@ -22,6 +22,9 @@ from rich.text import Text
 
 from ._io import atomic_write_bytes
 from .gmm import MAX_COMPONENTS
+
+if TYPE_CHECKING:
+    from .sim.tasks import TaskSpec
 
 app = typer.Typer(
     add_completion=False,
@@ -168,7 +171,24 @@ def run_lasa_demo(
     return metrics
 
 
-TASKS = ("coaster", "basin", "lasa")
+def _robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
+    """The registered robot task named ``task``, or a usage error listing the choices (the
+    registered tasks, then ``also``).
+
+    Imports the simulator (MuJoCo): call it after the cheap checks of a command's options.
+    """
+    from .sim.tasks import get_task, task_names
+
+    try:
+        return get_task(task)
+    except ValueError:
+        choices = ", ".join([*task_names(), *also])
+        raise typer.BadParameter(
+            f"task must be one of {choices}; got {task!r}", param_hint="--task"
+        ) from None
+
+
+_TASK_HELP = "A robot task (coaster, basin, or any registered with pbdkit.sim.register_task)"
 
 # Shared by `demo` and `evaluate`.
 GroundTruthOption = Annotated[
@@ -192,9 +212,7 @@ ConstrainFixedOption = Annotated[
 @_reports_errors
 def demo(
     out: Annotated[Path, typer.Option(help="Folder for the results.")] = Path("demo-output"),
-    task: Annotated[
-        str, typer.Option(help="coaster, basin (the robot tasks) or lasa.")
-    ] = "coaster",
+    task: Annotated[str, typer.Option(help=f"{_TASK_HELP}, or lasa.")] = "coaster",
     seed: Annotated[
         int, typer.Option(help="Seed of the demonstrations and the new situation.")
     ] = 0,
@@ -204,10 +222,6 @@ def demo(
 ) -> None:
     """Run the main job: demonstrations -> skill -> new situation -> physics, with figures,
     a video, report.html and metrics.json in OUT."""
-    if task not in TASKS:
-        raise typer.BadParameter(
-            f"task must be one of {', '.join(TASKS)}; got {task!r}", param_hint="--task"
-        )
     _check_output(out, "--out", folder=True)
     if task == "lasa":
         with console.status(f"learning LASA shape {shape} ..."):
@@ -222,13 +236,14 @@ def demo(
         console.print(table)
         console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
         return
+    spec = _robot_task(task, also=("lasa",))
     from .demo import run_robot_demo
     from .sim.tracking import ObjectNotSeenError
 
     try:
         with console.status("starting ...") as st:
             robot_metrics = run_robot_demo(
-                task,
+                spec,
                 out,
                 seed=seed,
                 status=lambda m: st.update(m),
@@ -239,7 +254,7 @@ def demo(
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(1) from None
     metrics: dict[str, Any] = robot_metrics
-    table = Table(title=f"pbdkit demo: {task} task, new situation (seed {seed})")
+    table = Table(title=f"pbdkit demo: {spec.name} task, new situation (seed {seed})")
     table.add_column("controller")
     table.add_column("success")
     keys = [k for k in metrics["controllers"]["fused"] if k != "success"]
@@ -250,7 +265,7 @@ def demo(
         cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
         table.add_row(name, *cells)
     console.print(table)
-    _print_components(task, metrics["n_components"])
+    _print_components(spec, metrics["n_components"])
     tracking = metrics["tracking"]
     _print_tracking(metrics["vision"], tracking["tracking_error_mm"] if tracking else None)
     secs = metrics["seconds"]
@@ -264,26 +279,23 @@ def demo(
 @app.command()
 @_reports_errors
 def teach(
-    task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
+    task: Annotated[str, typer.Option(help=f"{_TASK_HELP}.")] = "coaster",
     demos: Annotated[int, typer.Option(help="Number of demonstrations.")] = 5,
     out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("demos.npz"),
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """Record simulated kinesthetic demonstrations of a task."""
-    if task not in ("coaster", "basin"):
-        raise typer.BadParameter(
-            f"task must be coaster or basin, got {task!r}", param_hint="--task"
-        )
     if demos < 2:
         raise typer.BadParameter(
             f"need at least 2 demonstrations, got {demos}", param_hint="--demos"
         )
     _check_output(out, "--out")
+    spec = _robot_task(task)
     from .demos import save_demonstrations
     from .sim.teacher import teach as sim_teach
 
     with console.status(f"teaching {demos} demonstrations ..."):
-        items = sim_teach(task, demos, seed=seed)
+        items = sim_teach(spec, demos, seed=seed)
     save_demonstrations(items, out)
     console.print(f"wrote {len(items)} demonstrations to {out}")
 
@@ -400,7 +412,7 @@ def reproduce(
 @app.command()
 @_reports_errors
 def evaluate(
-    task: Annotated[str, typer.Option(help="coaster or basin.")] = "coaster",
+    task: Annotated[str, typer.Option(help=f"{_TASK_HELP}.")] = "coaster",
     trials: Annotated[int, typer.Option(help="Number of new placements.")] = 50,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
@@ -408,14 +420,11 @@ def evaluate(
     constrain_fixed: ConstrainFixedOption = False,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
-    if task not in ("coaster", "basin"):
-        raise typer.BadParameter(
-            f"task must be coaster or basin, got {task!r}", param_hint="--task"
-        )
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
     if json_path is not None:
         _check_output(json_path, "--json")
+    spec = _robot_task(task)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     from .sim.experiment import evaluate as sim_evaluate
@@ -433,7 +442,7 @@ def evaluate(
             bar.update(job, description=f"{task}: executing", completed=done, total=total)
 
         result = sim_evaluate(
-            task,
+            spec,
             trials,
             seed,
             progress=tick,
@@ -452,7 +461,7 @@ def evaluate(
         )
         table.add_row(name, f"{100 * row['success_rate']:.0f}%", med)
     console.print(table)
-    _print_components(task, result["n_components"])
+    _print_components(spec, result["n_components"])
     _print_tracking(result["vision"], result["tracking_error_mm"])
     if result["tracking_failures"]:
         console.print(
@@ -461,11 +470,9 @@ def evaluate(
         )
 
 
-def _print_components(task: str, n_components: dict[str, int]) -> None:
-    from .sim.tasks import fixed_objects
-
+def _print_components(spec: TaskSpec, n_components: dict[str, int]) -> None:
     ks = ", ".join(f"{k}: {v}" for k, v in n_components.items())
-    fixed = [k for k in n_components if k in fixed_objects(task)]
+    fixed = [k for k in n_components if k in spec.fixed_objects]
     note = f" ({', '.join(fixed)}: fixed, learned with --constrain-fixed)" if fixed else ""
     console.print(f"K per space (chosen by leaving one demonstration out): {ks}{note}")
 

@@ -11,7 +11,7 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,21 +27,10 @@ from .plots import (
 )
 from .report import Figure, Section, write_report
 
-__all__ = ["run_robot_demo"]
+if TYPE_CHECKING:
+    from .sim.tasks import TaskSpec
 
-TASK_TEXT = {
-    "coaster": (
-        "Set the table: grasp the glass on the shelf and put it on the coaster. Both objects "
-        "move between demonstrations. The hand must be precise relative to the glass while "
-        "grasping and relative to the coaster while placing; in between, the joint-space "
-        "posture of the demonstrations is the best guide."
-    ),
-    "basin": (
-        "Clear the table: grasp the glass from the table and empty it into the basin (at a fixed "
-        "place) by tilting it with the wrist. The hand must be precise relative to the glass "
-        "while grasping; the pouring gesture is the same joint motion in every demonstration."
-    ),
-}
+__all__ = ["run_robot_demo"]
 
 
 def _json_default(value: object) -> object:
@@ -53,7 +42,7 @@ def _json_default(value: object) -> object:
 
 
 def run_robot_demo(
-    task: str,
+    task: str | TaskSpec,
     out: Path,
     *,
     seed: int = 0,
@@ -62,7 +51,8 @@ def run_robot_demo(
     ground_truth: bool = False,
     constrain_fixed: bool = False,
 ) -> dict[str, Any]:
-    """Run the paper's experiment for one task and write its results to ``out``.
+    """Run the paper's experiment for one task (a registered name or a spec) and write its
+    results to ``out``.
 
     Writes ``demos.npz``, ``skill.npz``, ``fig3_cartesian.png``, ``fig45_constraints.png``,
     ``fig6_controllers.png``, ``reproduction.mp4``, ``report.html`` and ``metrics.json``.
@@ -86,7 +76,6 @@ def run_robot_demo(
     metrics : dict
         What ``metrics.json`` holds.
     """
-    from .sim import tasks as T
     from .sim.experiment import (
         controller_names,
         learn_task,
@@ -96,6 +85,7 @@ def run_robot_demo(
         tracking_errors,
     )
     from .sim.scene import Simulation
+    from .sim.tasks import get_task
     from .sim.tracking import SimTracker
     from .sim.video import save_video
 
@@ -103,28 +93,28 @@ def run_robot_demo(
         if status is not None:
             status(msg)
 
-    T.check_task(task)
+    spec = get_task(task)
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    say(f"teaching {n_demos} demonstrations of the {task} task ...")
-    ts = learn_task(task, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
+    say(f"teaching {n_demos} demonstrations of the {spec.name} task ...")
+    ts = learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     save_demonstrations(ts.demos, out / "demos.npz")
     ts.skill.save(out / "skill.npz")
     rng = np.random.default_rng([seed, 2])
-    truth = T.sample_objects(task, rng)
+    truth = spec.sample_objects(rng)
     vision: dict[str, Any] | None = None
     objects = truth
     if not ground_truth:
         say("calibrating the cameras and locating the objects ...")
         start = time.perf_counter()
-        calib = Simulation.from_task(task, T.nominal_objects(task))
+        calib = Simulation.from_task(spec, spec.nominal_objects())
         q_start = start_posture(ts)
         try:
             tracker = SimTracker.from_simulation(calib, at_nominal=False, arm=q_start)
         finally:
             calib.close()
         calib_s = time.perf_counter() - start
-        objects = observe(task, truth, tracker, arm=q_start)
+        objects = observe(spec, truth, tracker, arm=q_start)
         errors = tracking_errors(objects, truth, tracker.objects)
         vals = np.array(list(errors.values()))
         vision = {
@@ -165,7 +155,7 @@ def run_robot_demo(
     total_s = time.perf_counter() - t_start
     influence = {k: float(v.mean()) for k, v in fused.reproduction.influence.items()}
     metrics: dict[str, Any] = {
-        "task": task,
+        "task": spec.name,
         "seed": seed,
         "n_demos": n_demos,
         "objects": {k: v.tolist() for k, v in truth.items()},
@@ -190,18 +180,16 @@ def run_robot_demo(
         out / "metrics.json",
         (json.dumps(metrics, indent=2, default=_json_default) + "\n").encode(),
     )
-    _write_html(out, task, ts, truth, objects, runs, metrics, figures, video_path)
+    _write_html(out, spec, ts, truth, objects, runs, metrics, figures, video_path)
     return metrics
 
 
-def _constraints_text(task: str, ts: Any) -> str:
+def _constraints_text(spec: TaskSpec, ts: Any) -> str:
     """Which constraints the skill has, and why the fixed objects have (or lack) one."""
-    from .sim import tasks as T
-
     spaces = ["joint space" + (" (with the gripper)" if ts.skill.has_gripper else "")]
     spaces += [f"the hand relative to the {k}" for k in ts.skill.object_names]
     text = f"Constraints learned: {', '.join(spaces)}."
-    fixed = list(T.fixed_objects(task))
+    fixed = list(spec.fixed_objects)
     if not fixed:
         return text
     names = " and ".join(f"the {k}" for k in fixed)
@@ -276,7 +264,7 @@ def _vision_section(
 
 def _write_html(
     out: Path,
-    task: str,
+    spec: TaskSpec,
     ts: Any,
     truth: dict[str, Any],
     objects: dict[str, Any],
@@ -304,7 +292,7 @@ def _write_html(
         Section(
             "What happened",
             paragraphs=[
-                TASK_TEXT[task],
+                spec.description,
                 f"A simulated teacher moved the arm {len(ts.demos)} times by hand (kinesthetic "
                 f"demonstrations, objects placed at random). pbdkit learned the skill and "
                 f"reproduced it for a new situation never demonstrated ({place}). Executed "
@@ -327,7 +315,7 @@ def _write_html(
                 "the Gaussian components; coloured band: the GMR mean +- 2 standard deviations. "
                 "Where the band is narrow, the demonstrations agreed: that constraint matters "
                 "then.",
-                _constraints_text(task, ts),
+                _constraints_text(spec, ts),
             ],
             tables={"Components per space": (["space", "K kept", "best K", "K tried"], k_rows)},
             figures=[
@@ -401,7 +389,7 @@ def _write_html(
     ]
     write_report(
         out / "report.html",
-        f"pbdkit demo: the {task} task",
+        f"pbdkit demo: the {spec.name} task",
         sections,
         intro="Programming by Demonstration with constraints in joint space and task space "
         "(Calinon & Billard, IROS 2008), on a simulated Katana arm.",

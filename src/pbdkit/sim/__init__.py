@@ -1,17 +1,22 @@
-"""The simulated world of the experiment (MuJoCo): scene, cameras, execution, success, teacher.
+"""The simulated world of the experiment (MuJoCo): tasks, scene, cameras, execution, teacher.
 
 This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extra:
 ``pip install pbdkit[sim]``); learning and reproduction never depend on it.
 
-- :func:`build_scene`, :class:`Simulation`: the Katana (from the same URDF as
-  :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240 cameras.
-- :func:`execute`: plays a joint trajectory under physics and judges the outcome
-  (:class:`ExecutionResult`, :class:`Outcome`).
+- :mod:`pbdkit.sim.tasks`: a task is one :class:`TaskSpec` (placement ranges, scene objects, the
+  teacher's via points, the success judge) in a registry (:func:`register_task`,
+  :func:`get_task`, :func:`task_names`); the paper's two tasks, ``"coaster"`` and ``"basin"``
+  (:mod:`pbdkit.sim.taskdefs`), are registered when this package is imported. Every function
+  below takes a task's name or its spec. Which objects move (:func:`tracked_objects`: tracked by
+  the cameras, constrained in task space) or are fixed (:func:`fixed_objects`: the basin) comes
+  from the ranges.
+- :func:`build_scene` (:mod:`pbdkit.sim.world`), :class:`Simulation`: the Katana (from the same
+  URDF as :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240
+  cameras.
+- :func:`execute`: plays a joint trajectory under physics and judges the outcome with the task's
+  judge (:class:`ExecutionResult`, :class:`Outcome`).
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
-- :mod:`pbdkit.sim.tasks`: object placement ranges (:data:`PLACEMENT_RANGES`,
-  :func:`sample_objects`) and which objects move (:func:`tracked_objects`: tracked by the cameras,
-  constrained in task space) or are fixed (:func:`fixed_objects`: the basin).
 
 Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (``osmesa`` if only OSMesa is installed);
 set it before importing this package to choose another backend.
@@ -28,41 +33,50 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
         "pbdkit.sim needs MuJoCo: install the 'sim' extra, e.g. pip install 'pbdkit[sim]'"
     ) from exc
 
-from .execute import ExecutionResult, Outcome, evaluate_outcome, execute
+from . import taskdefs  # noqa: F401  (registers the built-in tasks)
+from .execute import ExecutionResult, Outcome, RunStats, evaluate_outcome, execute
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
 from .tasks import (
-    PLACEMENT_RANGES,
-    TASKS,
     PlacementRange,
+    TaskSpec,
     fixed_objects,
     full_placement,
+    get_task,
     nominal_objects,
+    register_task,
     sample_objects,
+    task_names,
     tracked_objects,
+    unregister_task,
 )
-from .teacher import solve_ik, teach, teach_one, tool_pitch
+from .teacher import ViaPoint, solve_ik, teach, teach_one, tool_pitch
 from .video import save_video
 
 __all__ = [
     "CAMERAS",
-    "PLACEMENT_RANGES",
-    "TASKS",
     "ExecutionResult",
     "Outcome",
     "PlacementRange",
+    "RunStats",
     "SceneInfo",
     "Simulation",
+    "TaskSpec",
+    "ViaPoint",
     "build_scene",
     "evaluate_outcome",
     "execute",
     "fixed_objects",
     "full_placement",
+    "get_task",
     "nominal_objects",
+    "register_task",
     "sample_objects",
     "save_video",
     "solve_ik",
+    "task_names",
     "teach",
     "teach_one",
     "tool_pitch",
     "tracked_objects",
+    "unregister_task",
 ]

@@ -5,13 +5,9 @@ joint samples for the position target and the segment's slope as velocity feed-f
 closes (a force-limited squeeze) while the gripper signal is above 0.5 and opens otherwise. Objects
 move only through contacts: a grasp holds by friction or not at all.
 
-Success (design.md):
-
-- coaster task: the glass stands upright (tilt < 10 deg) and rests on the coaster (its bottom within
-  5 mm of the coaster's top face, not held), its axis within 15 mm of the coaster's centre
-  (horizontally);
-- basin task: the glass is still held at the end of the trajectory and at least 90 % of the liquid
-  spheres end inside the basin.
+Success is the task's: its :attr:`pbdkit.sim.tasks.TaskSpec.judge` reads the state after the run
+(and a settling time) and what was measured during it (:class:`RunStats`); each task's module
+states its criteria (:mod:`pbdkit.sim.taskdefs.coaster`, :mod:`pbdkit.sim.taskdefs.basin`).
 """
 
 from __future__ import annotations
@@ -23,15 +19,9 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from . import tasks as T
 from .scene import TIMESTEP, Simulation
 
 Float = NDArray[np.float64]
-
-MAX_TILT_DEG = 10.0
-MAX_PLACEMENT_ERROR = 0.015  # m, horizontal
-MAX_REST_HEIGHT = 0.005  # m, glass bottom above the coaster top
-MIN_LIQUID_FRACTION = 0.9
 
 
 @dataclass(frozen=True)
@@ -42,16 +32,28 @@ class Outcome:
     ----------
     success : bool
     metrics : dict str -> float
-        Coaster task: ``placement_error_mm`` (horizontal distance glass axis - coaster centre),
-        ``height_error_mm`` (glass bottom above the coaster top), ``tilt_deg``, ``released``
-        (1.0 if the fingers no longer touch the glass). Basin task: ``liquid_fraction`` (share of
-        spheres in the basin), ``held`` (1.0 if the glass is held at the end of the trajectory),
-        ``pour_error_mm`` (horizontal distance from the basin's centre to the mean of the spheres
-        that left the glass), ``tilt_deg`` (largest tilt of the glass during the run).
+        The task's measurements, named with their unit (e.g. ``placement_error_mm``,
+        ``tilt_deg``); see the task's judge.
     """
 
     success: bool
     metrics: dict[str, float]
+
+
+@dataclass(frozen=True)
+class RunStats:
+    """What a judge may need beyond the final state: measured while the trajectory played.
+
+    Attributes
+    ----------
+    held_at_end : bool
+        Both fingers touched the glass at the end of the trajectory (before the settling time).
+    max_tilt : float
+        Largest tilt of the glass's axis from the vertical during the run (rad).
+    """
+
+    held_at_end: bool
+    max_tilt: float
 
 
 @dataclass(frozen=True)
@@ -251,69 +253,19 @@ def execute(
 
 
 def evaluate_outcome(sim: Simulation, *, held_at_end: bool, max_tilt: float) -> Outcome:
-    """Judge the current state of ``sim`` against the task's success criteria (module docstring).
+    """Judge the current state of ``sim`` with its task's judge (:attr:`TaskSpec.judge`).
 
     Parameters
     ----------
     sim : Simulation
         After the run (and the settling time).
     held_at_end : bool
-        Whether the glass was held at the end of the trajectory (basin task).
+        Whether the glass was held at the end of the trajectory.
     max_tilt : float
-        Largest tilt of the glass during the run (rad), reported for the basin task.
+        Largest tilt of the glass during the run (rad).
 
     Returns
     -------
     Outcome
     """
-    task = sim.info.task
-    bottom, rot = sim.glass_pose()
-    tilt = math.degrees(sim.glass_tilt())
-    if task == "coaster":
-        coaster = sim.info.objects["coaster"]
-        err = float(np.linalg.norm(bottom[:2] - coaster[:2]))
-        height = float(bottom[2] - coaster[2])
-        released = not (
-            sim.contacts("finger_left", "glass_wall") or sim.contacts("finger_right", "glass_wall")
-        )
-        ok = (
-            tilt < MAX_TILT_DEG
-            and err <= MAX_PLACEMENT_ERROR
-            and abs(height) <= MAX_REST_HEIGHT
-            and released
-        )
-        metrics = {
-            "placement_error_mm": 1e3 * err,
-            "height_error_mm": 1e3 * height,
-            "tilt_deg": tilt,
-            "released": float(released),
-        }
-        return Outcome(bool(ok), metrics)
-    basin = sim.info.objects["basin"]
-    liquid = sim.liquid_positions()
-    half = T.BASIN_INNER / 2
-    inside = (
-        (np.abs(liquid[:, 0] - basin[0]) < half)
-        & (np.abs(liquid[:, 1] - basin[1]) < half)
-        & (liquid[:, 2] < basin[2] + T.BASIN_WALL_HEIGHT)
-        & (liquid[:, 2] > basin[2] - 0.005)
-    )
-    frac = float(np.mean(inside)) if liquid.shape[0] else 0.0
-    # Spheres that left the glass: farther from its axis than its radius, or below its bottom.
-    rel = (liquid - bottom) @ rot
-    out = (
-        (np.hypot(rel[:, 0], rel[:, 1]) > T.GLASS_RADIUS)
-        | (rel[:, 2] < 0)
-        | (rel[:, 2] > T.GLASS_HEIGHT)
-    )
-    pour_err = (
-        float(np.linalg.norm(liquid[out, :2].mean(axis=0) - basin[:2])) if np.any(out) else math.nan
-    )
-    ok = held_at_end and frac >= MIN_LIQUID_FRACTION
-    metrics = {
-        "liquid_fraction": frac,
-        "held": float(held_at_end),
-        "pour_error_mm": 1e3 * pour_err,
-        "tilt_deg": math.degrees(max_tilt),
-    }
-    return Outcome(bool(ok), metrics)
+    return sim.info.spec.judge(sim, RunStats(held_at_end=held_at_end, max_tilt=max_tilt))

@@ -14,13 +14,16 @@ joint-space constraint, relates to it). So the coaster task's controllers are ``
 ``"task:glass"``. ``constrain_fixed=True`` (``pbdkit evaluate --constrain-fixed``) also learns a
 constraint relative to the fixed basin (and adds ``"task:basin"``), which the paper does not.
 The demonstrations record every object either way; the simulated world and the success judge
-always get every object's position (:func:`pbdkit.sim.tasks.full_placement`), the skill only its
-own objects'.
+always get every object's position (:meth:`pbdkit.sim.tasks.TaskSpec.full_placement`), the skill
+only its own objects'.
 
 A trial samples new object positions inside the demonstrated ranges
-(:data:`pbdkit.sim.tasks.PLACEMENT_RANGES`), reproduces the skill with a controller, executes the
+(:attr:`pbdkit.sim.tasks.TaskSpec.ranges`), reproduces the skill with a controller, executes the
 joint trajectory under physics over the demonstrations' mean duration, and judges the outcome
-(:func:`pbdkit.sim.execute.evaluate_outcome`).
+with the task's judge (:func:`pbdkit.sim.execute.evaluate_outcome`).
+
+Every function takes a task's name or its :class:`pbdkit.sim.tasks.TaskSpec`; a name is resolved
+once, at the entry (:func:`pbdkit.sim.tasks.get_task`).
 
 Vision in the loop (default of :func:`evaluate`): the skill is told the positions the stereo
 tracker measures (:mod:`pbdkit.sim.tracking`, calibrated once per evaluation), while the simulated
@@ -49,6 +52,7 @@ from ..skill import Skill
 from . import tasks as T
 from .execute import ExecutionResult, execute
 from .scene import Simulation
+from .tasks import TaskSpec
 from .teacher import teach
 from .tracking import ObjectNotSeenError, SimTracker, observed_objects
 
@@ -88,12 +92,13 @@ def controller_use(controller: str, object_names: Sequence[str]) -> list[str] | 
     )
 
 
-def constrained_objects(task: str, *, constrain_fixed: bool = False) -> list[str]:
+def constrained_objects(task: str | TaskSpec, *, constrain_fixed: bool = False) -> list[str]:
     """The objects of ``task`` that get a task-space constraint, in range order.
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     constrain_fixed : bool
         False (the paper): only the objects that move (:func:`pbdkit.sim.tasks.tracked_objects`).
         True: every object, the fixed ones (the basin) too.
@@ -103,30 +108,37 @@ def constrained_objects(task: str, *, constrain_fixed: bool = False) -> list[str
     names : list of str
         The ``objects`` argument of :meth:`pbdkit.Skill.learn`.
     """
+    spec = T.get_task(task)
     if constrain_fixed:
-        return list(T.PLACEMENT_RANGES[T.check_task(task)])
-    return list(T.tracked_objects(task))
+        return list(spec.ranges)
+    return list(spec.tracked_objects)
 
 
 @dataclass
 class TaskSkill:
-    """A skill learned from simulated demonstrations of a task."""
+    """A skill learned from simulated demonstrations of a task.
 
-    task: str
+    ``task`` is the task's spec; a registered name given instead is resolved on construction.
+    """
+
+    task: TaskSpec
     demos: list[Demonstration]
     skill: Skill
     learn_seconds: float
     teach_seconds: float
 
+    def __post_init__(self) -> None:
+        self.task = T.get_task(self.task)
+
     @property
     def constrain_fixed(self) -> bool:
         """True if the skill has a task-space constraint relative to a fixed object."""
-        fixed = T.fixed_objects(self.task)
+        fixed = self.task.fixed_objects
         return any(k in fixed for k in self.skill.object_names)
 
 
 def learn_task(
-    task: str,
+    task: str | TaskSpec,
     *,
     n_demos: int = 5,
     seed: int = 0,
@@ -140,9 +152,9 @@ def learn_task(
     objects of :func:`constrained_objects` (by default the moving ones, as in the paper;
     ``constrain_fixed=True`` adds the fixed basin).
     """
-    T.check_task(task)
+    spec = T.get_task(task)
     start = time.perf_counter()
-    demos = teach(task, n_demos, seed=seed)
+    demos = teach(spec, n_demos, seed=seed)
     teach_s = time.perf_counter() - start
     start = time.perf_counter()
     skill = Skill.learn(
@@ -150,10 +162,10 @@ def learn_task(
         katana(),
         n_steps=n_steps,
         max_components=max_components,
-        objects=constrained_objects(task, constrain_fixed=constrain_fixed),
+        objects=constrained_objects(spec, constrain_fixed=constrain_fixed),
     )
     learn_s = time.perf_counter() - start
-    return TaskSkill(task, demos, skill, learn_s, teach_s)
+    return TaskSkill(spec, demos, skill, learn_s, teach_s)
 
 
 @dataclass
@@ -198,7 +210,7 @@ def run_controller(
 
     ``objects`` are the positions the robot knows (e.g. from the tracker); ``sim_objects``,
     the true positions in the simulated world (default: the same). Either may leave out the
-    fixed objects (they are added from :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`) and may hold
+    fixed objects (they are added from the task's ranges) and may hold
     objects the skill has no constraint on: the skill is told only its own objects, the
     simulation and the success judge get every object.
 
@@ -208,8 +220,8 @@ def run_controller(
         An unknown controller or object, or a moving object without a position.
     """
     use = controller_use(controller, ts.skill.object_names)
-    known = T.full_placement(ts.task, objects)
-    world = T.full_placement(ts.task, sim_objects) if sim_objects is not None else known
+    known = ts.task.full_placement(objects)
+    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
     told = {k: known[k] for k in ts.skill.object_names}
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -234,7 +246,7 @@ def start_posture(ts: TaskSkill) -> Float:
 
 
 def observe(
-    task: str,
+    task: str | TaskSpec,
     truth: dict[str, Float],
     tracker: SimTracker,
     arm: npt.ArrayLike | None = None,
@@ -248,10 +260,11 @@ def observe(
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     truth : dict str -> ndarray, shape (3,)
         True positions of the objects of the task; fixed ones may be left out (they are added
-        from :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`).
+        from the task's ranges).
     tracker : SimTracker
         Calibrated on ``task``.
     arm : array-like, shape (n,), optional
@@ -268,8 +281,9 @@ def observe(
     ObjectNotSeenError
         If a tracked object is not located.
     """
-    truth = T.full_placement(task, truth)
-    sim = Simulation.from_task(task, truth)
+    spec = T.get_task(task)
+    truth = spec.full_placement(truth)
+    sim = Simulation.from_task(spec, truth)
     try:
         if arm is not None:
             sim.set_joints(arm)
@@ -314,7 +328,7 @@ def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | Non
 
 
 def evaluate(
-    task: str,
+    task: str | TaskSpec,
     trials: int,
     seed: int,
     *,
@@ -330,7 +344,8 @@ def evaluate(
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     trials : int
         Number of new placements (>= 1).
     seed : int
@@ -360,20 +375,20 @@ def evaluate(
         "tracking_error_mm": {"mean", "std", "max", "n", "per_object"} or None,
         "tracking_failures", "placements", "observed", "runs"}``.
     """
-    T.check_task(task)
+    spec = T.get_task(task)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
-    ts = task_skill or learn_task(task, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
+    ts = task_skill or learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     names = list(controllers) if controllers else controller_names(ts.skill.object_names)
     for name in names:
         controller_use(name, ts.skill.object_names)
     # Placements come from their own stream so that they do not depend on the teacher's draws.
     rng = np.random.default_rng([seed, 1])
-    placements = [T.sample_objects(task, rng) for _ in range(trials)]
+    placements = [spec.sample_objects(rng) for _ in range(trials)]
     vision = not ground_truth
     q_start = start_posture(ts)
     if vision and tracker is None:
-        calib = Simulation.from_task(task, T.nominal_objects(task))
+        calib = Simulation.from_task(spec, spec.nominal_objects())
         try:
             tracker = SimTracker.from_simulation(calib, at_nominal=False, arm=q_start)
         finally:
@@ -388,7 +403,7 @@ def evaluate(
         statuses: dict[str, str] = {}
         if vision and tracker is not None:
             try:
-                told = observe(task, truth, tracker, arm=q_start)
+                told = observe(spec, truth, tracker, arm=q_start)
             except ObjectNotSeenError as exc:
                 told = None
                 failures += 1
@@ -428,7 +443,7 @@ def evaluate(
             "metrics": stats,
         }
     return {
-        "task": task,
+        "task": spec.name,
         "trials": trials,
         "seed": seed,
         "n_demos": n_demos,

@@ -1,22 +1,28 @@
-"""The two tasks of the paper (Sec. III), their fixed geometry and the ranges of object placements.
+"""Tasks as data: a :class:`TaskSpec` per task, a registry, and the geometry every task shares.
 
+A task is one :class:`TaskSpec`: where its objects may be placed, how they are built in the
+simulated world, how the simulated teacher demonstrates it and how a run is judged. The functions
+along ``pbdkit demo``'s path take a spec, or a registered name that they resolve once with
+:func:`get_task`; nothing else knows a task by name. The paper's two tasks (Sec. III) are
+:mod:`pbdkit.sim.taskdefs.coaster` and :mod:`pbdkit.sim.taskdefs.basin`, registered when
+:mod:`pbdkit.sim` is imported.
+
+Frames and reference points
+---------------------------
 All positions are in the robot's base frame (the frame of the URDF root, ``base_link``), in metres:
 x points away from the robot across the table, z up, and the table top is the plane z = 0 (the arm's
-base column stands on it).
-
-An object's position ``o`` is the point a camera measures:
-
-- ``glass``: the point on the glass's axis at the height of the centre of its red band;
-- ``coaster``: the centre of the coaster's top face;
-- ``basin``: the centre of the basin's floor (top face). The basin is fixed.
+base column stands on it). An object's position ``o`` is the point a camera measures; each task
+says which point that is for its objects. Every task has a ``glass``, the object the gripper holds
+(the simulation, the execution record and the teacher's grasp rely on it), whose point is on its
+axis at the height of the centre of its red band.
 
 The Katana holds the glass from the side with its long wrist (0.30 m from the wrist pitch joint to
 the tool point) nearly horizontal, which folds the elbow beyond its limit closer than about 0.45 m
 from the base axis: placements lie 0.45-0.58 m from it.
 
-Ranges are boxes ``(low, high)`` of shape (3,) each; a range whose low and high are equal is a
-fixed object. Demonstrations sample inside them (:func:`sample_objects`) and so can evaluation
-trials, which then stay inside the demonstrated range.
+Ranges are boxes ``(low, high)`` of shape (3,) each (:class:`PlacementRange`); a range whose low and
+high are equal is a fixed object. Demonstrations sample inside them (:func:`sample_objects`) and so
+can evaluation trials, which then stay inside the demonstrated range.
 
 Fixed and tracked objects (paper Sec. III): the ranges are the one place that says which objects
 move. Those that move (:func:`tracked_objects`) are located by the cameras and get a task-space
@@ -24,16 +30,102 @@ constraint; a fixed one (the basin) is at a known place (:func:`fixed_objects`),
 patch, and gets no constraint in the paper's configuration: its position is the same in every
 demonstration, so the hand's path relative to it is the joint-space constraint seen through the
 forward kinematics. Demonstrations still record it, as a user's recording would.
+
+How to add a task
+-----------------
+Write one module that builds a :class:`TaskSpec` and calls :func:`register_task`; import it
+before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A spec needs:
+
+- ``name`` and ``description`` (the report's one-line text);
+- ``ranges``: object name -> :class:`PlacementRange`, with a ``"glass"``; z is the height at
+  which the object rests on its support (scenes refuse other heights);
+- ``add_objects(world, objects, rng)``: adds the task's bodies to the MuJoCo world
+  (``world`` is the ``MjSpec``'s worldbody, ``objects`` a full placement name -> (3,)), the glass
+  included (:func:`pbdkit.sim.world.add_glass`, and :func:`pbdkit.sim.world.add_liquid` for a
+  glass that holds ``n_liquid`` spheres); objects other than the glass are static bodies;
+- ``via_points(objects, rng, speed) -> list[ViaPoint]``: the teacher's hand path for a placement
+  (building blocks in :mod:`pbdkit.sim.teacher`: :class:`~pbdkit.sim.teacher.Person`,
+  :func:`~pbdkit.sim.teacher.grasp_via_points`);
+- ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
+  what was measured during the run (:class:`pbdkit.sim.execute.RunStats`);
+- ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
+  patch (default: the glass's red band only); ``n_liquid``: spheres in the glass (default 0).
+
+For example, a third task, "put the glass from the table on a green mark on the table"
+(``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
+
+    def add_objects(world, objects, rng):
+        m, g = objects["mark"], objects["glass"]
+        world.add_geom(name="mark", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                       size=[0.03, 0.0005, 0.0], pos=[m[0], m[1], 0.0005],
+                       rgba=[0.1, 0.7, 0.2, 1.0], contype=0, conaffinity=0)
+        add_glass(world, np.array([g[0], g[1], 0.0]))  # bottom face on the table
+
+    def via_points(objects, rng, speed):
+        p = Person(rng, speed)
+        g, m = objects["glass"], objects["mark"]
+        place = m + UP * (GLASS_PATCH_CENTER + 0.001) + GRASP_OFFSET  # tool point on release
+        carry = between(g + GRASP_OFFSET, place) + UP * 0.08 + p.jitter(0.01)
+        return [
+            *grasp_via_points(p, g, 0.08, 2.6),  # swing, approach, close, lift 8 cm
+            ViaPoint(p.duration(1.8), carry, p.holding_pitch(), p.roll(), True),
+            ViaPoint(p.duration(1.5), place + UP * 0.05, p.holding_pitch(), 0.0, True),
+            ViaPoint(p.duration(1.0), place, p.hold_pitch, 0.0, True),
+            ViaPoint(p.duration(0.6), place, p.hold_pitch, 0.0, False),  # open
+            ...,  # retreat: back along the radius, then up (free pitch, joint space)
+        ]
+
+    def judge(sim, run):
+        bottom, _ = sim.glass_pose()
+        err = float(np.linalg.norm(bottom[:2] - sim.info.objects["mark"][:2]))
+        tilt = math.degrees(sim.glass_tilt())
+        ok = err <= 0.02 and tilt < 10.0 and sim.glass_released()
+        return Outcome(ok, {"placement_error_mm": 1e3 * err, "tilt_deg": tilt})
+
+    z = GLASS_PATCH_CENTER  # the glass stands on the table
+    register_task(TaskSpec(
+        name="mark", description="Put the glass from the table on the green mark.",
+        ranges={"glass": PlacementRange.box((0.47, 0.08, z), (0.54, 0.22, z)),
+                "mark": PlacementRange.box((0.47, -0.22, 0.001), (0.52, -0.10, 0.001))},
+        add_objects=add_objects, via_points=via_points, judge=judge,
+        patches={"glass": GLASS_PATCH_PREFIX, "mark": "mark"}))
+
+After that, ``teach("mark", 5)``, ``learn_task("mark")``, ``evaluate("mark", ...)`` and
+``run_robot_demo("mark", ...)`` work as for the paper's tasks, and so does ``--task mark`` of the
+command's ``demo``, ``teach`` and ``evaluate`` in a process that registered it (the ``pbdkit``
+script itself knows the built-in tasks only: a module of :mod:`pbdkit.sim.taskdefs` is one).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from .execute import Outcome, RunStats
+    from .scene import Simulation
+    from .teacher import ViaPoint
+
+__all__ = [
+    "GLASS_PATCH_PREFIX",
+    "GRASP_OFFSET",
+    "PlacementRange",
+    "TaskSpec",
+    "fixed_objects",
+    "full_placement",
+    "get_task",
+    "nominal_objects",
+    "register_task",
+    "sample_objects",
+    "task_names",
+    "tracked_objects",
+    "unregister_task",
+]
 
 Float = NDArray[np.float64]
 
@@ -45,28 +137,14 @@ GLASS_BOTTOM = 0.006  # thickness of the bottom disk (m)
 GLASS_PATCH_LOW = 0.065  # red band, height above the glass's bottom face (m)
 GLASS_PATCH_HIGH = 0.085
 GLASS_PATCH_CENTER = 0.5 * (GLASS_PATCH_LOW + GLASS_PATCH_HIGH)
+#: Name prefix of the geoms of the glass's red band (``glass_patch0..11``), for the cameras.
+GLASS_PATCH_PREFIX = "glass_patch"
 # Height above the glass's bottom face at which the fingers hold it (centre of the finger pads).
 GLASS_GRASP_HEIGHT = 0.045
 # Tool point minus glass position when the glass is held upright with the tool on its axis.
 GRASP_OFFSET: Float = np.array([0.0, 0.0, GLASS_GRASP_HEIGHT - GLASS_PATCH_CENTER])
 
-COASTER_RADIUS = 0.045
-COASTER_THICKNESS = 0.006
-
-SHELF_HEIGHT = 0.10  # top face of the shelf board (m)
-# Shelf board extent (x, y) in the base frame: it holds every glass placement of the coaster task.
-SHELF_X = (0.38, 0.58)
-SHELF_Y = (0.06, 0.32)
-
-BASIN_CENTER_XY = (0.45, -0.22)
-BASIN_INNER = 0.20  # inner side length (square), m
-BASIN_WALL_HEIGHT = 0.06  # above the floor's top face
-BASIN_FLOOR = 0.02  # floor thickness (thick: falling spheres must not pass through it)
-
 LIQUID_RADIUS = 0.0055
-N_LIQUID = 20
-
-TASKS = ("coaster", "basin")
 
 
 @dataclass(frozen=True)
@@ -81,6 +159,13 @@ class PlacementRange:
 
     low: Float
     high: Float
+
+    @classmethod
+    def box(
+        cls, low: tuple[float, float, float], high: tuple[float, float, float]
+    ) -> PlacementRange:
+        """The box between two corners given as tuples."""
+        return cls(np.array(low, dtype=np.float64), np.array(high, dtype=np.float64))
 
     @property
     def fixed(self) -> bool:
@@ -98,47 +183,191 @@ class PlacementRange:
         return bool(np.all(p >= self.low - tol) and np.all(p <= self.high + tol))
 
 
-def _box(low: tuple[float, float, float], high: tuple[float, float, float]) -> PlacementRange:
-    return PlacementRange(np.array(low, dtype=np.float64), np.array(high, dtype=np.float64))
+#: ``add_objects(world, objects, rng)``: add the task's bodies to the MjSpec worldbody.
+AddObjects = Callable[[Any, Mapping[str, Float], np.random.Generator], None]
+#: ``via_points(objects, rng, speed)``: the teacher's via points for a placement.
+ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], "list[ViaPoint]"]
+#: ``judge(sim, run)``: the outcome of a run, from the final state and the run's measurements.
+Judge = Callable[["Simulation", "RunStats"], "Outcome"]
 
 
-_GLASS_ON_SHELF_Z = SHELF_HEIGHT + GLASS_PATCH_CENTER
-_GLASS_ON_TABLE_Z = GLASS_PATCH_CENTER
-_BASIN_POS = (BASIN_CENTER_XY[0], BASIN_CENTER_XY[1], BASIN_FLOOR)
-
-#: Placement ranges per task: object name -> range. The glass stands on its support (z fixed).
-PLACEMENT_RANGES: dict[str, dict[str, PlacementRange]] = {
-    "coaster": {
-        "glass": _box((0.44, 0.12, _GLASS_ON_SHELF_Z), (0.50, 0.24, _GLASS_ON_SHELF_Z)),
-        "coaster": _box((0.45, -0.24, COASTER_THICKNESS), (0.52, -0.10, COASTER_THICKNESS)),
-    },
-    "basin": {
-        "glass": _box((0.47, 0.08, _GLASS_ON_TABLE_Z), (0.54, 0.22, _GLASS_ON_TABLE_Z)),
-        "basin": _box(_BASIN_POS, _BASIN_POS),
-    },
-}
+def _glass_patch() -> dict[str, str]:
+    return {"glass": GLASS_PATCH_PREFIX}
 
 
-def check_task(task: str) -> str:
-    """Return ``task`` if it is a known task name, else raise ValueError."""
-    if task not in PLACEMENT_RANGES:
-        raise ValueError(f"task must be one of {list(TASKS)}, got {task!r}")
-    return task
+@dataclass(frozen=True, eq=False)
+class TaskSpec:
+    """Everything that makes a task (see the module docstring for how to write one).
+
+    Attributes
+    ----------
+    name : str
+        Registry key (``--task`` on the command line).
+    description : str
+        What the task is, in a few sentences (the report's first paragraph).
+    ranges : dict str -> PlacementRange
+        Object name -> placement range, in a fixed order (the order of every placement dict);
+        must contain ``"glass"``. A range with ``low == high`` is a fixed object.
+    add_objects : callable
+        ``add_objects(world, objects, rng)``: adds the task's bodies, the glass included, to
+        the worldbody of the MuJoCo ``MjSpec``; ``objects`` holds every object's position
+        (3,), ``rng`` seeds any jitter (the liquid's).
+    via_points : callable
+        ``via_points(objects, rng, speed) -> list[ViaPoint]``: the simulated teacher's hand path
+        for a placement (durations scaled by 1 / speed).
+    judge : callable
+        ``judge(sim, run) -> Outcome``: success and metrics of a run, from the simulation after
+        it and its :class:`pbdkit.sim.execute.RunStats`.
+    patches : dict str -> str
+        For each object the cameras can track, the name prefix of its patch's geoms.
+    n_liquid : int
+        Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
+    """
+
+    name: str
+    description: str
+    ranges: Mapping[str, PlacementRange]
+    add_objects: AddObjects
+    via_points: ViaPoints
+    judge: Judge
+    patches: Mapping[str, str] = field(default_factory=_glass_patch)
+    n_liquid: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        ranges = dict(self.ranges)
+        if "glass" not in ranges:
+            raise ValueError(
+                f"ranges of task {self.name!r} must include 'glass' (the object the gripper "
+                f"holds), got {list(ranges)}"
+            )
+        for obj, r in ranges.items():
+            if not isinstance(r, PlacementRange):
+                raise ValueError(f"ranges[{obj!r}] must be a PlacementRange, got {r!r}")
+            if r.low.shape != (3,) or r.high.shape != (3,) or np.any(r.low > r.high):
+                raise ValueError(f"ranges[{obj!r}] must be a box with low <= high, shape (3,)")
+        unknown = sorted(set(self.patches) - set(ranges))
+        if unknown:
+            raise ValueError(
+                f"patches of task {self.name!r} name object(s) {unknown} without a range; "
+                f"expected some of {list(ranges)}"
+            )
+        if self.n_liquid < 0:
+            raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
+        for what in ("add_objects", "via_points", "judge"):
+            if not callable(getattr(self, what)):
+                raise ValueError(f"{what} of task {self.name!r} must be callable")
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "patches", dict(self.patches))
+
+    def __repr__(self) -> str:
+        return f"TaskSpec(name={self.name!r}, objects={list(self.ranges)})"
+
+    @property
+    def tracked_objects(self) -> tuple[str, ...]:
+        """Objects that move between placements, in range order (the cameras track them)."""
+        return tuple(name for name, r in self.ranges.items() if not r.fixed)
+
+    @property
+    def fixed_objects(self) -> tuple[str, ...]:
+        """Objects that never move, in range order; known without vision."""
+        return tuple(name for name, r in self.ranges.items() if r.fixed)
+
+    def nominal_objects(self) -> dict[str, Float]:
+        """Centre of every placement range: name -> position (3,)."""
+        return {name: r.center.copy() for name, r in self.ranges.items()}
+
+    def sample_objects(self, rng: np.random.Generator) -> dict[str, Float]:
+        """Object positions drawn uniformly inside the ranges, name -> (3,) (see the function)."""
+        return {name: rng.uniform(r.low, r.high) for name, r in self.ranges.items()}
+
+    def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+        """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
+        unknown = sorted(set(objects) - set(self.ranges))
+        if unknown:
+            raise ValueError(
+                f"objects: unknown object(s) {unknown} for task {self.name!r}; expected "
+                f"{list(self.ranges)}"
+            )
+        missing = [k for k in self.tracked_objects if k not in objects]
+        if missing:
+            raise ValueError(
+                f"objects: missing position(s) for {missing}: they move between placements, so "
+                f"the {self.name!r} task needs them (only fixed objects "
+                f"{list(self.fixed_objects)} are known)"
+            )
+        return {
+            name: np.array(objects[name], dtype=np.float64) if name in objects else r.low.copy()
+            for name, r in self.ranges.items()
+        }
 
 
-def tracked_objects(task: str) -> tuple[str, ...]:
+_REGISTRY: dict[str, TaskSpec] = {}
+
+
+def register_task(spec: TaskSpec) -> TaskSpec:
+    """Make ``spec`` known by its name (:func:`get_task`, ``--task``); returns it.
+
+    Raises
+    ------
+    ValueError
+        If ``spec`` is not a TaskSpec, or another spec has the same name.
+    """
+    if not isinstance(spec, TaskSpec):
+        raise ValueError(f"spec must be a TaskSpec, got {type(spec).__name__}")
+    known = _REGISTRY.get(spec.name)
+    if known is not None and known is not spec:
+        raise ValueError(
+            f"task {spec.name!r} is already registered; choose another name (or "
+            "unregister_task it first)"
+        )
+    _REGISTRY[spec.name] = spec
+    return spec
+
+
+def unregister_task(name: str) -> TaskSpec:
+    """Forget the task ``name`` and return its spec; ValueError if it is not registered."""
+    spec = get_task(name)
+    del _REGISTRY[spec.name]
+    return spec
+
+
+def task_names() -> tuple[str, ...]:
+    """Names of the registered tasks, in registration order (the paper's first)."""
+    return tuple(_REGISTRY)
+
+
+def get_task(task: str | TaskSpec) -> TaskSpec:
+    """The spec of ``task``: a registered name, or a spec (returned as it is).
+
+    Raises
+    ------
+    ValueError
+        If ``task`` is not the name of a registered task.
+    """
+    if isinstance(task, TaskSpec):
+        return task
+    spec = _REGISTRY.get(task) if isinstance(task, str) else None
+    if spec is None:
+        raise ValueError(
+            f"task must be one of {list(_REGISTRY)}, got {task!r} (a new task is registered "
+            "with pbdkit.sim.tasks.register_task)"
+        )
+    return spec
+
+
+def tracked_objects(task: str | TaskSpec) -> tuple[str, ...]:
     """Objects of ``task`` that move between placements, in range order (the cameras track them)."""
-    ranges = PLACEMENT_RANGES[check_task(task)]
-    return tuple(name for name, r in ranges.items() if not r.fixed)
+    return get_task(task).tracked_objects
 
 
-def fixed_objects(task: str) -> tuple[str, ...]:
+def fixed_objects(task: str | TaskSpec) -> tuple[str, ...]:
     """Objects of ``task`` that never move (the basin), in range order; known without vision."""
-    ranges = PLACEMENT_RANGES[check_task(task)]
-    return tuple(name for name, r in ranges.items() if r.fixed)
+    return get_task(task).fixed_objects
 
 
-def full_placement(task: str, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+def full_placement(task: str | TaskSpec, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
     """Every object's position for a placement: ``objects`` plus the fixed objects' positions.
 
     Use it where a subset of the objects is known (e.g. those of a skill that has no constraint
@@ -146,7 +375,8 @@ def full_placement(task: str, objects: Mapping[str, npt.ArrayLike]) -> dict[str,
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     objects : dict str -> array-like, shape (3,)
         Positions of at least every moving object (:func:`tracked_objects`); fixed objects may
         be given too (they are then kept as given, for :func:`pbdkit.sim.build_scene` to check).
@@ -161,41 +391,27 @@ def full_placement(task: str, objects: Mapping[str, npt.ArrayLike]) -> dict[str,
     ValueError
         An object that is not one of the task's, or a moving object without a position.
     """
-    ranges = PLACEMENT_RANGES[check_task(task)]
-    unknown = sorted(set(objects) - set(ranges))
-    if unknown:
-        raise ValueError(
-            f"objects: unknown object(s) {unknown} for task {task!r}; expected {list(ranges)}"
-        )
-    missing = [k for k in tracked_objects(task) if k not in objects]
-    if missing:
-        raise ValueError(
-            f"objects: missing position(s) for {missing}: they move between placements, so the "
-            f"{task!r} task needs them (only fixed objects {list(fixed_objects(task))} are known)"
-        )
-    return {
-        name: np.array(objects[name], dtype=np.float64) if name in objects else r.low.copy()
-        for name, r in ranges.items()
-    }
+    return get_task(task).full_placement(objects)
 
 
-def nominal_objects(task: str) -> dict[str, Float]:
+def nominal_objects(task: str | TaskSpec) -> dict[str, Float]:
     """Centre of every placement range of ``task``: name -> position (3,)."""
-    return {name: r.center.copy() for name, r in PLACEMENT_RANGES[check_task(task)].items()}
+    return get_task(task).nominal_objects()
 
 
-def sample_objects(task: str, rng: np.random.Generator) -> dict[str, Float]:
+def sample_objects(task: str | TaskSpec, rng: np.random.Generator) -> dict[str, Float]:
     """Draw object positions uniformly inside the placement ranges of ``task``.
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     rng : numpy.random.Generator
 
     Returns
     -------
     dict str -> ndarray, shape (3,)
-        One position per object of the task (fixed objects at their fixed position).
+        One position per object of the task (fixed objects at their fixed position; they still
+        take their draws from ``rng``).
     """
-    ranges = PLACEMENT_RANGES[check_task(task)]
-    return {name: rng.uniform(r.low, r.high) for name, r in ranges.items()}
+    return get_task(task).sample_objects(rng)

@@ -1,15 +1,17 @@
-"""A simulated teacher: kinesthetic-style demonstrations of the two tasks on the Katana.
+"""A simulated teacher: kinesthetic-style demonstrations of a task on the Katana.
 
 A person moving the arm by hand goes through a few task-space via points with the timing, the
 detours and the posture of the moment. The teacher reproduces that: for random object placements
-(inside :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`) it lays out via points relative to the objects,
-draws durations, via-point jitter and a tool pitch per via point, solves each via point by damped
+(inside the task's :attr:`pbdkit.sim.tasks.TaskSpec.ranges`) it asks the task for its via points
+relative to the objects (:attr:`pbdkit.sim.tasks.TaskSpec.via_points`, with durations, via-point
+jitter and a tool pitch per via point drawn by a :class:`Person`), solves each via point by damped
 least-squares inverse kinematics on :func:`pbdkit.robots.katana` and interpolates with
 minimum-jerk profiles, sampled at 100 Hz (the encoders' record): in task space where the hand's
 path matters (holding the glass: straight lines at a constant pitch), in joint space for free
 swings and for the radial approach (constant pan keeps the open fingers around the glass).
 
-Structure, so that the paper's constraints emerge (Sec. III):
+Structure, so that the paper's constraints emerge (Sec. III; the via points of each task are in
+its module, :mod:`pbdkit.sim.taskdefs`):
 
 - coaster: start posture -> approach the glass on the shelf from the robot's side and grasp it (the
   tool on the glass's axis: tight relative to the glass) -> lift -> carry (free via point) -> place
@@ -18,10 +20,11 @@ Structure, so that the paper's constraints emerge (Sec. III):
   the fixed basin -> tilt it by a wrist-roll gesture whose angle profile is the same in every
   demonstration (a joint-space constraint) -> hold while the liquid pours into the basin (the end).
 
-Grasps are side grasps: the tool axis nearly horizontal (pitch :data:`GRASP_PITCH`, 8.6 deg down:
-level needs more reach than the near part of the ranges allows), pointing radially away from the
-base, fingers closing horizontally. The pitch is kept while the glass is held, so the glass stays
-upright while the roll is neutral, and rolling about the tool axis tips it sideways.
+The grasp is common to every task (:func:`grasp_via_points`): a side grasp, the tool axis nearly
+horizontal (pitch :data:`GRASP_PITCH`, 8.6 deg down: level needs more reach than the near part of
+the ranges allows), pointing radially away from the base, fingers closing horizontally. The pitch
+is kept while the glass is held, so the glass stays upright while the roll is neutral, and rolling
+about the tool axis tips it sideways.
 
 Katana specifics used here: the tool pitch (elevation of the tool axis above the horizontal) is
 ``lift1 + lift2 - lift3`` (the three lifts are parallel axes; lift3's axis is flipped by its
@@ -33,6 +36,7 @@ choice the teacher varies between demonstrations.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +47,7 @@ from ..demos import Demonstration
 from ..robot import Robot
 from ..robots import katana
 from . import tasks as T
+from .tasks import TaskSpec
 
 Float = NDArray[np.float64]
 
@@ -50,10 +55,6 @@ RATE = 100.0  # Hz, encoder sampling rate
 # Row of d(pitch)/d(theta) for the Katana (see the module docstring).
 PITCH_ROW: Float = np.array([0.0, 1.0, 1.0, -1.0, 0.0])
 ROLL_ROW: Float = np.array([0.0, 0.0, 0.0, 0.0, 1.0])
-# Pouring gesture (basin task): wrist-roll angle reached, rad. Past 90 deg the open top points
-# downwards and the spheres run out.
-POUR_ROLL = 2.0
-POUR_SHIFT = 0.06  # m, hand position behind the basin's centre, against the pouring direction
 APPROACH = 0.07  # m, pre-grasp distance along the tool axis (fingertips clear the glass)
 # Pitch at which the glass is held (tool axis 8.6 deg below the horizontal): reachable over the
 # whole placement ranges with the elbow-up branch (horizontal needs more than ~0.46 m of reach).
@@ -288,15 +289,18 @@ def _segment(robot: Robot, q: Float, p0: Float, p1: Float, n: int, joint_space: 
     return np.array(rows)
 
 
-def _radial(p: Float) -> Float:
+def radial(p: Float) -> Float:
+    """Horizontal unit vector (3,) from the base axis towards ``p`` (3,)."""
     u = np.array([p[0], p[1], 0.0])
     out: Float = u / np.linalg.norm(u)
     return out
 
 
-def _between(a: Float, b: Float) -> Float:
-    # Halfway in cylindrical coordinates about the base axis: the chord's midpoint would come
-    # closer to the base than the arm can reach with the glass held level.
+def between(a: Float, b: Float) -> Float:
+    """The point (3,) halfway between ``a`` and ``b`` in cylindrical coordinates about the base
+    axis (radius, angle and height averaged)."""
+    # Not the chord's midpoint: it would come closer to the base than the arm can reach with
+    # the glass held level.
     ra, rb = math.hypot(a[0], a[1]), math.hypot(b[0], b[1])
     angle = 0.5 * (math.atan2(a[1], a[0]) + math.atan2(b[1], b[0]))
     r = 0.5 * (ra + rb)
@@ -314,8 +318,26 @@ def start_posture(robot: Robot, rng: np.random.Generator) -> Float:
     return _ik_with_margin(robot, x, pitch, rng.normal(0.0, 0.02), guess)
 
 
-class _Person:
-    """Draws a person's variability: durations, via-point jitter, postures."""
+class Person:
+    """Draws a person's variability for one demonstration: durations, via-point jitter, postures.
+
+    Every method draws from ``rng``: a task's via points must call them in a fixed order (the
+    same seed then gives the same demonstration).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    speed : float
+        Every duration is scaled by 1 / speed.
+
+    Attributes
+    ----------
+    tempo : float
+        This demonstration's overall tempo (duration factor).
+    hold_pitch : float
+        The pitch (rad) at which this person holds the glass (kept while it is held: it stays
+        upright).
+    """
 
     def __init__(self, rng: np.random.Generator, speed: float) -> None:
         self.rng = rng
@@ -323,33 +345,55 @@ class _Person:
         # phases stay roughly aligned once the demonstrations are rescaled in time (paper
         # Table I), as with a person repeating a task.
         self.tempo = float(rng.uniform(0.85, 1.2)) / speed
-        # The pitch at which this person holds the glass (kept while it is held: it stays upright).
         self.hold_pitch = float(GRASP_PITCH + rng.normal(0.0, 0.02))
 
-    def d(self, mean: float) -> float:
+    def duration(self, mean: float) -> float:
+        """A segment's duration (s) around ``mean`` at this person's tempo."""
         return float(mean * self.tempo * self.rng.uniform(0.92, 1.08))
 
-    def jit(self, s: float) -> Float:
+    def jitter(self, s: float) -> Float:
+        """A via point's offset (3,), normal with standard deviation ``s`` (m) per axis."""
         return self.rng.normal(0.0, s, 3)
 
     def free_pitch(self) -> float:
+        """A pitch (rad) for a free via point (the glass is not held)."""
         return float(self.rng.uniform(-0.5, -0.15))
 
-    def hold(self) -> float:
+    def holding_pitch(self) -> float:
+        """The pitch (rad) while holding the glass: :attr:`hold_pitch` and a small wobble."""
         return self.hold_pitch + float(self.rng.normal(0.0, 0.005))
 
     def roll(self) -> float:
+        """A wrist roll (rad) near neutral."""
         return float(self.rng.normal(0.0, 0.02))
 
 
-_UP = np.array([0.0, 0.0, 1.0])
+#: Vertical unit vector (base frame).
+UP = np.array([0.0, 0.0, 1.0])
 
 
-def _grasp_via_points(
-    person: _Person, glass: Float, lift: float, approach_time: float
+def grasp_via_points(
+    person: Person, glass: Float, lift: float, approach_time: float
 ) -> list[ViaPoint]:
-    # Side grasp: come in along the radial direction at the glass's height, close, lift.
-    u = _radial(glass)
+    """Via points of the side grasp: swing behind the glass, approach along the radius, close,
+    lift.
+
+    Parameters
+    ----------
+    person : Person
+    glass : ndarray, shape (3,)
+        The glass's position (its reference point, :mod:`pbdkit.sim.tasks`).
+    lift : float
+        Height (m) of the lift once the glass is held.
+    approach_time : float
+        Mean duration (s) of the approach (slower near the table, where the arm folds more).
+
+    Returns
+    -------
+    list of ViaPoint
+        The last one holds the glass ``lift`` above its support.
+    """
+    u = radial(glass)
     grasp = glass + T.GRASP_OFFSET
     p = person
     hp = p.hold_pitch
@@ -357,8 +401,8 @@ def _grasp_via_points(
         # A free swing (joint space) to a point behind and above the glass: the swing's path
         # bulges, so it must end well clear of the glass.
         ViaPoint(
-            p.d(3.0),
-            grasp - (APPROACH + 0.05) * u + _UP * 0.08 + p.jit(0.01),
+            p.duration(3.0),
+            grasp - (APPROACH + 0.05) * u + UP * 0.08 + p.jitter(0.01),
             p.free_pitch(),
             p.roll(),
             False,
@@ -368,93 +412,26 @@ def _grasp_via_points(
         # Approach along the radius: the pan stays constant, so a joint-space motion keeps the
         # open fingers on both sides of the glass.
         ViaPoint(
-            p.d(approach_time),
-            grasp - APPROACH * u + _UP * 0.01 + p.jit(0.002),
+            p.duration(approach_time),
+            grasp - APPROACH * u + UP * 0.01 + p.jitter(0.002),
             hp,
             0.0,
             False,
             free_pitch=True,
             joint_space=True,
         ),
-        ViaPoint(p.d(1.6), grasp, hp, 0.0, False, joint_space=True),
-        ViaPoint(p.d(0.6), grasp, hp, 0.0, True),  # close and wait for the grip
-        ViaPoint(p.d(1.0), grasp + _UP * lift, p.hold(), p.roll(), True),
+        ViaPoint(p.duration(1.6), grasp, hp, 0.0, False, joint_space=True),
+        ViaPoint(p.duration(0.6), grasp, hp, 0.0, True),  # close and wait for the grip
+        ViaPoint(p.duration(1.0), grasp + UP * lift, p.holding_pitch(), p.roll(), True),
     ]
 
 
-def coaster_via_points(
-    objects: dict[str, Float], rng: np.random.Generator, speed: float = 1.0
-) -> list[ViaPoint]:
-    """Via points of the coaster task for given glass and coaster positions."""
-    person = _Person(rng, speed)
-    p = person
-    g, c = objects["glass"], objects["coaster"]
-    uc = _radial(c)
-    # Glass bottom 2 mm above the coaster's top when released: it drops onto it.
-    place = c + _UP * (T.GLASS_PATCH_CENTER + 0.002) + T.GRASP_OFFSET
-    grasp = g + T.GRASP_OFFSET
-    carry = _between(grasp, place) + _UP * rng.uniform(0.10, 0.15) + p.jit(0.015)
-    return [
-        *_grasp_via_points(person, g, 0.06, 1.6),
-        ViaPoint(p.d(1.8), carry, p.hold(), p.roll(), True),
-        ViaPoint(p.d(1.5), place + _UP * 0.05 + p.jit(0.005), p.hold(), 0.0, True),
-        ViaPoint(p.d(1.0), place, p.hold_pitch, 0.0, True),
-        ViaPoint(p.d(0.6), place, p.hold_pitch, 0.0, False),  # open and wait
-        ViaPoint(
-            p.d(1.8),
-            place - APPROACH * uc + p.jit(0.002),
-            p.hold_pitch,
-            p.roll(),
-            False,
-            free_pitch=True,
-            joint_space=True,
-        ),
-        ViaPoint(
-            p.d(2.5),
-            place - APPROACH * uc + _UP * 0.08 + p.jit(0.01),
-            p.free_pitch(),
-            p.roll(),
-            False,
-            free_pitch=True,
-            joint_space=True,
-        ),
-    ]
-
-
-def basin_via_points(
-    objects: dict[str, Float], rng: np.random.Generator, speed: float = 1.0
-) -> list[ViaPoint]:
-    """Via points of the basin task for a given glass position (the basin is fixed)."""
-    person = _Person(rng, speed)
-    p = person
-    g, b = objects["glass"], objects["basin"]
-    grasp = g + T.GRASP_OFFSET
-    # A positive roll tips the glass's mouth towards the tangential direction d (the roll axis
-    # points back along the tool). The liquid slides out along the wall and flies ~10 cm further
-    # (it leaves at ~0.7 m/s): pour low, from behind the basin's centre.
-    ub = _radial(b)
-    d_pour = np.array([-ub[1], ub[0], 0.0])
-    pour = b + _UP * rng.uniform(0.13, 0.15) - POUR_SHIFT * d_pour + p.jit(0.008)
-    carry = _between(grasp, pour) + _UP * rng.uniform(0.06, 0.10) + p.jit(0.015)
-    # The gesture: the same roll profile in every demonstration (joint space), fixed durations.
-    return [
-        # Near the table the arm folds more: the approach turns the wrist farther, slower.
-        *_grasp_via_points(person, g, 0.08, 2.6),
-        ViaPoint(p.d(1.6), carry, p.hold(), p.roll(), True),
-        ViaPoint(p.d(1.4), pour, p.hold(), 0.0, True),
-        # The pour ends the demonstration, as in the paper (joint space most constrained "at the
-        # end of the motion"): tilt, then hold while the liquid runs out.
-        ViaPoint(p.d(4.0), pour, p.hold_pitch, POUR_ROLL + p.roll(), True),
-        ViaPoint(p.d(2.0), pour, p.hold_pitch, POUR_ROLL + p.roll(), True),
-    ]
-
-
-def _fmt(objects: dict[str, Float]) -> str:
+def _fmt(objects: Mapping[str, Float]) -> str:
     return str({k: np.round(v, 3).tolist() for k, v in objects.items()})
 
 
 def teach_one(
-    task: str,
+    task: str | TaskSpec,
     objects: dict[str, Float],
     rng: np.random.Generator,
     robot: Robot | None = None,
@@ -464,9 +441,10 @@ def teach_one(
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     objects : dict str -> ndarray, shape (3,)
-        Object positions (see :mod:`pbdkit.sim.tasks`).
+        Object positions (see the task).
     rng : numpy.random.Generator
         The person's variability (timing, via points, posture).
     robot : Robot, optional
@@ -479,9 +457,8 @@ def teach_one(
     Demonstration
         Encoders at :data:`RATE`; gripper 1.0 while closed.
     """
-    T.check_task(task)
+    spec = T.get_task(task)
     robot = katana() if robot is None else robot
-    make_via = coaster_via_points if task == "coaster" else basin_via_points
     error: ValueError | None = None
     # A person never demonstrates an impossible motion: redraw the variability when a drawn path
     # leaves the reachable set.
@@ -489,7 +466,7 @@ def teach_one(
         try:
             q_start = start_posture(robot, rng)
             t, joints, gripper = trajectory_from_via_points(
-                robot, q_start, make_via(objects, rng, speed)
+                robot, q_start, spec.via_points(objects, rng, speed)
             )
         except ValueError as exc:
             error = exc
@@ -497,18 +474,19 @@ def teach_one(
         return Demonstration(t=t, joints=joints, objects=objects, gripper=gripper)
     raise ValueError(
         f"objects: no reachable demonstration for {_fmt(objects)} after {MAX_ATTEMPTS} "
-        f"attempts ({error}); keep objects inside PLACEMENT_RANGES"
+        f"attempts ({error}); keep objects inside the {spec.name!r} task's placement ranges"
     )
 
 
 def teach(
-    task: str, n_demos: int = 5, seed: int | None = None, speed: float = 1.0
+    task: str | TaskSpec, n_demos: int = 5, seed: int | None = None, speed: float = 1.0
 ) -> list[Demonstration]:
     """Kinesthetic-style demonstrations of ``task`` for random object placements.
 
     Parameters
     ----------
-    task : {"coaster", "basin"}
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
     n_demos : int
         Number of demonstrations (>= 1).
     seed : int, optional
@@ -519,15 +497,16 @@ def teach(
     Returns
     -------
     list of Demonstration
-        Object positions drawn uniformly in :data:`pbdkit.sim.tasks.PLACEMENT_RANGES`.
+        Object positions drawn uniformly in the task's placement ranges
+        (:meth:`pbdkit.sim.tasks.TaskSpec.sample_objects`).
     """
-    T.check_task(task)
+    spec = T.get_task(task)
     if n_demos < 1:
         raise ValueError(f"n_demos must be >= 1, got {n_demos}")
     rng = np.random.default_rng(seed)
     robot = katana()
     demos = []
     for _ in range(n_demos):
-        objects = T.sample_objects(task, rng)
-        demos.append(teach_one(task, objects, rng, robot, speed))
+        objects = spec.sample_objects(rng)
+        demos.append(teach_one(spec, objects, rng, robot, speed))
     return demos

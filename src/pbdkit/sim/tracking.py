@@ -8,9 +8,9 @@ the simulator's renders, calibrated the way a real session would be, with nothin
   pose error, :meth:`pbdkit.vision.PinholeCamera.perturbed`);
 - colors: one CbCr Gaussian per tracked object, fitted on a labelled image pair of the scene at
   the nominal placement. The labels are MuJoCo's segmentation rendering: a pixel belongs to an
-  object's patch when the geom drawn there is one of the patch's geoms
-  (:data:`PATCH_GEOM_PREFIX`). Both cameras' pixels are pooled, so the model covers both
-  views' shading;
+  object's patch when the geom drawn there is one of the patch's geoms (the task's
+  :attr:`pbdkit.sim.tasks.TaskSpec.patches`). Both cameras' pixels are pooled, so the model
+  covers both views' shading;
 - bias: a per-object offset measured once at the same calibration placement (see below).
 
 Bias correction: why an offset, and not tracked positions in the demonstrations
@@ -60,12 +60,10 @@ from numpy.typing import NDArray
 
 from .._validation import check_array
 from ..vision import ColorModel, PinholeCamera, StereoTracker, Track
-from . import tasks as T
 from .scene import CAMERAS, Simulation
 from .tasks import tracked_objects  # re-exported: the objects the cameras track
 
 __all__ = [
-    "PATCH_GEOM_PREFIX",
     "Calibration",
     "ObjectNotSeenError",
     "SimTracker",
@@ -76,10 +74,6 @@ __all__ = [
 ]
 
 Float = NDArray[np.float64]
-
-#: Name prefix of the geoms that make each object's colored patch in the scene (the red band of
-#: the glass is 12 thin boxes ``glass_patch0..11``; the coaster is one blue cylinder).
-PATCH_GEOM_PREFIX: dict[str, str] = {"glass": "glass_patch", "coaster": "coaster"}
 
 
 class ObjectNotSeenError(RuntimeError):
@@ -109,26 +103,32 @@ class ObjectNotSeenError(RuntimeError):
         )
 
 
-def patch_geom_ids(model: Any, name: str) -> NDArray[np.intp]:
-    """Geom ids of the colored patch of object ``name``.
+def patch_geom_ids(sim: Simulation, name: str) -> NDArray[np.intp]:
+    """Geom ids of the colored patch of object ``name`` in ``sim``'s scene.
+
+    The geoms are those whose name starts with the task's prefix for the object
+    (:attr:`pbdkit.sim.tasks.TaskSpec.patches`: e.g. the glass's red band is 12 thin boxes
+    ``glass_patch0..11``, the coaster one blue cylinder ``coaster``).
 
     Parameters
     ----------
-    model : mujoco.MjModel
+    sim : Simulation
     name : str
-        A key of :data:`PATCH_GEOM_PREFIX`.
+        An object with a patch in the task's ``patches``.
 
     Returns
     -------
     ids : ndarray of int, shape (n_geoms,)
         At least one id.
     """
-    if name not in PATCH_GEOM_PREFIX:
+    patches = sim.info.spec.patches
+    if name not in patches:
         raise ValueError(
-            f"objects: no colored patch is known for {name!r}; expected one of "
-            f"{sorted(PATCH_GEOM_PREFIX)}"
+            f"objects: no colored patch is known for {name!r} in the {sim.info.task!r} task; "
+            f"expected one of {sorted(patches)}"
         )
-    prefix = PATCH_GEOM_PREFIX[name]
+    prefix = patches[name]
+    model = sim.model
     ids = np.array(
         [i for i in range(model.ngeom) if model.geom(i).name.startswith(prefix)], dtype=np.intp
     )
@@ -152,7 +152,7 @@ def label_patches(
     camera : str
         One of ``sim.info.cameras``.
     objects : sequence of str
-        Objects with a patch (:data:`PATCH_GEOM_PREFIX`).
+        Objects with a patch (the task's ``patches``).
 
     Returns
     -------
@@ -160,8 +160,8 @@ def label_patches(
         True where the front-most surface is one of the object's patch geoms (occluded parts are
         not labelled), aligned with :meth:`Simulation.render` of the same camera.
     """
-    ids = {name: patch_geom_ids(sim.model, name) for name in objects}
-    cam_id = sim._check_camera(camera)
+    ids = {name: patch_geom_ids(sim, name) for name in objects}
+    cam_id = sim.camera_id(camera)
     *_, width, height = sim.camera_parameters(camera)
     renderer = mujoco.Renderer(sim.model, height, width)
     try:
@@ -289,19 +289,19 @@ class SimTracker:
             Unknown object or camera; a patch that no camera shows at the calibration placement;
             or (with ``correct_bias``) an object the calibrated tracker cannot locate there.
         """
-        task = sim.info.task
-        names = tuple(tracked_objects(task) if objects is None else objects)
+        spec = sim.info.spec
+        names = tuple(spec.tracked_objects if objects is None else objects)
         if not names:
             raise ValueError(f"objects must name at least one object to track, got {objects!r}")
         unknown = sorted(set(names) - set(sim.info.objects))
         if unknown:
             raise ValueError(
-                f"objects: {unknown} are not objects of the {task!r} task; expected some of "
+                f"objects: {unknown} are not objects of the {spec.name!r} task; expected some of "
                 f"{sorted(sim.info.objects)}"
             )
         for cam in cameras:
-            sim._check_camera(cam)
-        calib = Simulation.from_task(task, T.nominal_objects(task)) if at_nominal else sim
+            sim.camera_id(cam)
+        calib = Simulation.from_task(spec, spec.nominal_objects()) if at_nominal else sim
         try:
             if arm is not None:
                 calib.set_joints(check_array(arm, "arm", shape=(calib.n_joints,)))
