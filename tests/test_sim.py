@@ -583,14 +583,17 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     # Measured: 11-20 mm with 3 fast demonstrations on a 200-step grid (fused, 3 placements).
     assert run.success
 
-    result = E.evaluate("mark", trials=1, seed=0, task_skill=ts, ground_truth=True)
+    evaluation = E.evaluate("mark", trials=1, seed=0, task_skill=ts, ground_truth=True)
+    assert isinstance(evaluation, E.Evaluation) and len(evaluation.trials) == 1
+    assert set(evaluation.controllers) == {"fused", "joint", "task:glass", "task:mark"}
+    result = evaluation.as_dict()
     assert result["task"] == "mark"
     assert set(result["controllers"]) == {"fused", "joint", "task:glass", "task:mark"}
     assert set(result["placements"][0]) == {"glass", "mark"}
     assert all(isinstance(r[0]["success"], bool) for r in result["runs"].values())
     json.dumps(result)  # JSON-ready
     # Vision in the loop: the cameras learn the mark's green from the task's patches.
-    seen = E.evaluate("mark", trials=1, seed=0, task_skill=ts, controllers=["fused"])
+    seen = E.evaluate("mark", trials=1, seed=0, task_skill=ts, controllers=["fused"]).as_dict()
     assert seen["tracking_failures"] == 0
     assert set(seen["tracking_error_mm"]["per_object"]) == {"glass", "mark"}
     assert seen["tracking_error_mm"]["max"] < 4.0
@@ -617,3 +620,36 @@ def test_a_scene_without_the_tasks_glass_is_refused() -> None:
     )
     with pytest.raises(ValueError, match="add_objects must add the glass"):
         build_scene(spec)
+
+
+def test_summarize_counts_successes_and_metric_statistics() -> None:
+    # The summarising half of evaluate, on hand-made trials (no physics).
+    from types import SimpleNamespace
+
+    skill = SimpleNamespace(
+        n_components={"joint": 3, "glass": 4}, constraint_names=["joint", "glass"]
+    )
+    ts = SimpleNamespace(
+        task=SimpleNamespace(name="basin"), skill=skill, constrain_fixed=False, learn_seconds=0.5
+    )
+    rows = [
+        {"fused": {"success": True, "err": 1.0}, "joint": {"success": False, "err": 9.0}},
+        {"fused": {"success": True, "err": 3.0}, "joint": {"success": True, "err": None}},
+        {
+            "fused": {"success": False, "tracking_status": {"glass": "lost"}},
+            "joint": {"success": False, "tracking_status": {"glass": "lost"}},
+        },
+    ]
+    trials = [
+        E.Trial({"glass": np.zeros(3)}, None if i == 2 else {"glass": np.zeros(3)}, {}, None, r)
+        for i, r in enumerate(rows)
+    ]
+    ev = E.summarize(ts, trials, seed=4, n_demos=5, vision=True)  # type: ignore[arg-type]
+    assert ev.controllers["fused"].successes == 2
+    assert ev.controllers["fused"].success_rate == pytest.approx(2 / 3)
+    assert ev.controllers["fused"].metrics["err"] == {"mean": 2.0, "median": 2.0, "max": 3.0}
+    assert ev.controllers["joint"].metrics["err"] == {"mean": 9.0, "median": 9.0, "max": 9.0}
+    assert ev.tracking_failures == 1
+    d = ev.as_dict()
+    assert d["trials"] == 3 and d["observed"][2] is None and d["runs"]["joint"][1]["err"] is None
+    json.dumps(d)

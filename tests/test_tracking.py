@@ -229,7 +229,12 @@ def test_evaluate_counts_unseen_placements_as_failures(
             min_area=10**6,
         )
     )
-    res = E.evaluate("coaster", 2, 0, task_skill=small_skill, tracker=blind, controllers=["fused"])
+    evaluation = E.evaluate(
+        "coaster", 2, 0, task_skill=small_skill, tracker=blind, controllers=["fused"]
+    )
+    assert evaluation.tracking_failures == 2
+    assert all(t.observed is None for t in evaluation.trials)
+    res = evaluation.as_dict()
     assert res["vision"] is True
     assert res["tracking_failures"] == 2
     assert res["tracking_error_mm"] is None

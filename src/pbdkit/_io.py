@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["atomic_write_bytes", "load_npz_safe", "save_npz_atomic"]
+__all__ = ["atomic_write_bytes", "load_npz_safe", "save_npz_atomic", "write_json"]
 
 # Flags of the temporary file: created here, never reused (O_EXCL), never through a link.
 _TMP_FLAGS = (
@@ -140,3 +140,20 @@ def load_npz_safe(path: str | os.PathLike[str], *, what: str = "file") -> dict[s
     raise ValueError(
         f"{p} is not a NumPy .npz archive (it does not start like a zip file); expected a {what}"
     )
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    raise TypeError(f"not JSON serializable: {type(value).__name__}")
+
+
+def write_json(path: str | os.PathLike[str], data: object, *, sort_keys: bool = False) -> None:
+    """Write ``data`` as indented JSON, atomically (:func:`atomic_write_bytes`); NumPy arrays
+    and scalars become lists and numbers."""
+    import json
+
+    text = json.dumps(data, indent=2, sort_keys=sort_keys, default=_json_default) + "\n"
+    atomic_write_bytes(path, text.encode())

@@ -7,7 +7,6 @@ commands expose one step each.
 from __future__ import annotations
 
 import functools
-import json
 import os
 import time
 from collections.abc import Callable
@@ -20,7 +19,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from ._io import atomic_write_bytes
+from ._io import write_json
 from .gmm import MAX_COMPONENTS
 
 if TYPE_CHECKING:
@@ -109,68 +108,6 @@ def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
 
 
 # ----------------------------------------------------------------------------- commands
-def _write_json(path: Path, data: object) -> None:
-    def default(value: object) -> object:
-        if isinstance(value, np.ndarray):
-            return value.tolist()
-        if isinstance(value, (np.floating, np.integer, np.bool_)):
-            return value.item()
-        raise TypeError(f"not JSON serializable: {type(value).__name__}")
-
-    text = json.dumps(data, indent=2, sort_keys=True, default=default) + "\n"
-    atomic_write_bytes(path, text.encode())
-
-
-def run_lasa_demo(
-    out: Path, shape: str = "GShape", max_components: int = MAX_COMPONENTS
-) -> dict[str, object]:
-    """Learn a LASA handwriting shape with GMM/GMR and write a figure and metrics.json.
-
-    Returns the metrics written.
-    """
-    from .datasets import load_lasa
-    from .gmm import GMM
-    from .plots import plot_lasa_summary, save_figure
-
-    out.mkdir(parents=True, exist_ok=True)
-    demos = load_lasa(shape)
-    n_steps = demos[0].pos.shape[0]
-    t = np.linspace(0.0, 1.0, n_steps)
-    # EM sees 100 evenly spaced steps per demonstration, as Skill.learn (fit_samples).
-    fit_steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(100, n_steps))).astype(int))
-    x = np.vstack([np.column_stack([t[fit_steps], d.pos[fit_steps]]) for d in demos])
-    start = time.perf_counter()
-    gmm = GMM("auto", max_components=max_components).fit(x)
-    learn_s = time.perf_counter() - start
-    start = time.perf_counter()
-    mean, cov = gmm.regress(t[:, None])
-    regress_s = time.perf_counter() - start
-    positions = np.stack([d.pos for d in demos])
-
-    def rmse(traj: np.ndarray) -> float:
-        return float(
-            np.mean([np.sqrt(np.mean(np.sum((traj - p) ** 2, axis=1))) for p in positions])
-        )
-
-    metrics: dict[str, object] = {
-        "task": "lasa",
-        "shape": shape,
-        "n_demonstrations": len(demos),
-        "n_steps": n_steps,
-        "n_components": gmm.n_components_,
-        "selection": gmm.selection_.as_dict(),
-        "rmse_gmr_to_demos": rmse(mean),
-        "rmse_pointwise_mean_to_demos": rmse(positions.mean(axis=0)),
-        "final_point_error": float(np.linalg.norm(mean[-1] - positions[:, -1].mean(axis=0))),
-        "learn_seconds": learn_s,
-        "regress_seconds": regress_s,
-    }
-    fig = plot_lasa_summary(shape, t, list(positions), gmm, mean, cov)
-    save_figure(fig, out / f"lasa_{shape}.png")
-    _write_json(out / "metrics.json", metrics)
-    return metrics
-
-
 def _robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
     """The registered robot task named ``task``, or a usage error listing the choices (the
     registered tasks, then ``also``).
@@ -224,6 +161,8 @@ def demo(
     a video, report.html and metrics.json in OUT."""
     _check_output(out, "--out", folder=True)
     if task == "lasa":
+        from .demo import run_lasa_demo
+
         with console.status(f"learning LASA shape {shape} ..."):
             lasa_metrics = run_lasa_demo(out, shape)
         table = Table(title=f"pbdkit demo: LASA {shape}")
@@ -450,22 +389,20 @@ def evaluate(
             constrain_fixed=constrain_fixed,
         )
     if json_path is not None:
-        _write_json(json_path, result)
+        write_json(json_path, result.as_dict())
     table = Table(title=f"{task}: {trials} new placements (seed {seed})")
     table.add_column("controller")
     table.add_column("success rate", justify="right")
     table.add_column("median errors", justify="left")
-    for name, row in result["controllers"].items():
-        med = ", ".join(
-            f"{k} {v['median']:.1f}" for k, v in row["metrics"].items() if v is not None
-        )
-        table.add_row(name, f"{100 * row['success_rate']:.0f}%", med)
+    for name, row in result.controllers.items():
+        med = ", ".join(f"{k} {v['median']:.1f}" for k, v in row.metrics.items() if v is not None)
+        table.add_row(name, f"{100 * row.success_rate:.0f}%", med)
     console.print(table)
-    _print_components(spec, result["n_components"])
-    _print_tracking(result["vision"], result["tracking_error_mm"])
-    if result["tracking_failures"]:
+    _print_components(spec, result.n_components)
+    _print_tracking(result.vision, result.tracking_error_mm)
+    if result.tracking_failures:
         console.print(
-            f"[red]{result['tracking_failures']} placement(s) where the cameras did not locate "
+            f"[red]{result.tracking_failures} placement(s) where the cameras did not locate "
             "every object (counted as failures)"
         )
 

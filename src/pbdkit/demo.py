@@ -7,17 +7,17 @@ is imported only by the command line.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._io import atomic_write_bytes
+from ._io import atomic_write_bytes, write_json
 from .demos import save_demonstrations
-from .gmm import CV_TOLERANCE
+from .gmm import CV_TOLERANCE, MAX_COMPONENTS
 from .plots import (
     figure_png,
     plot_constraints,
@@ -30,15 +30,57 @@ from .report import Figure, Section, write_report
 if TYPE_CHECKING:
     from .sim.tasks import TaskSpec
 
-__all__ = ["run_robot_demo"]
+__all__ = ["run_lasa_demo", "run_robot_demo"]
 
 
-def _json_default(value: object) -> object:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    raise TypeError(f"not JSON serializable: {type(value).__name__}")
+def run_lasa_demo(
+    out: Path, shape: str = "GShape", max_components: int = MAX_COMPONENTS
+) -> dict[str, object]:
+    """Learn a LASA handwriting shape with GMM/GMR and write a figure and metrics.json.
+
+    Returns the metrics written.
+    """
+    from .datasets import load_lasa
+    from .gmm import GMM
+    from .plots import plot_lasa_summary, save_figure
+
+    out.mkdir(parents=True, exist_ok=True)
+    demos = load_lasa(shape)
+    n_steps = demos[0].pos.shape[0]
+    t = np.linspace(0.0, 1.0, n_steps)
+    # EM sees 100 evenly spaced steps per demonstration, as Skill.learn (fit_samples).
+    fit_steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(100, n_steps))).astype(int))
+    x = np.vstack([np.column_stack([t[fit_steps], d.pos[fit_steps]]) for d in demos])
+    start = time.perf_counter()
+    gmm = GMM("auto", max_components=max_components).fit(x)
+    learn_s = time.perf_counter() - start
+    start = time.perf_counter()
+    mean, cov = gmm.regress(t[:, None])
+    regress_s = time.perf_counter() - start
+    positions = np.stack([d.pos for d in demos])
+
+    def rmse(traj: np.ndarray) -> float:
+        return float(
+            np.mean([np.sqrt(np.mean(np.sum((traj - p) ** 2, axis=1))) for p in positions])
+        )
+
+    metrics: dict[str, object] = {
+        "task": "lasa",
+        "shape": shape,
+        "n_demonstrations": len(demos),
+        "n_steps": n_steps,
+        "n_components": gmm.n_components_,
+        "selection": gmm.selection_.as_dict(),
+        "rmse_gmr_to_demos": rmse(mean),
+        "rmse_pointwise_mean_to_demos": rmse(positions.mean(axis=0)),
+        "final_point_error": float(np.linalg.norm(mean[-1] - positions[:, -1].mean(axis=0))),
+        "learn_seconds": learn_s,
+        "regress_seconds": regress_s,
+    }
+    fig = plot_lasa_summary(shape, t, list(positions), gmm, mean, cov)
+    save_figure(fig, out / f"lasa_{shape}.png")
+    write_json(out / "metrics.json", metrics, sort_keys=True)
+    return metrics
 
 
 def run_robot_demo(
@@ -77,6 +119,7 @@ def run_robot_demo(
         What ``metrics.json`` holds.
     """
     from .sim.experiment import (
+        calibrate_tracker,
         controller_names,
         learn_task,
         observe,
@@ -84,9 +127,7 @@ def run_robot_demo(
         start_posture,
         tracking_errors,
     )
-    from .sim.scene import Simulation
     from .sim.tasks import get_task
-    from .sim.tracking import SimTracker
     from .sim.video import save_video
 
     def say(msg: str) -> None:
@@ -107,14 +148,9 @@ def run_robot_demo(
     if not ground_truth:
         say("calibrating the cameras and locating the objects ...")
         start = time.perf_counter()
-        calib = Simulation.from_task(spec, spec.nominal_objects())
-        q_start = start_posture(ts)
-        try:
-            tracker = SimTracker.from_simulation(calib, at_nominal=False, arm=q_start)
-        finally:
-            calib.close()
+        tracker = calibrate_tracker(ts)
         calib_s = time.perf_counter() - start
-        objects = observe(spec, truth, tracker, arm=q_start)
+        objects = observe(spec, truth, tracker, arm=start_posture(ts))
         errors = tracking_errors(objects, truth, tracker.objects)
         vals = np.array(list(errors.values()))
         vision = {
@@ -176,11 +212,8 @@ def run_robot_demo(
             "total": total_s,
         },
     }
-    atomic_write_bytes(
-        out / "metrics.json",
-        (json.dumps(metrics, indent=2, default=_json_default) + "\n").encode(),
-    )
-    _write_html(out, spec, ts, truth, objects, runs, metrics, figures, video_path)
+    write_json(out / "metrics.json", metrics)
+    _write_html(DemoRun(out, spec, ts, truth, objects, runs, metrics, figures, video_path))
     return metrics
 
 
@@ -262,17 +295,43 @@ def _vision_section(
     )
 
 
-def _write_html(
-    out: Path,
-    spec: TaskSpec,
-    ts: Any,
-    truth: dict[str, Any],
-    objects: dict[str, Any],
-    runs: dict[str, Any],
-    metrics: dict[str, Any],
-    figures: dict[str, bytes],
-    video_path: Path,
-) -> None:
+@dataclass(frozen=True)
+class DemoRun:
+    """Everything a robot demo produced, for its report.
+
+    Attributes
+    ----------
+    out : Path
+        The output folder.
+    spec : TaskSpec
+    ts : TaskSkill
+        The demonstrations and the skill learned from them.
+    truth, objects : dict str -> array-like, shape (3,)
+        The new situation's true positions, and those the skill was told.
+    runs : dict str -> ControllerRun
+        Per controller, its reproduction and execution.
+    metrics : dict
+        What ``metrics.json`` holds.
+    figures : dict str -> bytes
+        PNG files by name.
+    video : Path
+        The fused controller's video (may not exist).
+    """
+
+    out: Path
+    spec: TaskSpec
+    ts: Any
+    truth: dict[str, Any]
+    objects: dict[str, Any]
+    runs: dict[str, Any]
+    metrics: dict[str, Any]
+    figures: dict[str, bytes]
+    video: Path
+
+
+def _write_html(demo: DemoRun) -> None:
+    out, spec, ts, truth, objects = demo.out, demo.spec, demo.ts, demo.truth, demo.objects
+    runs, metrics, figures, video_path = demo.runs, demo.metrics, demo.figures, demo.video
     fig3, fig45 = figures["fig3_cartesian.png"], figures["fig45_constraints.png"]
     fig6, fig_sel = figures["fig6_controllers.png"], figures["fig_selection.png"]
     fused = runs["fused"]

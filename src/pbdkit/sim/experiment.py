@@ -58,7 +58,11 @@ from .tracking import ObjectNotSeenError, SimTracker, observed_objects
 
 __all__ = [
     "ControllerRun",
+    "ControllerStats",
+    "Evaluation",
     "TaskSkill",
+    "Trial",
+    "calibrate_tracker",
     "constrained_objects",
     "controller_names",
     "controller_use",
@@ -66,7 +70,9 @@ __all__ = [
     "learn_task",
     "observe",
     "run_controller",
+    "run_trials",
     "start_posture",
+    "summarize",
     "tracking_errors",
     "tracking_summary",
 ]
@@ -327,6 +333,211 @@ def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | Non
     return {**stats(pooled), "per_object": per}
 
 
+def calibrate_tracker(ts: TaskSkill) -> SimTracker:
+    """The stereo tracker of a task, calibrated on its nominal placement with the arm at the
+    skill's start posture (where it waits while the cameras look; :func:`start_posture`)."""
+    calib = Simulation.from_task(ts.task, ts.task.nominal_objects())
+    try:
+        return SimTracker.from_simulation(calib, at_nominal=False, arm=start_posture(ts))
+    finally:
+        calib.close()
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One placement of an evaluation and what every controller did there.
+
+    Attributes
+    ----------
+    truth : dict str -> ndarray, shape (3,)
+        The true positions of every object.
+    observed : dict str -> ndarray, shape (3,), or None
+        What the skill was told (the cameras' positions with vision, else ``truth``); None if
+        the cameras did not locate every tracked object.
+    tracking_status : dict str -> str
+        The tracker's status per object when ``observed`` is None, else empty.
+    tracking_error_mm : dict str -> float or None
+        Distance from the observed to the true position, per tracked object (vision only).
+    runs : dict str -> dict
+        Per controller, :meth:`ControllerRun.summary` (JSON-ready), or ``{"success": False,
+        "tracking_status": ...}`` when the objects were not located.
+    """
+
+    truth: dict[str, Float]
+    observed: dict[str, Float] | None
+    tracking_status: dict[str, str]
+    tracking_error_mm: dict[str, float] | None
+    runs: dict[str, dict[str, Any]]
+
+
+def run_trials(
+    ts: TaskSkill,
+    placements: Sequence[dict[str, Float]],
+    controllers: Sequence[str],
+    *,
+    tracker: SimTracker | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Trial]:
+    """Execute every controller on every placement (the running half of :func:`evaluate`).
+
+    Parameters
+    ----------
+    ts : TaskSkill
+    placements : sequence of dict str -> ndarray, shape (3,)
+        True positions of every object of the task.
+    controllers : sequence of str
+        Names from :func:`controller_names`.
+    tracker : SimTracker, optional
+        With a tracker the skill is told the positions the cameras measure; without, the true
+        ones.
+    progress : callable, optional
+        ``progress(done, total)`` after every execution.
+
+    Returns
+    -------
+    trials : list of Trial
+    """
+    for name in controllers:
+        controller_use(name, ts.skill.object_names)
+    q_start = start_posture(ts) if tracker is not None else None
+    total, done = len(placements) * len(controllers), 0
+    out = []
+    for truth in placements:
+        told: dict[str, Float] | None = truth
+        statuses: dict[str, str] = {}
+        errors: dict[str, float] | None = None
+        if tracker is not None:
+            try:
+                told = observe(ts.task, truth, tracker, arm=q_start)
+            except ObjectNotSeenError as exc:
+                told = None
+                statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
+            else:
+                errors = tracking_errors(told, truth, tracker.objects)
+        runs: dict[str, dict[str, Any]] = {}
+        for name in controllers:
+            if told is None:
+                runs[name] = {"success": False, "tracking_status": statuses}
+            else:
+                runs[name] = run_controller(ts, told, name, sim_objects=truth).summary()
+            done += 1
+            if progress is not None:
+                progress(done, total)
+        out.append(Trial(truth, told, statuses, errors, runs))
+    return out
+
+
+@dataclass(frozen=True)
+class ControllerStats:
+    """Success rate of one controller over an evaluation and its metrics' statistics.
+
+    Attributes
+    ----------
+    success_rate : float
+    successes : int
+    metrics : dict str -> dict or None
+        Per metric of the task's judge, ``{"mean", "median", "max"}`` over the trials where it
+        is defined (None where it never is).
+    """
+
+    success_rate: float
+    successes: int
+    metrics: dict[str, dict[str, float] | None]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """The result of :func:`evaluate`; :meth:`as_dict` is ``pbdkit evaluate``'s JSON."""
+
+    task: str
+    seed: int
+    n_demos: int
+    n_components: dict[str, int]
+    constraints: list[str]
+    constrain_fixed: bool
+    learn_seconds: float
+    vision: bool
+    controllers: dict[str, ControllerStats]
+    tracking_error_mm: dict[str, Any] | None
+    trials: list[Trial]
+
+    @property
+    def tracking_failures(self) -> int:
+        """Placements where the cameras did not locate every tracked object."""
+        return sum(t.observed is None for t in self.trials) if self.vision else 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"task", "trials", "seed", "n_demos", "n_components", "constraints",
+        "constrain_fixed", "learn_seconds", "vision", "controllers": {NAME: {"success_rate",
+        "successes", "metrics"}}, "tracking_error_mm", "tracking_failures", "placements",
+        "observed", "runs"}`` (``runs``: per controller, one summary per trial)."""
+        names = list(self.controllers)
+        return {
+            "task": self.task,
+            "trials": len(self.trials),
+            "seed": self.seed,
+            "n_demos": self.n_demos,
+            "n_components": dict(self.n_components),
+            "constraints": list(self.constraints),
+            "constrain_fixed": self.constrain_fixed,
+            "learn_seconds": self.learn_seconds,
+            "vision": self.vision,
+            "controllers": {
+                k: {"success_rate": v.success_rate, "successes": v.successes, "metrics": v.metrics}
+                for k, v in self.controllers.items()
+            },
+            "tracking_error_mm": self.tracking_error_mm,
+            "tracking_failures": self.tracking_failures,
+            "placements": [{k: v.tolist() for k, v in t.truth.items()} for t in self.trials],
+            "observed": [
+                None if t.observed is None else {k: v.tolist() for k, v in t.observed.items()}
+                for t in self.trials
+            ],
+            "runs": {k: [t.runs[k] for t in self.trials] for k in names},
+        }
+
+
+def summarize(
+    ts: TaskSkill, trials: Sequence[Trial], *, seed: int, n_demos: int, vision: bool
+) -> Evaluation:
+    """The summarising half of :func:`evaluate`: success rates and metric statistics."""
+    names = list(trials[0].runs) if trials else []
+    stats: dict[str, ControllerStats] = {}
+    for name in names:
+        rows = [t.runs[name] for t in trials]
+        successes = sum(bool(r["success"]) for r in rows)
+        metric_names = list(
+            dict.fromkeys(k for r in rows for k in r if k not in ("success", "tracking_status"))
+        )
+        metrics: dict[str, dict[str, float] | None] = {}
+        for m in metric_names:
+            vals = np.array([r[m] for r in rows if r.get(m) is not None], dtype=float)
+            metrics[m] = (
+                {
+                    "mean": float(vals.mean()),
+                    "median": float(np.median(vals)),
+                    "max": float(vals.max()),
+                }
+                if len(vals)
+                else None
+            )
+        stats[name] = ControllerStats(successes / len(rows), successes, metrics)
+    errors = [t.tracking_error_mm for t in trials if t.tracking_error_mm is not None]
+    return Evaluation(
+        task=ts.task.name,
+        seed=seed,
+        n_demos=n_demos,
+        n_components=ts.skill.n_components,
+        constraints=list(ts.skill.constraint_names),
+        constrain_fixed=ts.constrain_fixed,
+        learn_seconds=ts.learn_seconds,
+        vision=vision,
+        controllers=stats,
+        tracking_error_mm=tracking_summary(errors) if vision else None,
+        trials=list(trials),
+    )
+
+
 def evaluate(
     task: str | TaskSpec,
     trials: int,
@@ -339,8 +550,11 @@ def evaluate(
     ground_truth: bool = False,
     tracker: SimTracker | None = None,
     constrain_fixed: bool = False,
-) -> dict[str, Any]:
+) -> Evaluation:
     """Success rate of every controller over ``trials`` random new placements.
+
+    Teaches and learns (unless ``task_skill`` is given), draws the placements, runs
+    :func:`run_trials` and :func:`summarize`.
 
     Parameters
     ----------
@@ -360,7 +574,7 @@ def evaluate(
     ground_truth : bool
         Tell the skill the true object positions instead of the tracked ones.
     tracker : SimTracker, optional
-        With vision: the tracker to use (default: calibrated here, at the nominal placement).
+        With vision: the tracker to use (default: :func:`calibrate_tracker`).
     constrain_fixed : bool
         When learning here: also learn a task-space constraint relative to the fixed objects
         (the basin), which the paper does not (:func:`learn_task`). With ``task_skill``, the
@@ -368,12 +582,8 @@ def evaluate(
 
     Returns
     -------
-    result : dict
-        JSON-ready: ``{"task", "trials", "seed", "n_components", "constraints" (the skill's
-        spaces, e.g. ``["joint", "glass"]``), "constrain_fixed", "vision", "controllers":
-        {NAME: {"success_rate", "successes", "metrics": {metric: {"mean", "median", "max"}}}},
-        "tracking_error_mm": {"mean", "std", "max", "n", "per_object"} or None,
-        "tracking_failures", "placements", "observed", "runs"}``.
+    result : Evaluation
+        ``result.as_dict()`` is JSON-ready (``pbdkit evaluate --json``).
     """
     spec = T.get_task(task)
     if trials < 1:
@@ -386,76 +596,7 @@ def evaluate(
     rng = np.random.default_rng([seed, 1])
     placements = [spec.sample_objects(rng) for _ in range(trials)]
     vision = not ground_truth
-    q_start = start_posture(ts)
     if vision and tracker is None:
-        calib = Simulation.from_task(spec, spec.nominal_objects())
-        try:
-            tracker = SimTracker.from_simulation(calib, at_nominal=False, arm=q_start)
-        finally:
-            calib.close()
-    runs: dict[str, list[dict[str, Any]]] = {n: [] for n in names}
-    observed: list[dict[str, list[float]] | None] = []
-    errors: list[dict[str, float]] = []
-    failures = 0
-    total, done = trials * len(names), 0
-    for truth in placements:
-        told: dict[str, Float] | None = truth
-        statuses: dict[str, str] = {}
-        if vision and tracker is not None:
-            try:
-                told = observe(spec, truth, tracker, arm=q_start)
-            except ObjectNotSeenError as exc:
-                told = None
-                failures += 1
-                statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
-            else:
-                errors.append(tracking_errors(told, truth, tracker.objects))
-        observed.append(None if told is None else {k: v.tolist() for k, v in told.items()})
-        for name in names:
-            if told is None:
-                runs[name].append({"success": False, "tracking_status": statuses})
-            else:
-                runs[name].append(run_controller(ts, told, name, sim_objects=truth).summary())
-            done += 1
-            if progress is not None:
-                progress(done, total)
-    summary: dict[str, Any] = {}
-    for name, rows in runs.items():
-        successes = sum(bool(r["success"]) for r in rows)
-        metric_names = list(
-            dict.fromkeys(k for r in rows for k in r if k not in ("success", "tracking_status"))
-        )
-        stats = {}
-        for m in metric_names:
-            vals = np.array([r[m] for r in rows if r.get(m) is not None], dtype=float)
-            stats[m] = (
-                {
-                    "mean": float(vals.mean()),
-                    "median": float(np.median(vals)),
-                    "max": float(vals.max()),
-                }
-                if len(vals)
-                else None
-            )
-        summary[name] = {
-            "success_rate": successes / len(rows),
-            "successes": successes,
-            "metrics": stats,
-        }
-    return {
-        "task": spec.name,
-        "trials": trials,
-        "seed": seed,
-        "n_demos": n_demos,
-        "n_components": ts.skill.n_components,
-        "constraints": list(ts.skill.constraint_names),
-        "constrain_fixed": ts.constrain_fixed,
-        "learn_seconds": ts.learn_seconds,
-        "vision": vision,
-        "controllers": summary,
-        "tracking_error_mm": tracking_summary(errors) if vision else None,
-        "tracking_failures": failures,
-        "placements": [{k: v.tolist() for k, v in p.items()} for p in placements],
-        "observed": observed,
-        "runs": runs,
-    }
+        tracker = calibrate_tracker(ts)
+    done = run_trials(ts, placements, names, tracker=tracker if vision else None, progress=progress)
+    return summarize(ts, done, seed=seed, n_demos=n_demos, vision=vision)
