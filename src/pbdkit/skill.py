@@ -219,12 +219,11 @@ class Skill:
         fit_samples : int or None
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
-            information (the reason the BIC uses an effective sample size, see
-            :mod:`pbdkit.gmm` and ``bic_samples_per_sequence``), while EM's cost grows
-            linearly with the points: with 1000 steps, 100 of them learn 5 times faster and
-            reproduce as well (``benchmarks/bench_skill.py``: reach errors 0.04 and
-            1.9 mm, against 0.05 and 0.31 mm with all steps). The GMMs still model time in
-            steps 0 .. n_steps-1.
+            information (the demonstration, not the sample, is the unit of evidence, see
+            :mod:`pbdkit.gmm`), while EM's cost grows linearly with the points: with 1000
+            steps, 100 of them learn 5 times faster and reproduce as well
+            (``benchmarks/README.md``, "Skill learning and reproduction"). The GMMs still
+            model time in steps 0 .. n_steps-1.
 
         Returns
         -------

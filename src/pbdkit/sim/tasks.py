@@ -106,6 +106,8 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import check_positions
+
 if TYPE_CHECKING:
     from .execute import Outcome, RunStats
     from .scene import Simulation
@@ -282,25 +284,46 @@ class TaskSpec:
         """Object positions drawn uniformly inside the ranges, name -> (3,) (see the function)."""
         return {name: rng.uniform(r.low, r.high) for name, r in self.ranges.items()}
 
-    def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
-        """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
-        unknown = sorted(set(objects) - set(self.ranges))
+    def check_placement(
+        self, objects: Mapping[str, npt.ArrayLike], *, fill_moving: bool = False
+    ) -> dict[str, Float]:
+        """The one validator of a task's object positions: every object, in range order.
+
+        Positions are checked by :func:`pbdkit._validation.check_positions` (names, (3,),
+        finite); an object the task does not have is an error; a fixed object must be at its
+        fixed place (within 1e-6 m) and is filled in when left out; a moving object left out
+        is an error, or its range's centre with ``fill_moving``.
+        """
+        given = check_positions(objects, "objects")
+        unknown = [k for k in given if k not in self.ranges]
         if unknown:
             raise ValueError(
                 f"objects: unknown object(s) {unknown} for task {self.name!r}; expected "
                 f"{list(self.ranges)}"
             )
-        missing = [k for k in self.tracked_objects if k not in objects]
-        if missing:
+        missing = [k for k in self.tracked_objects if k not in given]
+        if missing and not fill_moving:
             raise ValueError(
                 f"objects: missing position(s) for {missing}: they move between placements, so "
                 f"the {self.name!r} task needs them (only fixed objects "
                 f"{list(self.fixed_objects)} are known)"
             )
-        return {
-            name: np.array(objects[name], dtype=np.float64) if name in objects else r.low.copy()
-            for name, r in self.ranges.items()
-        }
+        out: dict[str, Float] = {}
+        for name, r in self.ranges.items():
+            if name not in given:
+                out[name] = r.low.copy() if r.fixed else r.center.copy()
+                continue
+            if r.fixed and not np.allclose(given[name], r.low, rtol=0.0, atol=1e-6):
+                raise ValueError(
+                    f"objects[{name!r}]: the {name} is fixed at {r.low.tolist()}, "
+                    f"got {given[name].tolist()}"
+                )
+            out[name] = given[name]
+        return out
+
+    def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+        """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
+        return self.check_placement(objects)
 
 
 _REGISTRY: dict[str, TaskSpec] = {}

@@ -58,7 +58,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_array, check_positions
 from ..vision import ColorModel, PinholeCamera, StereoTracker, Track
 from .scene import CAMERAS, Simulation
 from .tasks import tracked_objects  # re-exported: the objects the cameras track
@@ -400,17 +400,13 @@ def observed_objects(
     ValueError
         If ``fixed`` names a tracked object or holds a position that is not a finite (3,) vector.
     """
-    known: dict[str, Float] = {}
-    for name, value in (fixed or {}).items():
+    known = check_positions(fixed or {}, "fixed")
+    for name in known:
         if name in tracker.objects:
             raise ValueError(
                 f"fixed[{name!r}]: {name!r} is tracked by the cameras; fixed objects must be "
                 f"others than {list(tracker.objects)}"
             )
-        p = np.asarray(value, dtype=np.float64)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"fixed[{name!r}] must be a finite (3,) position, got {value!r}")
-        known[name] = p.copy()
     tracks = tracker.locate(sim)
     if not all(tr.ok for tr in tracks.values()):
         raise ObjectNotSeenError(tracks)

@@ -135,25 +135,13 @@ def _look_at_xyaxes(pos: Float, target: Float) -> list[float]:
 
 
 def _check_objects(spec: TaskSpec, objects: Mapping[str, npt.ArrayLike] | None) -> dict[str, Float]:
-    ranges = spec.ranges
+    """Every object's position for the scene: :meth:`TaskSpec.check_placement` (moving objects
+    left out at their range's centre), then each object set on its support."""
     if objects is None:
         return spec.nominal_objects()
-    unknown = sorted(set(objects) - set(ranges))
-    if unknown:
-        raise ValueError(
-            f"objects: unknown object(s) {unknown} for task {spec.name!r}; expected "
-            f"{sorted(ranges)}"
-        )
-    out: dict[str, Float] = {}
-    for name, r in ranges.items():
-        if name not in objects:
-            out[name] = r.center.copy()
-            continue
-        p = np.asarray(objects[name], dtype=np.float64)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"objects[{name!r}] must be a finite (3,) position, got {p!r}")
-        if r.fixed and not np.allclose(p, r.low, atol=1e-6):
-            raise ValueError(f"objects[{name!r}]: the {name} is fixed at {r.low.tolist()}, got {p}")
+    out = spec.check_placement(objects, fill_moving=True)
+    for name, r in spec.ranges.items():
+        p = out[name]
         # Objects rest on their support: the height is not free.
         if abs(p[2] - r.low[2]) > 0.02:
             raise ValueError(
