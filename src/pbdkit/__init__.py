@@ -31,6 +31,7 @@ Arrays have rows = samples and are float64: a trajectory is (T, D), a batch lead
 from __future__ import annotations
 
 from . import gaussian, robots
+from .controller import Command, Controller
 from .demos import (
     Demonstration,
     LimitWarning,
@@ -46,6 +47,8 @@ from .skill import Skill
 
 __all__ = [
     "GMM",
+    "Command",
+    "Controller",
     "Demonstration",
     "LimitWarning",
     "ReachWarning",

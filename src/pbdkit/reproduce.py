@@ -656,6 +656,35 @@ def _limited_mask(n_steps: int, steps: list[int]) -> NDArray[np.bool_]:
     return mask
 
 
+class JointStep:
+    """One step of the joint-space controller: theta_j = theta + (theta_hat_j - theta) within the
+    bounds (Table II); shared by :func:`reproduce` and the online controller."""
+
+    def __init__(
+        self,
+        theta_hat: Float,
+        lower: Float,
+        upper: Float,
+        max_step: float,
+        step_limit: Float | None,
+    ) -> None:
+        self.target = np.clip(theta_hat, lower, upper)
+        self.max_step, self.step_limit = max_step, step_limit
+        self.free2 = _free_step2(max_step, step_limit)
+
+    def __call__(self, j: int, theta: Float) -> tuple[Float, bool]:
+        """theta_j from theta_{j-1} = ``theta``, and whether a bound scaled the step down."""
+        step = self.target[j] - theta
+        step2 = step @ step
+        limited = False
+        if step2 > self.free2:
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                step = step * scale
+                limited = True
+        return theta + step, limited  # stays in the box: between theta and target[j]
+
+
 def _joint_only(
     theta_hat: Float,
     theta0: Float,
@@ -664,14 +693,14 @@ def _joint_only(
     max_step: float,
     step_limit: Float | None,
 ) -> tuple[Float, NDArray[np.bool_]]:
-    """Joint-space controller: theta_{j+1} = theta_j + (theta_hat_{j+1} - theta_j) (Table II).
+    """Joint-space controller: :class:`JointStep` over every step.
 
     That is theta_hat itself (clipped to the limits), except where a step would exceed
     ``step_limit`` or ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those
     steps are scaled. Returns the joints and the mask of the scaled steps.
     """
-    target = np.clip(theta_hat, lower, upper)
-    joints = target.copy()
+    step = JointStep(theta_hat, lower, upper, max_step, step_limit)
+    joints = step.target.copy()
     joints[0] = theta0
     n_steps = joints.shape[0]
     d = np.diff(joints, axis=0)
@@ -681,18 +710,12 @@ def _joint_only(
         fits &= (np.abs(d) / step_limit).max(axis=1) <= 1.0
     if np.all(fits):
         return joints, np.zeros(n_steps, dtype=bool)
-    free2 = _free_step2(max_step, step_limit)
     limited: list[int] = []
     theta = theta0
     for j in range(1, n_steps):
-        step = target[j] - theta
-        step2 = step @ step
-        if step2 > free2:
-            scale = _step_scale(step, step2, step_limit, max_step)
-            if scale < 1.0:
-                step = step * scale
-                limited.append(j)
-        theta = theta + step  # stays in the box: a point between theta and target[j]
+        theta, was_limited = step(j, theta)
+        if was_limited:
+            limited.append(j)
         joints[j] = theta
     return joints, _limited_mask(n_steps, limited)
 
@@ -709,6 +732,104 @@ def _check_q0(q0: npt.ArrayLike, lower: Float, upper: Float) -> Float:
     return q
 
 
+class FusedStep:
+    """One step of the fused controller (Table II with eq. (1) in information form).
+
+    Everything that does not depend on the posture is prepared here for all steps at once;
+    :meth:`__call__` takes the posture theta_{j-1} (with f and J there) and returns theta_j.
+    :func:`reproduce` and :class:`pbdkit.controller.Controller` both run this one step, so an
+    online run fed its own targets is the offline reproduction.
+
+    Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
+    sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)): per step
+    the cost does not grow with the number of objects (P_n = (Sigma^x(n))^-1).
+    """
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        c: Constraints,
+        objs: Mapping[str, Float],
+        tasks: list[str],
+        lower: Float,
+        upper: Float,
+        max_step: float,
+        step_limit: Float | None,
+        line_search: bool,
+    ) -> None:
+        self.c, self.tasks, self.n = c, tasks, c.n_joints
+        self.lower, self.upper = lower, upper
+        self.max_step, self.step_limit, self.line_search = max_step, step_limit, line_search
+        # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
+        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        # A step shorter than this fits every bound: one comparison (module docstring).
+        self.free2 = _free_step2(max_step, step_limit)
+        # Lists of per-step views are cheaper to index in the loop than the arrays.
+        self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
+        self.set_objects(objs)
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+        c, n = self.c, self.n
+        self.prec, self.p_sum, h = _task_stack(c, objs, self.tasks)
+        # [sum_n P_n | h] so that one product gives J^T P and J^T h.
+        self.g = list(np.concatenate([self.p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
+        # The fused energy of step j in z = [theta | f(theta)]: E_j = 1/2 z^T Q_j z - z . b_j + c
+        # with Q_j = diag(Lambda_theta_j, sum_n P_n), b_j = [eta_j | h_j]; the line search
+        # compares E_j(z_new) - E_j(z) = d . (Q_j (z_new + z) / 2 - b_j), d = z_new - z (exact:
+        # quadratic).
+        half_q = np.zeros((c.n_steps, n + 3, n + 3))
+        half_q[:, :n, :n] = 0.5 * c.joint_prec
+        half_q[:, n:, n:] = 0.5 * self.p_sum
+        self.q_list, self.b_list = list(half_q), list(np.concatenate([c.joint_eta, h], axis=1))
+
+    def __call__(
+        self, j: int, theta: Float, x: Float, jac: Float
+    ) -> tuple[Float, Float, Float, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x = f(theta), jac = J(theta)).
+
+        Returns theta_j, f(theta_j), J(theta_j), and whether a bound scaled the step down.
+        """
+        # ndarray.dot rather than @: for these tiny operands it has half the call overhead
+        # (1 us against 2 us per product, measured).
+        m = jac.T.dot(self.g[j])  # (n, 4): [J^T P | J^T h]
+        a = m[:, :3]
+        lam_j = self.prec_list[j] + a.dot(jac)  # eq. (1) in information form: precisions add
+        # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
+        # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
+        _, target, info = dposv(lam_j, self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x))
+        if info != 0:
+            raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
+        step = target - theta
+        step2 = step.dot(step)
+        limited = False
+        if step2 > self.free2:  # velocity bound, trust region of the linearization
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                target = theta + step * scale
+                limited = True
+        new = np.minimum(np.maximum(target, self.lower), self.upper)
+        x_new, jac_new = self.fk_jac(new)
+        if self.line_search:
+            # The step must lower the fused energy of step j (module docstring, "Stability").
+            z = np.concatenate((theta, x))
+            z_new = np.concatenate((new, x_new))
+            q_t, b_t = self.q_list[j], self.b_list[j]
+            halvings = 0
+            while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
+                halvings += 1
+                new = theta + 0.5 * (new - theta)
+                x_new, jac_new = self.fk_jac(new)
+                z_new = np.concatenate((new, x_new))
+        return new, x_new, jac_new, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used."""
+        lam = self.prec_list[j] + jac.T.dot(self.p_sum[j]).dot(jac)
+        inv = np.linalg.inv(lam)
+        return np.asarray(0.5 * (inv + inv.T))
+
+
 def _fused_loop(
     robot: KinematicModel,
     c: Constraints,
@@ -721,74 +842,23 @@ def _fused_loop(
     step_limit: Float | None,
     line_search: bool,
 ) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
-    """Table II with eq. (1) in information form.
+    """Table II with eq. (1) in information form: :class:`FusedStep` over every step.
 
     Returns joints, positions, covariances, influence (hand space), influence in joint space
     and the mask of the steps scaled down.
     """
     n_steps, n = c.n_steps, c.n_joints
-    # Everything that does not depend on the state, for all steps at once.
-    # Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
-    # sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)):
-    # per step the cost does not grow with the number of objects. P_n = (Sigma^x(n))^-1.
-    prec, p_sum, h = _task_stack(c, objs, tasks)
-    prec_j, eta_j = c.joint_prec, c.joint_eta
-    # [sum_n P_n | h] so that one product gives J^T P and J^T h; lists of per-step views are
-    # cheaper to index in the loop than the arrays.
-    g = list(np.concatenate([p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
-    prec_list, eta_list = list(prec_j), list(eta_j)
-    # The fused energy of step j in z = [theta | f(theta)]: E_j = 1/2 z^T Q_j z - z . b_j + c
-    # with Q_j = diag(Lambda_theta_j, sum_n P_n), b_j = [eta_j | h_j]; the line search compares
-    # E_j(z_new) - E_j(z) = d . (Q_j (z_new + z) / 2 - b_j), d = z_new - z (exact: quadratic).
-    half_q = np.zeros((n_steps, n + 3, n + 3))
-    half_q[:, :n, :n] = 0.5 * prec_j
-    half_q[:, n:, n:] = 0.5 * p_sum
-    q_list, b_list = list(half_q), list(np.concatenate([eta_j, h], axis=1))
-    concat = np.concatenate
-    # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
-    fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-    lo, hi = np.maximum, np.minimum
-    # A step shorter than this fits every bound: one comparison in the loop (module docstring).
-    free2 = _free_step2(max_step, step_limit)
+    step = FusedStep(robot, c, objs, tasks, lower, upper, max_step, step_limit, line_search)
     limited: list[int] = []
     theta = theta0
-    x, jac = fk_jac(theta)
-    z = concat((theta, x))
+    x, jac = step.fk_jac(theta)
     # Python lists: appending costs less than writing rows into arrays, step by step.
     joints_l, positions_l, jacs_l = [theta], [x], [jac]
     for j in range(1, n_steps):
         # x, jac are f(theta_{j-1}) and J(theta_{j-1}): Table II linearizes at the current posture.
-        # ndarray.dot rather than @ in this loop: for these tiny operands it has half the call
-        # overhead (1 us against 2 us per product, measured).
-        m = jac.T.dot(g[j])  # (n, 4): [J^T P | J^T h]
-        a = m[:, :3]
-        lam_j = prec_list[j] + a.dot(jac)  # eq. (1) in information form: precisions add
-        # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
-        # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
-        _, target, info = dposv(lam_j, eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x))
-        if info != 0:
-            raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
-        step = target - theta
-        step2 = step.dot(step)
-        if step2 > free2:  # velocity bound, trust region of the linearization (module docstring)
-            scale = _step_scale(step, step2, step_limit, max_step)
-            if scale < 1.0:
-                target = theta + step * scale
-                limited.append(j)
-        new = hi(lo(target, lower), upper)
-        x, jac = fk_jac(new)
-        if line_search:
-            # The step must lower the fused energy of step j (module docstring, "Stability").
-            z_new = concat((new, x))
-            q_t, b_t = q_list[j], b_list[j]
-            halvings = 0
-            while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
-                halvings += 1
-                new = theta + 0.5 * (new - theta)
-                x, jac = fk_jac(new)
-                z_new = concat((new, x))
-            z = z_new
-        theta = new
+        theta, x, jac, was_limited = step(j, theta, x, jac)
+        if was_limited:
+            limited.append(j)
         # Entry j holds the state theta_j and the Jacobian that step j+1 will use.
         joints_l.append(theta)
         positions_l.append(x)
@@ -797,6 +867,7 @@ def _fused_loop(
     # Step 0 reports the constraints at t_0 with J(theta_0); step j >= 1 used J(theta_{j-1}).
     jac_used = np.concatenate([jacs[:1], jacs[:-1]])
     jt = np.swapaxes(jac_used, -1, -2)
+    prec_j, prec, p_sum = c.joint_prec, step.prec, step.p_sum
     lam = prec_j + jt @ p_sum @ jac_used
     cov = _spd_inverse(lam)
     # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
@@ -831,6 +902,57 @@ def _spd_inverse(a: Float) -> Float:
     return np.asarray(0.5 * (inv + np.swapaxes(inv, -1, -2)))
 
 
+class TaskStep:
+    """One step of a task-only controller (Table II): the task constraints in use fused in task
+    space, dtheta = J+ dx + alpha (I - J+ J)(theta_hat_j - theta), J+ the damped right inverse
+    at the current posture. Shared by :func:`reproduce` and the online controller."""
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        c: Constraints,
+        objs: Mapping[str, Float],
+        tasks: list[str],
+        lower: Float,
+        upper: Float,
+        alpha: float,
+        max_step: float,
+        step_limit: Float | None,
+    ) -> None:
+        self.c, self.tasks, self.alpha = c, tasks, alpha
+        self.lower, self.upper = lower, upper
+        self.max_step, self.step_limit = max_step, step_limit
+        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        self.free2 = _free_step2(max_step, step_limit)
+        self.eye = np.eye(c.n_joints)
+        self.set_objects(objs)
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+        self.prec, prec_sum, h = _task_stack(self.c, objs, self.tasks)
+        self.s_fused = _spd_inverse(prec_sum)  # (T, 3, 3)
+        # Product of the task-space Gaussians: target = S (sum_n P_n (o_n + x_hat_n)).
+        self.target = np.einsum("tij,tj->ti", self.s_fused, h)
+
+    def __call__(
+        self, j: int, theta: Float, x: Float, jac: Float, jp: Float
+    ) -> tuple[Float, Float, Float, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x, jac at it; jp = damped_pinv(jac))."""
+        d_hat = self.c.joint_mean[j] - theta
+        # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
+        step = jp @ (self.target[j] - x) + self.alpha * ((self.eye - jp @ jac) @ d_hat)
+        step2 = step @ step
+        limited = False
+        if step2 > self.free2:
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                step *= scale
+                limited = True
+        new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
+        x_new, jac_new = self.fk_jac(new)
+        return new, x_new, jac_new, limited
+
+
 def _task_loop(
     robot: KinematicModel,
     c: Constraints,
@@ -843,40 +965,26 @@ def _task_loop(
     max_step: float,
     step_limit: Float | None,
 ) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
-    """Task-only controller of Table II (objects in ``tasks`` fused in task space first)."""
+    """Task-only controller of Table II: :class:`TaskStep` over every step."""
     n_steps, n = c.n_steps, c.n_joints
-    prec, prec_sum, h = _task_stack(c, objs, tasks)
-    s_fused = _spd_inverse(prec_sum)  # (T, 3, 3)
-    # Product of the task-space Gaussians: target = S (sum_n P_n (o_n + x_hat_n)).
-    target = np.einsum("tij,tj->ti", s_fused, h)
-    theta_hat = c.joint_mean
+    step = TaskStep(robot, c, objs, tasks, lower, upper, alpha, max_step, step_limit)
     joints = np.empty((n_steps, n))
     positions = np.empty((n_steps, 3))
     pinvs = np.empty((n_steps, n, 3))
-    # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
-    fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-    eye = np.eye(n)
-    free2 = _free_step2(max_step, step_limit)
     limited: list[int] = []
     theta = theta0
-    x, jac = fk_jac(theta)
+    x, jac = step.fk_jac(theta)
     jp = damped_pinv(jac)
     joints[0], positions[0], pinvs[0] = theta, x, jp
     for j in range(1, n_steps):
-        d_hat = theta_hat[j] - theta
-        # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
-        step = jp @ (target[j] - x) + alpha * ((eye - jp @ jac) @ d_hat)
-        step2 = step @ step
-        if step2 > free2:
-            scale = _step_scale(step, step2, step_limit, max_step)
-            if scale < 1.0:
-                step *= scale
-                limited.append(j)
-        theta = np.minimum(np.maximum(theta + step, lower), upper)
-        x, jac = fk_jac(theta)
+        theta, x, jac_new, was_limited = step(j, theta, x, jac, jp)
+        if was_limited:
+            limited.append(j)
         pinvs[j] = jp
+        jac = jac_new
         jp = damped_pinv(jac)
         joints[j], positions[j] = theta, x
+    s_fused, prec = step.s_fused, step.prec
     covs = pinvs @ s_fused @ np.swapaxes(pinvs, -1, -2)
     # Already in hand space: share_n = tr(S_fused P_n) / 3, S_fused = (sum_n P_n)^-1.
     influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}

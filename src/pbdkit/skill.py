@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from ._io import load_npz_safe, save_npz_atomic
 from ._validation import check_int, check_positive_float
+from .controller import Controller
 from .demos import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .gmm import GMM, MAX_COMPONENTS, ModelSelection
 from .reproduce import (
@@ -415,9 +416,7 @@ class Skill:
             Bad input, an object out of reach (``on_unreachable="raise"``), or an explicit
             ``velocity_limit`` for a skill whose :attr:`duration` is unknown.
         """
-        known = bool(np.isfinite(self.duration) and self.duration > 0)
-        # The timing of times(): steps 0 .. n_steps-1 spread over the duration.
-        dt = self.duration / (self.n_steps - 1) if known else float("nan")
+        dt = self.step_seconds
         step_limit = step_limit_from_velocity(velocity_limit, self.robot, dt)
         return reproduce(
             self.robot,
@@ -431,6 +430,65 @@ class Skill:
             reach=self.reach,
             on_unreachable=on_unreachable,
             line_search=line_search,
+        )
+
+    @property
+    def step_seconds(self) -> float:
+        """Seconds per step when executed: :attr:`duration` / (n_steps - 1), as :meth:`times`
+        (NaN when the duration is unknown)."""
+        known = bool(np.isfinite(self.duration) and self.duration > 0)
+        return self.duration / (self.n_steps - 1) if known else float("nan")
+
+    def controller(
+        self,
+        objects: Mapping[str, npt.ArrayLike],
+        q0: npt.ArrayLike | None = None,
+        use: Sequence[str] | str | None = None,
+        alpha: float = 0.5,
+        covariance: CovarianceMode = "exact",
+        max_step: float | None = 0.1,
+        on_unreachable: Literal["raise", "warn"] = "raise",
+        *,
+        velocity_limit: float | npt.ArrayLike | Literal["robot"] | None = "robot",
+        line_search: bool = True,
+        max_lag: float = 3.0,
+    ) -> Controller:
+        """One closed-loop run of the skill, step by step from the measured joint angles.
+
+        ``ctrl.step(q_measured, objects=None)`` returns the next target (:class:`Command`);
+        ``ctrl.dt`` is the seconds per step (:attr:`step_seconds`), ``ctrl.done`` tells when the
+        last step was targeted. Fed its own targets with constant objects it equals
+        :meth:`reproduce` step for step (one implementation of the loop); see
+        :mod:`pbdkit.controller` for how the phase advances when the arm is held back.
+
+        Parameters
+        ----------
+        objects, q0, use, alpha, covariance, max_step, on_unreachable, velocity_limit,
+        line_search
+            As :meth:`reproduce`.
+        max_lag : float
+            The phase holds while the measured posture is more than this many steps (at the
+            joints' top speed) behind the last target.
+
+        Returns
+        -------
+        controller : Controller
+        """
+        dt = self.step_seconds
+        return Controller(
+            self.robot,
+            self.constraints(covariance),
+            objects,
+            q0=q0,
+            use=use,
+            alpha=alpha,
+            max_step=max_step,
+            step_limit=step_limit_from_velocity(velocity_limit, self.robot, dt),
+            dt=dt,
+            line_search=line_search,
+            reach=self.reach,
+            on_unreachable=on_unreachable,
+            max_lag=max_lag,
         )
 
     # ------------------------------------------------------------------ I/O
