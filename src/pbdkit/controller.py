@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_positions, check_positive_float
+from ._validation import check_array, check_positions
 from .kinematics import damped_pinv
 from .reproduce import (
     JOINT,
@@ -43,11 +43,8 @@ from .reproduce import (
     JointStep,
     KinematicModel,
     TaskStep,
-    _check_q0,
     _check_reach,
-    _check_step_limit,
-    _check_use,
-    check_objects,
+    setup_run,
 )
 
 __all__ = ["Command", "Controller"]
@@ -160,54 +157,44 @@ class Controller:
         on_unreachable: str = "raise",
         max_lag: float = 3.0,
     ) -> None:
-        c = constraints
-        if not isinstance(c, Constraints):
-            raise ValueError(f"constraints must be a Constraints, got {type(c).__name__}")
-        n = c.n_joints
-        if int(robot.n_joints) != n:
-            raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
-        self._c = c
-        self._robot = robot
-        self._objs = check_objects(objects, c.object_names)
-        self._used = _check_use(use, c.names)
-        alpha = check_positive_float(alpha, "alpha", allow_zero=True)
-        cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
-        bound = _check_step_limit(step_limit, n)
-        if on_unreachable not in ("raise", "warn"):
-            raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
-        self._reach = reach
-        self._on_unreachable = on_unreachable
-        if reach is not None:
-            self._check_reach(self._objs)
+        run = setup_run(
+            robot,
+            constraints,
+            objects,
+            q0=q0,
+            use=use,
+            alpha=alpha,
+            max_step=max_step,
+            step_limit=step_limit,
+            reach=reach,
+            on_unreachable=on_unreachable,
+        )
         lag = float(max_lag)
         if not (lag > 0):  # NaN too
             raise ValueError(f"max_lag must be > 0 (steps), got {max_lag!r}")
+        c, n = run.constraints, run.constraints.n_joints
+        self._c, self._robot = c, robot
+        self._objs, self._used, self._tasks = run.objects, run.used, run.tasks
+        self._reach, self._on_unreachable = reach, on_unreachable
         self.max_lag = lag
         self.dt = float(dt)
-        lower = np.asarray(robot.lower, dtype=np.float64)
-        upper = np.asarray(robot.upper, dtype=np.float64)
+        lower, upper, cap, bound = run.lower, run.upper, run.max_step, run.step_limit
         self._lower, self._upper = lower, upper
-        theta0 = (
-            np.clip(c.joint_mean[0], lower, upper) if q0 is None else _check_q0(q0, lower, upper)
-        )
+        theta0 = run.theta0
         # The largest step of each joint, for the phase rule: the velocity bound, else max_step.
         self._step_bound = bound if bound is not None else np.full(n, cap)
         self._fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-        self._tasks = [u for u in self._used if u != JOINT]
-        self._mode = (
-            "fused"
-            if JOINT in self._used and self._tasks
-            else "joint"
-            if JOINT in self._used
-            else "task"
-        )
+        if JOINT not in self._used:
+            self._mode = "task"
+        else:
+            self._mode = "fused" if self._tasks else "joint"
         if self._mode == "fused":
             self._fused = FusedStep(
                 robot, c, self._objs, self._tasks, lower, upper, cap, bound, bool(line_search)
             )
         elif self._mode == "task":
             self._task = TaskStep(
-                robot, c, self._objs, self._tasks, lower, upper, alpha, cap, bound
+                robot, c, self._objs, self._tasks, lower, upper, run.alpha, cap, bound
             )
         else:
             self._joint = JointStep(c.joint_mean, lower, upper, cap, bound)

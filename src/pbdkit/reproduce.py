@@ -156,9 +156,11 @@ __all__ = [
     "KinematicModel",
     "ReachWarning",
     "ReproductionResult",
+    "RunSetup",
     "check_objects",
     "reach_from_samples",
     "reproduce",
+    "setup_run",
     "step_limit_from_velocity",
 ]
 
@@ -430,6 +432,60 @@ def _check_reach(
             warnings.warn(msg + " (the hand will stop short)", ReachWarning, stacklevel=3)
 
 
+@dataclass(frozen=True)
+class RunSetup:
+    """The validated inputs of one reproduction or controller run (see :func:`setup_run`)."""
+
+    constraints: Constraints
+    objects: dict[str, Float]
+    used: list[str]
+    tasks: list[str]
+    alpha: float
+    max_step: float  # inf: no trust region
+    step_limit: Float | None
+    lower: Float
+    upper: Float
+    theta0: Float
+
+
+def setup_run(
+    robot: KinematicModel,
+    constraints: Constraints,
+    objects: Mapping[str, npt.ArrayLike],
+    *,
+    q0: npt.ArrayLike | None,
+    use: Sequence[str] | str | None,
+    alpha: float,
+    max_step: float | None,
+    step_limit: npt.ArrayLike | None,
+    reach: float | None,
+    on_unreachable: str,
+) -> RunSetup:
+    """Validate the inputs shared by :func:`reproduce` and the online controller."""
+    c = constraints
+    if not isinstance(c, Constraints):
+        raise ValueError(f"constraints must be a Constraints, got {type(c).__name__}")
+    n = c.n_joints
+    if int(robot.n_joints) != n:
+        raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
+    objs = check_objects(objects, c.object_names)
+    used = _check_use(use, c.names)
+    alpha = check_positive_float(alpha, "alpha", allow_zero=True)
+    step_cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
+    bound = _check_step_limit(step_limit, n)
+    if on_unreachable not in ("raise", "warn"):
+        raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
+    if reach is not None:
+        # Only the objects whose constraints are in use steer the arm.
+        _check_reach({k: o for k, o in objs.items() if k in used}, c, float(reach), on_unreachable)
+    lower = np.asarray(robot.lower, dtype=np.float64)
+    upper = np.asarray(robot.upper, dtype=np.float64)
+    # The paper starts at theta_hat_0; clipped in case the GMR mean grazes a limit.
+    theta0 = np.clip(c.joint_mean[0], lower, upper) if q0 is None else _check_q0(q0, lower, upper)
+    tasks = [u for u in used if u != JOINT]
+    return RunSetup(c, objs, used, tasks, alpha, step_cap, bound, lower, upper, theta0)
+
+
 def reproduce(
     robot: KinematicModel,
     constraints: Constraints,
@@ -485,28 +541,26 @@ def reproduce(
     -------
     result : ReproductionResult
     """
-    c = constraints
-    if not isinstance(c, Constraints):
-        raise ValueError(f"constraints must be a Constraints, got {type(c).__name__}")
-    n = c.n_joints
-    if int(robot.n_joints) != n:
-        raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
-    objs = check_objects(objects, c.object_names)
-    used = _check_use(use, c.names)
-    alpha = check_positive_float(alpha, "alpha", allow_zero=True)
-    step_cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
-    bound = _check_step_limit(step_limit, n)
-    if on_unreachable not in ("raise", "warn"):
-        raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
-    if reach is not None:
-        # Only the objects whose constraints are in use steer the arm.
-        _check_reach({k: o for k, o in objs.items() if k in used}, c, float(reach), on_unreachable)
-    lower = np.asarray(robot.lower, dtype=np.float64)
-    upper = np.asarray(robot.upper, dtype=np.float64)
-    # The paper starts at theta_hat_0; clipped in case the GMR mean grazes a limit.
-    theta0 = np.clip(c.joint_mean[0], lower, upper) if q0 is None else _check_q0(q0, lower, upper)
-
-    tasks = [u for u in used if u != JOINT]
+    run = setup_run(
+        robot,
+        constraints,
+        objects,
+        q0=q0,
+        use=use,
+        alpha=alpha,
+        max_step=max_step,
+        step_limit=step_limit,
+        reach=reach,
+        on_unreachable=on_unreachable,
+    )
+    c, objs, used, tasks, alpha = run.constraints, run.objects, run.used, run.tasks, run.alpha
+    step_cap, bound, lower, upper, theta0 = (
+        run.max_step,
+        run.step_limit,
+        run.lower,
+        run.upper,
+        run.theta0,
+    )
     if JOINT in used and tasks:
         joints, positions, covs, influence, influence_js, limited = _fused_loop(
             robot, c, objs, tasks, theta0, lower, upper, step_cap, bound, bool(line_search)
