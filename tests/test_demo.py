@@ -131,7 +131,44 @@ def test_evaluate_basin_lists_the_controllers_of_its_constraints(
     # The world always has the basin; every controller's run was judged on it.
     assert set(data["placements"][0]) == {"glass", "basin"}
     for rows in data["runs"].values():
-        assert set(rows[0]) == {"success", "liquid_fraction", "held", "pour_error_mm", "tilt_deg"}
+        assert set(rows[0]) == {
+            "success",
+            "liquid_fraction",
+            "held",
+            "pour_error_mm",
+            "tilt_deg",
+            "peak_speed_ratio",
+            "following_error_rad",
+        }
+    assert data["online"] is False and data["perturb"] == "none"
+    assert data["perturbations"] == [{"name": "none"}]
+
+
+def test_evaluate_online_with_a_perturbation(fast_basin: dict[str, object], tmp_path: Path) -> None:
+    path = tmp_path / "eval.json"
+    args = ["evaluate", "--task", "basin", "--trials", "1", "--ground-truth", "--online"]
+    result = CliRunner().invoke(
+        app, [*args, "--perturb", "move", "--controller", "fused", "--json", str(path)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "online, perturb move" in result.output
+    data = json.loads(path.read_text())
+    assert data["online"] is True and data["perturb"] == "move"
+    assert list(data["runs"]) == ["fused"]
+    (move,) = data["perturbations"]
+    assert move["object"] == "glass" and np.linalg.norm(move["displacement_m"]) == pytest.approx(
+        0.04
+    )
+    # The glass's slide ends before the grasp.
+    assert move["start_s"] + move["duration_s"] < move["grasp_s"] - 1.0
+    assert "phase_held_steps" in data["runs"]["fused"][0]
+    for bad, msg in (
+        (["--perturb", "shake"], "must be one of none, move, push"),
+        (["--controller", "fused", "--controller", "fused"], "a controller is named twice"),
+        (["--controller", "task:cup"], "controller must be one of"),
+    ):
+        r = CliRunner().invoke(app, ["evaluate", "--task", "basin", "--trials", "1", *bad])
+        assert r.exit_code != 0 and msg in r.output, r.output
 
 
 def test_demo_basin_paper_configuration(fast_basin: dict[str, object], tmp_path: Path) -> None:
@@ -157,6 +194,29 @@ def test_demo_basin_paper_configuration(fast_basin: dict[str, object], tmp_path:
     )
     assert "no task-space constraint" in html
     assert "learn (2 GMMs" in html
+
+
+def test_demo_online_shows_the_online_run(fast_basin: dict[str, object], tmp_path: Path) -> None:
+    args = ["demo", "--task", "basin", "--out", str(tmp_path), "--online", "--ground-truth"]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert "the fused controller under perturb move" in r.output
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    online = m["online"]
+    assert online["perturb"]["name"] == "move" and online["perturb"]["object"] == "glass"
+    assert set(online) == {"perturb", "online", "offline", "tracking"}
+    assert online["tracking"] is None  # --ground-truth: no cameras
+    assert "phase_held_steps" in online["online"] and "phase_held_steps" not in online["offline"]
+    assert (tmp_path / "fig_online.png").read_bytes().startswith(PNG_MAGIC)
+    assert (tmp_path / "online.mp4").stat().st_size > 10_000
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert "The skill online: the controller in the robot" in html
+    assert 'src="online.mp4"' in html and "Disturbance: the glass slides 40 mm" in html
+    # Without --online the demo has no online part; --perturb is checked.
+    r = CliRunner().invoke(
+        app, ["demo", "--task", "basin", "--out", str(tmp_path / "x"), "--perturb", "shake"]
+    )
+    assert r.exit_code != 0 and "must be one of none, move, push" in r.output
 
 
 def test_teach_learn_reproduce_chain(tmp_path: Path) -> None:

@@ -578,7 +578,14 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     placement = sample_objects("mark", np.random.default_rng(24))
     run = E.run_controller(ts, placement, "fused")
     assert set(run.execution.objects) == {"glass", "mark"}
-    assert set(run.summary()) == {"success", "placement_error_mm", "tilt_deg", "released"}
+    assert set(run.summary()) == {
+        "success",
+        "placement_error_mm",
+        "tilt_deg",
+        "released",
+        "peak_speed_ratio",
+        "following_error_rad",
+    }
     assert run.success == (run.execution.outcome.metrics["placement_error_mm"] <= 20.0)
     # Measured: 11-20 mm with 3 fast demonstrations on a 200-step grid (fused, 3 placements).
     assert run.success

@@ -145,6 +145,34 @@ ConstrainFixedOption = Annotated[
 ]
 
 
+OnlineOption = Annotated[
+    bool,
+    typer.Option(
+        "--online",
+        help="Run the controllers in the physics loop, step by step from the measured joint "
+        "angles, told the object positions at 15 Hz (default: reproduce once, play the "
+        "trajectory).",
+    ),
+]
+PerturbOption = Annotated[
+    str,
+    typer.Option(
+        help="Disturbance: none, move (the coaster slides 5 cm while the glass is carried; "
+        "basin task: the glass slides 4 cm before the grasp) or push (a 0.3 s shove on the arm "
+        "halfway to the grasp).",
+    ),
+]
+
+
+def _check_perturb(perturb: str) -> None:
+    from .sim.perturb import PERTURBATIONS
+
+    if perturb not in PERTURBATIONS:
+        raise typer.BadParameter(
+            f"must be one of {', '.join(PERTURBATIONS)}, got {perturb!r}", param_hint="--perturb"
+        )
+
+
 @app.command()
 @_reports_errors
 def demo(
@@ -156,10 +184,21 @@ def demo(
     shape: Annotated[str, typer.Option(help="LASA shape (task lasa only).")] = "GShape",
     ground_truth: GroundTruthOption = False,
     constrain_fixed: ConstrainFixedOption = False,
+    online: OnlineOption = False,
+    perturb: Annotated[
+        str,
+        typer.Option(
+            help="Disturbance of the online run (with --online): none, move or push; default "
+            "move (the coaster slides 5 cm while the glass is carried; basin task: the glass "
+            "slides 4 cm before the grasp).",
+        ),
+    ] = "move",
 ) -> None:
     """Run the main job: demonstrations -> skill -> new situation -> physics, with figures,
-    a video, report.html and metrics.json in OUT."""
+    a video, report.html and metrics.json in OUT. With --online, the fused controller also
+    runs in the physics loop under a disturbance, beside the offline run."""
     _check_output(out, "--out", folder=True)
+    _check_perturb(perturb)
     if task == "lasa":
         from .demo import run_lasa_demo
 
@@ -188,6 +227,8 @@ def demo(
                 status=lambda m: st.update(m),
                 ground_truth=ground_truth,
                 constrain_fixed=constrain_fixed,
+                online=online,
+                perturb=perturb if online else "none",
             )
     except ObjectNotSeenError as exc:
         console.print(f"[red]error:[/red] {exc}")
@@ -196,7 +237,8 @@ def demo(
     table = Table(title=f"pbdkit demo: {spec.name} task, new situation (seed {seed})")
     table.add_column("controller")
     table.add_column("success")
-    keys = [k for k in metrics["controllers"]["fused"] if k != "success"]
+    extra = ("success", "peak_speed_ratio", "following_error_rad")  # in metrics.json
+    keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
     for k in keys:
         table.add_column(k, justify="right")
     for name, row in metrics["controllers"].items():
@@ -204,6 +246,25 @@ def demo(
         cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
         table.add_row(name, *cells)
     console.print(table)
+    if metrics["online"] is not None:
+        on = metrics["online"]
+        t2 = Table(title=f"the fused controller under perturb {on['perturb']['name']}")
+        t2.add_column("run")
+        t2.add_column("success")
+        first = next(iter(k for k in on["online"] if k not in extra))
+        t2.add_column(first, justify="right")
+        t2.add_column("peak speed / limit", justify="right")
+        t2.add_column("following error (rad)", justify="right")
+        for label in ("online", "offline"):
+            row = on[label]
+            t2.add_row(
+                label,
+                "[green]yes" if row["success"] else "[red]no",
+                "-" if row[first] is None else f"{row[first]:.1f}",
+                f"{row['peak_speed_ratio']:.2f}",
+                f"{row['following_error_rad']:.3f}",
+            )
+        console.print(t2)
     _print_components(spec, metrics["n_components"])
     tracking = metrics["tracking"]
     _print_tracking(metrics["vision"], tracking["tracking_error_mm"] if tracking else None)
@@ -357,10 +418,23 @@ def evaluate(
     json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
     ground_truth: GroundTruthOption = False,
     constrain_fixed: ConstrainFixedOption = False,
+    online: OnlineOption = False,
+    perturb: PerturbOption = "none",
+    controller: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--controller",
+            help="Run only this controller (repeatable): fused, joint or task:OBJECT. "
+            "Default: every one.",
+        ),
+    ] = None,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    _check_perturb(perturb)
+    if controller and len(set(controller)) != len(controller):
+        raise typer.BadParameter("a controller is named twice", param_hint="--controller")
     if json_path is not None:
         _check_output(json_path, "--json")
     spec = _robot_task(task)
@@ -387,10 +461,15 @@ def evaluate(
             progress=tick,
             ground_truth=ground_truth,
             constrain_fixed=constrain_fixed,
+            online=online,
+            perturb=perturb,
+            controllers=controller or None,
         )
     if json_path is not None:
         write_json(json_path, result.as_dict())
-    table = Table(title=f"{task}: {trials} new placements (seed {seed})")
+    how = "online" if online else "offline"
+    title = f"{task}: {trials} new placements (seed {seed}), {how}, perturb {perturb}"
+    table = Table(title=title)
     table.add_column("controller")
     table.add_column("success rate", justify="right")
     table.add_column("median errors", justify="left")

@@ -20,7 +20,12 @@ the measured posture is more than ``max_lag`` steps behind the last target, in u
 largest step each joint may take (its velocity limit times dt; ``max_step`` without velocity
 limits), the phase holds and the command re-targets the same step, from where the arm is,
 until it has caught up. A command never asks a joint to move faster than its velocity limit
-over ``dt``, and never leaves the joint limits (the same bounds as the offline loop).
+over ``dt`` from the measured posture, and never leaves the joint limits (the same bounds as
+the offline loop). While the arm follows, the step is also bounded from the last target, so
+that a reference through consecutive commands keeps the speed limits despite a small tracking
+error. Held back (:attr:`Command.held`), the command re-targets from where the arm is: a pushed
+arm is not snapped back to where it was, it is steered back to the constraints at the speed
+limits from where the push left it.
 """
 
 from __future__ import annotations
@@ -65,6 +70,10 @@ class Command:
         The step of the skill's time grid it targets.
     limited : bool
         True if a velocity bound (or ``max_step``) shortened the step.
+    held : bool
+        True if the arm was more than ``max_lag`` steps behind the last target: the phase held
+        and the command re-targets from the measured posture (a reference that runs through
+        the commands should restart there).
     covariance : ndarray, shape (n, n)
         Covariance of the target (the fused Sigma of eq. (1), Sigma^theta for the joint-only
         controller, J+ S J+^T for a task-only one).
@@ -74,11 +83,18 @@ class Command:
     """
 
     def __init__(
-        self, controller: Controller, q: Float, index: int, limited: bool, jac: Float
+        self,
+        controller: Controller,
+        q: Float,
+        index: int,
+        limited: bool,
+        jac: Float,
+        held: bool = False,
     ) -> None:
         self.q = q
         self.index = index
         self.limited = limited
+        self.held = held
         self.gripper = controller._gripper_at(index)
         self._ctrl = controller
         self._jac = jac  # the Jacobian the step was linearized with
@@ -136,6 +152,10 @@ class Controller:
         T.
     index : int
         The step the last command targeted (0 before the first :meth:`step`).
+    target : ndarray, shape (n,)
+        The last target (the start posture before the first :meth:`step`).
+    gripper : bool
+        The gripper command at :attr:`index`.
     done : bool
         True once a command has targeted the last step.
     """
@@ -218,6 +238,16 @@ class Controller:
         return self._last.index >= self._c.n_steps - 1
 
     @property
+    def target(self) -> Float:
+        """The last target (the start posture before the first :meth:`step`), a copy."""
+        return self._last.q.copy()
+
+    @property
+    def gripper(self) -> bool:
+        """The gripper command of the last target's step (of step 0 before the first call)."""
+        return self._gripper_at(self._last.index)
+
+    @property
     def objects(self) -> dict[str, Float]:
         """The object positions in use now (copies)."""
         return {k: v.copy() for k, v in self._objs.items()}
@@ -260,23 +290,34 @@ class Controller:
         last = self._last
         # Phase: advance while the arm follows (module docstring, "Timing and phase").
         lag = float((np.abs(q - last.q) / self._step_bound).max())
-        j = last.index if (last.index > 0 and lag > self.max_lag) else last.index + 1
+        held = last.index > 0 and lag > self.max_lag
+        j = last.index if held else last.index + 1
         if self._mode == "joint":
             jac = self._no_jac
             new, limited = self._joint(j, q)
-            self._last = _Targets(new, j, None, None)
-            return Command(self, new, j, limited, jac)
-        # The arm at the last target exactly (fed its own commands): its f and J are known.
-        if last.x is not None and last.jac is not None and lag == 0.0:
-            x, jac = last.x, last.jac
+            x_new: Float | None = None
+            jac_new: Float | None = None
         else:
-            x, jac = self._fk_jac(q)
-        if self._mode == "fused":
-            new, x_new, jac_new, limited = self._fused(j, q, x, jac)
-        else:
-            new, x_new, jac_new, limited = self._task(j, q, x, jac, damped_pinv(jac))
+            # The arm at the last target exactly (fed its own commands): its f and J are known.
+            if last.x is not None and last.jac is not None and lag == 0.0:
+                x, jac = last.x, last.jac
+            else:
+                x, jac = self._fk_jac(q)
+            if self._mode == "fused":
+                new, x_new, jac_new, limited = self._fused(j, q, x, jac)
+            else:
+                new, x_new, jac_new, limited = self._task(j, q, x, jac, damped_pinv(jac))
+        if lag > 0.0 and not held:
+            # The arm follows but is not at the last target: bound the step from the last
+            # target too, so that the reference through consecutive commands keeps the bound.
+            # (Held back, the command re-targets from where the arm is: module docstring.)
+            bound = self._step_bound
+            capped = np.minimum(np.maximum(new, last.q - bound), last.q + bound)
+            capped = np.minimum(np.maximum(capped, self._lower), self._upper)
+            if not np.array_equal(capped, new):
+                new, x_new, jac_new, limited = capped, None, None, True
         self._last = _Targets(new, j, x_new, jac_new)
-        return Command(self, new, j, limited, jac)
+        return Command(self, new, j, limited, jac, held)
 
     def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
         names = self._c.object_names

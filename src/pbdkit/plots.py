@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from .demos import Demonstration
     from .gmm import GMM
     from .reproduce import ReproductionResult
+    from .sim.execute import ExecutionResult
+    from .sim.online import OnlineRun
     from .skill import Skill
 
 __all__ = [
@@ -36,6 +38,7 @@ __all__ = [
     "plot_gmr_tube",
     "plot_influence",
     "plot_lasa_summary",
+    "plot_online_run",
     "plot_reproductions",
     "plot_selection",
     "save_figure",
@@ -478,6 +481,133 @@ def plot_selection(skill: Skill) -> Figure:
         f"{100 * CV_TOLERANCE:.1f} % of the best; line: K kept)",
         fontsize=9,
     )
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+# Colors of a TrackFilter's statuses in the online figure (others: refusals by the tracker).
+_STATUS_COLORS = {
+    "ok": "tab:green",
+    "held": "tab:blue",
+    "occluded": "tab:orange",
+    "jump": "tab:red",
+    "unseen": "0.85",
+}
+
+
+def plot_online_run(
+    run: OnlineRun,
+    velocity_limit: Float,
+    offline: ExecutionResult | None = None,
+    *,
+    title: str = "",
+) -> Figure:
+    """An online run (:func:`pbdkit.sim.online.execute_online`) at a glance, beside an offline one.
+
+    Four panels: the phase (the step each command targets against time: it holds while the
+    arm is held back); the fastest joint's speed over its velocity limit (online and offline);
+    how far each object the controller knows has moved from where it started, as the
+    controller was told and in truth; the tracker's status per object over time (with vision).
+    The disturbance's window is shaded.
+    """
+    fig = _new_figure(figsize=(10.0, 6.4))
+    (a_phase, a_speed), (a_obj, a_track) = fig.subplots(2, 2)
+    dist = run.disturbance
+    window = None
+    if "start_s" in dist:
+        window = (float(dist["start_s"]), float(dist["start_s"]) + float(dist["duration_s"]))
+    ex = run.execution
+    dt = run.dt
+    for ax in (a_phase, a_speed, a_obj, a_track):
+        if window is not None:
+            ax.axvspan(*window, color="0.85", lw=0, label=f"{dist['name']}")
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel("time (s)", fontsize=8)
+    a_phase.plot(run.tick_times, run.index, color="k", lw=1, label="step targeted")
+    a_phase.plot(
+        run.tick_times,
+        np.round(run.tick_times / dt) + 1,
+        color="0.5",
+        lw=0.8,
+        ls="--",
+        label="one step per dt",
+    )
+    a_phase.set_ylabel("skill step", fontsize=8)
+    a_phase.set_title(f"phase ({run.held_steps} commands held it)", fontsize=9)
+    a_phase.legend(fontsize=7, loc="upper left")
+
+    def speed(e: ExecutionResult) -> tuple[Float, Float]:
+        dq = np.abs(np.diff(e.joints, axis=0)) / np.diff(e.t)[:, None]
+        return e.t[1:], (dq / velocity_limit).max(axis=1)
+
+    if offline is not None:
+        a_speed.plot(*speed(offline), color="tab:gray", lw=0.8, label="offline")
+    a_speed.plot(*speed(ex), color="k", lw=1, label="online")
+    a_speed.axhline(1.0, color="tab:red", lw=0.8, ls="--", label="velocity limit")
+    a_speed.set_ylabel("fastest joint / its limit", fontsize=8)
+    a_speed.set_title("joint speed (measured)", fontsize=9)
+    a_speed.legend(fontsize=7, loc="upper right")
+
+    for i, (name, used) in enumerate(run.objects.items()):
+        color = SPACE_COLORS[i % len(SPACE_COLORS)]
+        if len(used):
+            a_obj.plot(
+                run.tick_times,
+                1e3 * np.linalg.norm(used - used[0], axis=1),
+                color=color,
+                lw=1.2,
+                label=f"{name}: told",
+            )
+        if name in ex.objects and len(ex.objects[name]):
+            true = ex.objects[name]
+            a_obj.plot(
+                ex.t,
+                1e3 * np.linalg.norm(true - true[0], axis=1),
+                color=color,
+                lw=0.8,
+                ls=":",
+                label=f"{name}: true",
+            )
+    a_obj.set_ylabel("moved from its start (mm)", fontsize=8)
+    a_obj.set_title("objects: what the controller was told", fontsize=9)
+    a_obj.legend(fontsize=7, loc="upper left")
+
+    tracking = run.tracking
+    if tracking is None:
+        a_track.text(
+            0.5,
+            0.5,
+            "no cameras: the controller was told the true positions",
+            ha="center",
+            va="center",
+            fontsize=8,
+            transform=a_track.transAxes,
+        )
+        a_track.set_yticks([])
+    else:
+        names = list(tracking["frames"])
+        end = float(ex.t[-1]) if len(ex.t) else 1.0
+        for row, name in enumerate(names):
+            events = [e for e in tracking["events"] if e["name"] == name]
+            for j, e in enumerate(events):
+                stop = events[j + 1]["time"] if j + 1 < len(events) else end
+                color = _STATUS_COLORS.get(e["status"], "tab:purple")
+                a_track.barh(row, stop - e["time"], left=e["time"], color=color, height=0.6)
+        a_track.set_yticks(range(len(names)), names, fontsize=8)
+        seen = sorted({e["status"] for e in tracking["events"]})
+        from matplotlib.patches import Patch
+
+        a_track.legend(
+            handles=[Patch(color=_STATUS_COLORS.get(s, "tab:purple"), label=s) for s in seen],
+            fontsize=7,
+            loc="upper left",
+            ncols=len(seen),
+        )
+        a_track.set_ylim(-0.6, len(names) + 0.4)
+    a_track.set_title("cameras (15 Hz): estimate accepted or held", fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     figure: Figure = fig
     return figure

@@ -15,6 +15,11 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
   cameras.
 - :func:`execute`: plays a joint trajectory under physics and judges the outcome with the task's
   judge (:class:`ExecutionResult`, :class:`Outcome`).
+- :func:`execute_online` (:mod:`pbdkit.sim.online`): runs a :class:`pbdkit.Controller` in the
+  physics loop, told object positions at 15 Hz by the cameras (through a
+  :class:`pbdkit.vision.TrackFilter`) or the truth.
+- :mod:`pbdkit.sim.perturb`: disturbances for both ways of running (``move``: an object slides;
+  ``push``: a shove on the arm).
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
 
@@ -35,8 +40,11 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
 
 from . import taskdefs  # noqa: F401  (registers the built-in tasks)
 from .execute import ExecutionResult, Outcome, RunStats, evaluate_outcome, execute
+from .online import OnlineRun, execute_online
+from .perturb import PERTURBATIONS, Disturbance, PushArm, SlideObject
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
 from .tasks import (
+    ObjectMove,
     PlacementRange,
     TaskSpec,
     fixed_objects,
@@ -54,17 +62,24 @@ from .video import save_video
 
 __all__ = [
     "CAMERAS",
+    "PERTURBATIONS",
+    "Disturbance",
     "ExecutionResult",
+    "ObjectMove",
+    "OnlineRun",
     "Outcome",
     "PlacementRange",
+    "PushArm",
     "RunStats",
     "SceneInfo",
     "Simulation",
+    "SlideObject",
     "TaskSpec",
     "ViaPoint",
     "build_scene",
     "evaluate_outcome",
     "execute",
+    "execute_online",
     "fixed_objects",
     "full_placement",
     "get_task",

@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
 
 Float = NDArray[np.float64]
@@ -136,6 +137,7 @@ def execute(
     camera: str | None = None,
     fps: float = 15.0,
     duration: float | None = None,
+    disturbance: Disturbance | None = None,
 ) -> ExecutionResult:
     """Play a joint trajectory under physics and judge the task's outcome.
 
@@ -165,6 +167,9 @@ def execute(
         If given, ``t`` is first mapped linearly onto [0, duration] seconds: a reproduction comes
         in time steps (e.g. 0 ... 999), to be played at the pace of the demonstrations (e.g.
         their mean duration).
+    disturbance : Disturbance, optional
+        Acts on the world before every physics step (:mod:`pbdkit.sim.perturb`), at the time
+        from the trajectory's start.
 
     Returns
     -------
@@ -180,13 +185,9 @@ def execute(
         raise ValueError(
             f"settle must be >= 0 and record_rate, fps > 0, got {settle}, {record_rate}, {fps}"
         )
-    if camera is not None:
-        sim.camera_id(camera)
+    recorder = Recorder(sim, record_rate, camera, fps)
 
-    sim.set_joints(q_[0])
-    sim.set_gripper(bool(g[0]))
-    sim.step(round(0.3 / TIMESTEP))
-    sim.set_joints(q_[0])  # undo the small sag of the settling phase
+    start_at(sim, q_[0], bool(g[0]))
 
     # Servo targets at every physics step: linear interpolation and the segment's slope.
     n_play = math.ceil((t_[-1] - t_[0]) / TIMESTEP)
@@ -201,55 +202,97 @@ def execute(
     dq_target[s >= t_[-1]] = 0.0
     g_target = g[np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 1)]
 
-    rec_every = max(1, round(1.0 / (record_rate * TIMESTEP)))
-    frame_every = max(1, round(1.0 / (fps * TIMESTEP)))
-    rec: dict[str, list[object]] = {
-        k: [] for k in ("t", "q", "target", "tool", "tilt", "grasped", "gripper")
-    }
-    rec_objects: dict[str, list[Float]] = {k: [] for k in sim.info.objects}
-    frames: list[NDArray[np.uint8]] = []
-    frame_times: list[float] = []
-    max_tilt = 0.0
-    held_at_end = False
-    start = sim.time
+    act = NoDisturbance() if disturbance is None else disturbance
     for k in range(s.shape[0]):
         sim.set_targets(q_target[k], dq_target[k])
         sim.set_gripper(bool(g_target[k]))
-        if k % rec_every == 0:
+        recorder.record(k, s[k], q_target[k], bool(g_target[k]))
+        if k == n_play:
+            recorder.end_of_trajectory()
+        if k < s.shape[0] - 1:
+            act.apply(sim, s[k] - t_[0])
+            sim.step()
+    return recorder.result()
+
+
+def start_at(sim: Simulation, q: Float, gripper: bool) -> None:
+    """Put the arm at ``q`` with the gripper command, let the world settle for 0.3 s, and put the
+    arm back at ``q`` (undoing the small sag of the settling phase): where every run starts."""
+    sim.set_joints(q)
+    sim.set_gripper(gripper)
+    sim.step(round(0.3 / TIMESTEP))
+    sim.set_joints(q)
+
+
+class Recorder:
+    """What a run records, at ``record_rate`` (and camera frames at ``fps``), and its judgement.
+
+    Shared by the offline playback (:func:`execute`) and the online loop
+    (:func:`pbdkit.sim.online.execute_online`): call :meth:`record` at every physics step,
+    :meth:`end_of_trajectory` at the step where the last target is reached, and
+    :meth:`result` after the settling time.
+    """
+
+    def __init__(self, sim: Simulation, record_rate: float, camera: str | None, fps: float) -> None:
+        if record_rate <= 0 or fps <= 0:
+            raise ValueError(f"record_rate and fps must be > 0, got {record_rate}, {fps}")
+        if camera is not None:
+            sim.camera_id(camera)
+        self.sim = sim
+        self.camera = camera
+        self.rec_every = max(1, round(1.0 / (record_rate * TIMESTEP)))
+        self.frame_every = max(1, round(1.0 / (fps * TIMESTEP)))
+        self.rec: dict[str, list[object]] = {
+            k: [] for k in ("t", "q", "target", "tool", "tilt", "grasped", "gripper")
+        }
+        self.objects: dict[str, list[Float]] = {k: [] for k in sim.info.objects}
+        self.frames: list[NDArray[np.uint8]] = []
+        self.frame_times: list[float] = []
+        self.max_tilt = 0.0
+        self.held_at_end = False
+
+    def record(self, k: int, t: float, target: Float, gripper: bool) -> None:
+        """At physics step ``k`` (run time ``t``), with the servo target and gripper command."""
+        sim = self.sim
+        if k % self.rec_every == 0:
             sim.refresh()
-            rec["t"].append(t_[0] + sim.time - start)
+            rec = self.rec
+            rec["t"].append(t)
             rec["q"].append(sim.joints())
-            rec["target"].append(q_target[k].copy())
+            rec["target"].append(np.array(target, dtype=np.float64))
             rec["tool"].append(sim.tool_position())
             rec["tilt"].append(sim.glass_tilt())
             rec["grasped"].append(sim.glass_grasped())
-            rec["gripper"].append(bool(g_target[k]))
+            rec["gripper"].append(gripper)
             for name, p in sim.object_positions().items():
-                rec_objects[name].append(p)
-        if camera is not None and k % frame_every == 0:
-            frames.append(sim.render(camera))
-            frame_times.append(t_[0] + sim.time - start)
-        if k == n_play:
-            held_at_end = sim.glass_grasped()
-        max_tilt = max(max_tilt, sim.glass_tilt())
-        if k < s.shape[0] - 1:
-            sim.step()
+                self.objects[name].append(p)
+        if self.camera is not None and k % self.frame_every == 0:
+            self.frames.append(sim.render(self.camera))
+            self.frame_times.append(t)
+        self.max_tilt = max(self.max_tilt, sim.glass_tilt())
 
-    outcome = evaluate_outcome(sim, held_at_end=held_at_end, max_tilt=max_tilt)
-    return ExecutionResult(
-        t=np.array(rec["t"], dtype=np.float64),
-        joints=np.array(rec["q"], dtype=np.float64),
-        targets=np.array(rec["target"], dtype=np.float64),
-        tool=np.array(rec["tool"], dtype=np.float64),
-        objects={k: np.array(v, dtype=np.float64) for k, v in rec_objects.items()},
-        glass_tilt=np.array(rec["tilt"], dtype=np.float64),
-        grasped=np.array(rec["grasped"], dtype=bool),
-        gripper=np.array(rec["gripper"], dtype=bool),
-        liquid=sim.liquid_positions(),
-        frames=np.array(frames, dtype=np.uint8) if camera is not None else None,
-        frame_times=np.array(frame_times, dtype=np.float64),
-        outcome=outcome,
-    )
+    def end_of_trajectory(self) -> None:
+        """The last target is reached now: note whether the glass is held."""
+        self.held_at_end = self.sim.glass_grasped()
+
+    def result(self) -> ExecutionResult:
+        """The record and the task's judgement of the current state."""
+        sim, rec = self.sim, self.rec
+        outcome = evaluate_outcome(sim, held_at_end=self.held_at_end, max_tilt=self.max_tilt)
+        return ExecutionResult(
+            t=np.array(rec["t"], dtype=np.float64),
+            joints=np.array(rec["q"], dtype=np.float64),
+            targets=np.array(rec["target"], dtype=np.float64),
+            tool=np.array(rec["tool"], dtype=np.float64),
+            objects={k: np.array(v, dtype=np.float64) for k, v in self.objects.items()},
+            glass_tilt=np.array(rec["tilt"], dtype=np.float64),
+            grasped=np.array(rec["grasped"], dtype=bool),
+            gripper=np.array(rec["gripper"], dtype=bool),
+            liquid=sim.liquid_positions(),
+            frames=np.array(self.frames, dtype=np.uint8) if self.camera is not None else None,
+            frame_times=np.array(self.frame_times, dtype=np.float64),
+            outcome=outcome,
+        )
 
 
 def evaluate_outcome(sim: Simulation, *, held_at_end: bool, max_tilt: float) -> Outcome:

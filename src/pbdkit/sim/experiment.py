@@ -51,6 +51,8 @@ from ..robots import katana
 from ..skill import Skill
 from . import tasks as T
 from .execute import ExecutionResult, execute
+from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
+from .perturb import PERTURBATIONS, Disturbance, make_disturbance
 from .scene import Simulation
 from .tasks import TaskSpec
 from .teacher import teach
@@ -60,6 +62,7 @@ __all__ = [
     "ControllerRun",
     "ControllerStats",
     "Evaluation",
+    "OnlineControllerRun",
     "TaskSkill",
     "Trial",
     "calibrate_tracker",
@@ -67,14 +70,18 @@ __all__ = [
     "controller_names",
     "controller_use",
     "evaluate",
+    "following_error",
     "learn_task",
     "observe",
+    "peak_speed_ratio",
     "run_controller",
+    "run_online",
     "run_trials",
     "start_posture",
     "summarize",
     "tracking_errors",
     "tracking_summary",
+    "trial_disturbance",
 ]
 
 Float = NDArray[np.float64]
@@ -187,16 +194,96 @@ class ControllerRun:
     execution: ExecutionResult
     reproduce_seconds: float
     warnings: list[str] = field(default_factory=list)
+    velocity_limit: Float | None = None
+    force_window: tuple[float, float] | None = None
 
     @property
     def success(self) -> bool:
         return bool(self.execution.outcome.success)
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready: success, the task's metrics, and the reproduction's task errors (mm)."""
-        out: dict[str, Any] = {"success": self.success}
-        out.update({k: _finite(v) for k, v in self.execution.outcome.metrics.items()})
+        """JSON-ready: success, the task's metrics, ``peak_speed_ratio`` and
+        ``following_error_rad``, both outside a push (:func:`peak_speed_ratio`,
+        :func:`following_error`)."""
+        return _run_summary(self.execution, self.velocity_limit, self.force_window)
+
+
+@dataclass
+class OnlineControllerRun:
+    """One controller run online, in the physics loop (:func:`pbdkit.sim.online.execute_online`).
+
+    ``objects`` holds the positions the skill was told at the start (its own objects only).
+    """
+
+    controller: str
+    objects: dict[str, Float]
+    online: OnlineRun
+    velocity_limit: Float
+    warnings: list[str] = field(default_factory=list)
+    force_window: tuple[float, float] | None = None
+
+    @property
+    def execution(self) -> ExecutionResult:
+        return self.online.execution
+
+    @property
+    def success(self) -> bool:
+        return bool(self.execution.outcome.success)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: as :meth:`ControllerRun.summary`, plus ``phase_held_steps`` (commands
+        that re-targeted the previous step) and, with vision, ``tracking`` (frames per status
+        of the :class:`pbdkit.vision.TrackFilter`, per object)."""
+        out = _run_summary(self.execution, self.velocity_limit, self.force_window)
+        out["phase_held_steps"] = self.online.held_steps
+        if self.online.tracking is not None:
+            out["tracking"] = self.online.tracking["frames"]
         return out
+
+
+def following_error(
+    execution: ExecutionResult, exclude: tuple[float, float] | None = None
+) -> float:
+    """Largest distance (rad) of a measured joint angle from the servo reference (recorded
+    samples): a real drive faults beyond its following-error limit. ``exclude`` as
+    :func:`peak_speed_ratio`."""
+    err = np.abs(execution.joints - execution.targets).max(axis=1)
+    if exclude is not None:
+        t = execution.t
+        err = err[(t < exclude[0]) | (t > exclude[1])]
+    return float(err.max()) if err.size else 0.0
+
+
+def peak_speed_ratio(
+    execution: ExecutionResult,
+    velocity_limit: Float,
+    exclude: tuple[float, float] | None = None,
+) -> float:
+    """Largest measured joint speed over the velocity limits (recorded samples, 50 Hz).
+
+    ``exclude``: a window of run time (s) left out, where an external force drives the arm
+    (:meth:`pbdkit.sim.perturb.Disturbance.force_window`).
+    """
+    dq = np.abs(np.diff(execution.joints, axis=0)) / np.diff(execution.t)[:, None]
+    ratio = (dq / velocity_limit).max(axis=1) if dq.size else np.zeros(0)
+    if exclude is not None:
+        t = execution.t[1:]
+        ratio = ratio[(t < exclude[0]) | (execution.t[:-1] > exclude[1])]
+    return float(ratio.max()) if ratio.size else 0.0
+
+
+def _run_summary(
+    execution: ExecutionResult,
+    velocity_limit: Float | None,
+    exclude: tuple[float, float] | None = None,
+) -> dict[str, Any]:
+    out: dict[str, Any] = {"success": bool(execution.outcome.success)}
+    out.update({k: _finite(v) for k, v in execution.outcome.metrics.items()})
+    if velocity_limit is not None:
+        ratio = peak_speed_ratio(execution, velocity_limit, exclude)
+        out["peak_speed_ratio"] = _finite(ratio)
+    out["following_error_rad"] = _finite(following_error(execution, exclude))
+    return out
 
 
 def _finite(v: float) -> float | None:
@@ -211,8 +298,12 @@ def run_controller(
     camera: str | None = None,
     fps: float = 15.0,
     sim_objects: dict[str, Float] | None = None,
+    disturbance: Disturbance | None = None,
 ) -> ControllerRun:
     """Reproduce with one controller for ``objects`` and execute it in a fresh simulation.
+
+    The reproduction is computed once, from ``objects``, and played open loop (offline); a
+    ``disturbance`` (:mod:`pbdkit.sim.perturb`) acts on the world while it plays.
 
     ``objects`` are the positions the robot knows (e.g. from the tracker); ``sim_objects``,
     the true positions in the simulated world (default: the same). Either may leave out the
@@ -236,10 +327,71 @@ def run_controller(
     rep_s = time.perf_counter() - start
     sim = Simulation.from_task(ts.task, world)
     try:
-        ex = execute(sim, ts.skill.times(res), res.joints, res.gripper, camera=camera, fps=fps)
+        ex = execute(
+            sim,
+            ts.skill.times(res),
+            res.joints,
+            res.gripper,
+            camera=camera,
+            fps=fps,
+            disturbance=disturbance,
+        )
     finally:
         sim.close()
-    return ControllerRun(controller, told, res, ex, rep_s, [str(w.message) for w in caught])
+    messages = [str(w.message) for w in caught]
+    limit = _velocity_limit(ts)
+    window = None if disturbance is None else disturbance.force_window()
+    return ControllerRun(
+        controller, told, res, ex, rep_s, messages, velocity_limit=limit, force_window=window
+    )
+
+
+def run_online(
+    ts: TaskSkill,
+    objects: dict[str, Float],
+    controller: str,
+    *,
+    tracker: SimTracker | None = None,
+    camera: str | None = None,
+    fps: float = 15.0,
+    sim_objects: dict[str, Float] | None = None,
+    disturbance: Disturbance | None = None,
+) -> OnlineControllerRun:
+    """Run one controller online (in the physics loop) from ``objects``, in a fresh simulation.
+
+    The controller (:meth:`pbdkit.Skill.controller`) starts from the positions ``objects``
+    (what the cameras saw before the run, or the truth) and is then told new positions at
+    15 Hz: the tracker's (filtered, :class:`pbdkit.sim.online.VisionObserver`) with a
+    ``tracker``, else the true ones (:class:`pbdkit.sim.online.TruthObserver`). Arguments as
+    :func:`run_controller`.
+    """
+    use = controller_use(controller, ts.skill.object_names)
+    known = ts.task.full_placement(objects)
+    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
+    told = {k: known[k] for k in ts.skill.object_names}
+    names = ts.skill.object_names
+    observer: Observer = TruthObserver(names) if tracker is None else VisionObserver(tracker, names)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ReachWarning)
+        ctrl = ts.skill.controller(told, use=use, on_unreachable="warn")
+        sim = Simulation.from_task(ts.task, world)
+        try:
+            run = execute_online(
+                sim, ctrl, observer=observer, disturbance=disturbance, camera=camera, fps=fps
+            )
+        finally:
+            sim.close()
+    messages = [str(w.message) for w in caught]
+    window = None if disturbance is None else disturbance.force_window()
+    limit = _velocity_limit(ts)
+    return OnlineControllerRun(controller, told, run, limit, messages, force_window=window)
+
+
+def _velocity_limit(ts: TaskSkill) -> Float:
+    """The robot's joint velocity limits (rad/s; inf where it has none)."""
+    n = ts.skill.robot.n_joints
+    limit = getattr(ts.skill.robot, "velocity_limit", None)
+    return np.full(n, np.inf) if limit is None else np.asarray(limit, dtype=np.float64)
 
 
 def start_posture(ts: TaskSkill) -> Float:
@@ -361,6 +513,9 @@ class Trial:
     runs : dict str -> dict
         Per controller, :meth:`ControllerRun.summary` (JSON-ready), or ``{"success": False,
         "tracking_status": ...}`` when the objects were not located.
+    perturb : dict
+        The trial's disturbance (:meth:`pbdkit.sim.perturb.Disturbance.as_dict`;
+        ``{"name": "none"}`` without one).
     """
 
     truth: dict[str, Float]
@@ -368,6 +523,7 @@ class Trial:
     tracking_status: dict[str, str]
     tracking_error_mm: dict[str, float] | None
     runs: dict[str, dict[str, Any]]
+    perturb: dict[str, Any] = field(default_factory=lambda: {"name": "none"})
 
 
 def run_trials(
@@ -377,6 +533,9 @@ def run_trials(
     *,
     tracker: SimTracker | None = None,
     progress: Callable[[int, int], None] | None = None,
+    online: bool = False,
+    perturb: str = "none",
+    seed: int = 0,
 ) -> list[Trial]:
     """Execute every controller on every placement (the running half of :func:`evaluate`).
 
@@ -392,6 +551,14 @@ def run_trials(
         ones.
     progress : callable, optional
         ``progress(done, total)`` after every execution.
+    online : bool
+        Run the controllers online, in the physics loop (:func:`run_online`), instead of
+        reproducing once and playing the trajectory (:func:`run_controller`).
+    perturb : str
+        A disturbance of :data:`pbdkit.sim.perturb.PERTURBATIONS`, drawn per trial (the same
+        for every controller of the trial) from ``seed`` and the trial's index.
+    seed : int
+        Seeds the disturbances.
 
     Returns
     -------
@@ -399,10 +566,14 @@ def run_trials(
     """
     for name in controllers:
         controller_use(name, ts.skill.object_names)
+    if perturb not in PERTURBATIONS:
+        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
+    if perturb == "move" and ts.task.move is None:
+        raise ValueError(f"task {ts.task.name!r} has no 'move' disturbance (TaskSpec.move)")
     q_start = start_posture(ts) if tracker is not None else None
     total, done = len(placements) * len(controllers), 0
     out = []
-    for truth in placements:
+    for i, truth in enumerate(placements):
         told: dict[str, Float] | None = truth
         statuses: dict[str, str] = {}
         errors: dict[str, float] | None = None
@@ -414,17 +585,49 @@ def run_trials(
                 statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
             else:
                 errors = tracking_errors(told, truth, tracker.objects)
+
+        def disturbance(truth: dict[str, Float] = truth, i: int = i) -> Disturbance:
+            return trial_disturbance(ts, perturb, truth, seed=seed, index=i)
+
+        described: dict[str, Any] = disturbance().as_dict()
         runs: dict[str, dict[str, Any]] = {}
         for name in controllers:
             if told is None:
                 runs[name] = {"success": False, "tracking_status": statuses}
             else:
-                runs[name] = run_controller(ts, told, name, sim_objects=truth).summary()
+                act = disturbance()
+                if online:
+                    summary = run_online(
+                        ts, told, name, tracker=tracker, sim_objects=truth, disturbance=act
+                    ).summary()
+                else:
+                    summary = run_controller(
+                        ts, told, name, sim_objects=truth, disturbance=act
+                    ).summary()
+                runs[name] = summary
+                described = act.as_dict()
             done += 1
             if progress is not None:
                 progress(done, total)
-        out.append(Trial(truth, told, statuses, errors, runs))
+        out.append(Trial(truth, told, statuses, errors, runs, described))
     return out
+
+
+def trial_disturbance(
+    ts: TaskSkill, perturb: str, truth: dict[str, Float], *, seed: int, index: int = 0
+) -> Disturbance:
+    """The disturbance ``perturb`` of trial ``index``: :func:`pbdkit.sim.perturb.make_disturbance`
+    timed on the skill's grasp and drawn from ``seed`` and ``index``. A new object each call (a
+    disturbance keeps state while it acts), the same disturbance for the same arguments."""
+    grid = np.arange(ts.skill.n_steps, dtype=np.float64) * _step_seconds(ts)
+    gripper = ts.skill.constraints().gripper
+    rng = np.random.default_rng([seed, 2, index])
+    return make_disturbance(perturb, ts.task, truth, grid, gripper, truth[GRASPED], rng)
+
+
+def _step_seconds(ts: TaskSkill) -> float:
+    """Seconds per step of the skill's time grid (its duration over T - 1 steps)."""
+    return float(ts.skill.duration) / max(ts.skill.n_steps - 1, 1)
 
 
 @dataclass(frozen=True)
@@ -460,6 +663,8 @@ class Evaluation:
     controllers: dict[str, ControllerStats]
     tracking_error_mm: dict[str, Any] | None
     trials: list[Trial]
+    online: bool = False
+    perturb: str = "none"
 
     @property
     def tracking_failures(self) -> int:
@@ -468,9 +673,11 @@ class Evaluation:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready: ``{"task", "trials", "seed", "n_demos", "n_components", "constraints",
-        "constrain_fixed", "learn_seconds", "vision", "controllers": {NAME: {"success_rate",
-        "successes", "metrics"}}, "tracking_error_mm", "tracking_failures", "placements",
-        "observed", "runs"}`` (``runs``: per controller, one summary per trial)."""
+        "constrain_fixed", "learn_seconds", "vision", "online", "perturb", "controllers":
+        {NAME: {"success_rate", "successes", "metrics"}}, "tracking_error_mm",
+        "tracking_failures", "placements", "observed", "perturbations", "runs"}`` (``runs``:
+        per controller, one summary per trial; ``perturbations``: one disturbance per
+        trial)."""
         names = list(self.controllers)
         return {
             "task": self.task,
@@ -482,6 +689,8 @@ class Evaluation:
             "constrain_fixed": self.constrain_fixed,
             "learn_seconds": self.learn_seconds,
             "vision": self.vision,
+            "online": self.online,
+            "perturb": self.perturb,
             "controllers": {
                 k: {"success_rate": v.success_rate, "successes": v.successes, "metrics": v.metrics}
                 for k, v in self.controllers.items()
@@ -493,12 +702,20 @@ class Evaluation:
                 None if t.observed is None else {k: v.tolist() for k, v in t.observed.items()}
                 for t in self.trials
             ],
+            "perturbations": [dict(t.perturb) for t in self.trials],
             "runs": {k: [t.runs[k] for t in self.trials] for k in names},
         }
 
 
 def summarize(
-    ts: TaskSkill, trials: Sequence[Trial], *, seed: int, n_demos: int, vision: bool
+    ts: TaskSkill,
+    trials: Sequence[Trial],
+    *,
+    seed: int,
+    n_demos: int,
+    vision: bool,
+    online: bool = False,
+    perturb: str = "none",
 ) -> Evaluation:
     """The summarising half of :func:`evaluate`: success rates and metric statistics."""
     names = list(trials[0].runs) if trials else []
@@ -507,7 +724,12 @@ def summarize(
         rows = [t.runs[name] for t in trials]
         successes = sum(bool(r["success"]) for r in rows)
         metric_names = list(
-            dict.fromkeys(k for r in rows for k in r if k not in ("success", "tracking_status"))
+            dict.fromkeys(
+                k
+                for r in rows
+                for k, v in r.items()
+                if k != "success" and (v is None or isinstance(v, (int, float)))
+            )
         )
         metrics: dict[str, dict[str, float] | None] = {}
         for m in metric_names:
@@ -535,6 +757,8 @@ def summarize(
         controllers=stats,
         tracking_error_mm=tracking_summary(errors) if vision else None,
         trials=list(trials),
+        online=online,
+        perturb=perturb,
     )
 
 
@@ -550,6 +774,8 @@ def evaluate(
     ground_truth: bool = False,
     tracker: SimTracker | None = None,
     constrain_fixed: bool = False,
+    online: bool = False,
+    perturb: str = "none",
 ) -> Evaluation:
     """Success rate of every controller over ``trials`` random new placements.
 
@@ -579,6 +805,12 @@ def evaluate(
         When learning here: also learn a task-space constraint relative to the fixed objects
         (the basin), which the paper does not (:func:`learn_task`). With ``task_skill``, the
         skill's own constraints are used and recorded.
+    online : bool
+        Run the controllers online, in the physics loop, told the tracker's (or, with
+        ``ground_truth``, the true) positions at 15 Hz (:func:`run_online`); default: reproduce
+        once from the positions seen at the start and play the trajectory.
+    perturb : str
+        ``"none"``, ``"move"`` or ``"push"`` (:mod:`pbdkit.sim.perturb`).
 
     Returns
     -------
@@ -588,6 +820,10 @@ def evaluate(
     spec = T.get_task(task)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
+    if perturb not in PERTURBATIONS:
+        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
+    if perturb == "move" and spec.move is None:
+        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
     ts = task_skill or learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     names = list(controllers) if controllers else controller_names(ts.skill.object_names)
     for name in names:
@@ -598,5 +834,16 @@ def evaluate(
     vision = not ground_truth
     if vision and tracker is None:
         tracker = calibrate_tracker(ts)
-    done = run_trials(ts, placements, names, tracker=tracker if vision else None, progress=progress)
-    return summarize(ts, done, seed=seed, n_demos=n_demos, vision=vision)
+    done = run_trials(
+        ts,
+        placements,
+        names,
+        tracker=tracker if vision else None,
+        progress=progress,
+        online=online,
+        perturb=perturb,
+        seed=seed,
+    )
+    return summarize(
+        ts, done, seed=seed, n_demos=n_demos, vision=vision, online=online, perturb=perturb
+    )

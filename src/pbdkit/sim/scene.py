@@ -92,6 +92,16 @@ class Simulation:
         self._liquid_bodies = np.array(
             [m.body(f"liquid{i}").id for i in range(info.n_liquid)], dtype=np.intp
         )
+        # Objects built as mocap bodies (a disturbance may slide them): body id -> mocap id,
+        # and the object's reference point relative to the body's origin.
+        self._mocap: dict[str, tuple[int, Float]] = {}
+        for name, pos in info.objects.items():
+            bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+            if bid >= 0 and m.body_mocapid[bid] >= 0:
+                mid = int(m.body_mocapid[bid])
+                self._mocap[name] = (mid, np.asarray(pos - m.body_pos[bid], dtype=np.float64))
+        self._glass_qadr = int(m.jnt_qposadr[m.joint("glass_free").id])
+        self._glass_vadr = int(m.jnt_dofadr[m.joint("glass_free").id])
         self._renderer: Any = None
         self._prefix_masks: dict[str, NDArray[np.bool_]] = {}
         self.set_gripper(False)
@@ -185,12 +195,59 @@ class Simulation:
         """Ground-truth object positions o (base frame), name -> (3,), as the cameras define them.
 
         The glass's point is on its axis at the height of the red band's centre; the other
-        objects are static bodies, at their build positions.
+        objects are static bodies, at their build positions, or mocap bodies where they are
+        now (:meth:`place_object`).
         """
         out = {k: v.copy() for k, v in self.info.objects.items()}
+        for name, (mid, offset) in self._mocap.items():
+            out[name] = np.asarray(self.data.mocap_pos[mid] + offset, dtype=np.float64)
         bottom, rot = self.glass_pose()
         out["glass"] = bottom + rot[:, 2] * T.GLASS_PATCH_CENTER
         return out
+
+    def place_object(
+        self, name: str, position: npt.ArrayLike, velocity: npt.ArrayLike | None = None
+    ) -> None:
+        """Move an object so that its reference point (:meth:`object_positions`) is at
+        ``position``, for a disturbance that slides it.
+
+        The glass (a free body) is set upright and translated, with the linear velocity
+        ``velocity`` (default zero) and no angular velocity, as a hand sliding it would hold
+        it; its contents follow through contacts. An object built as a
+        mocap body (the coaster) is moved kinematically. Static objects cannot move.
+
+        Raises
+        ------
+        ValueError
+            An unknown or static object, or a position that is not a finite (3,) vector.
+        """
+        p = np.asarray(position, dtype=np.float64)
+        v = np.zeros(3) if velocity is None else np.asarray(velocity, dtype=np.float64)
+        if (
+            p.shape != (3,)
+            or v.shape != (3,)
+            or not (np.isfinite(p).all() and np.isfinite(v).all())
+        ):
+            raise ValueError(
+                f"position and velocity must be finite (3,) vectors, got {position!r}, {velocity!r}"
+            )
+        if name == "glass":
+            a, d = self._glass_qadr, self._glass_vadr
+            # Upright (the glass is built with the identity orientation), as a hand sliding it
+            # would hold it; its reference point is then on the vertical through its bottom.
+            self.data.qpos[a + 3 : a + 7] = (1.0, 0.0, 0.0, 0.0)
+            self.data.qvel[d + 3 : d + 6] = 0.0
+            mujoco.mj_kinematics(self.model, self.data)
+            now = self.object_positions()["glass"]
+            self.data.qpos[a : a + 3] += p - now
+            self.data.qvel[d : d + 3] = v
+        elif name in self._mocap:
+            mid, offset = self._mocap[name]
+            self.data.mocap_pos[mid] = p - offset
+        else:
+            movable = ["glass", *self._mocap]
+            raise ValueError(f"object {name!r} cannot move; movable objects: {movable}")
+        mujoco.mj_kinematics(self.model, self.data)
 
     def liquid_positions(self) -> Float:
         """Centres of the liquid spheres, shape (n_liquid, 3)."""

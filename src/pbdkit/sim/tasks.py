@@ -42,14 +42,16 @@ before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A sp
 - ``add_objects(world, objects, rng)``: adds the task's bodies to the MuJoCo world
   (``world`` is the ``MjSpec``'s worldbody, ``objects`` a full placement name -> (3,)), the glass
   included (:func:`pbdkit.sim.world.add_glass`, and :func:`pbdkit.sim.world.add_liquid` for a
-  glass that holds ``n_liquid`` spheres); objects other than the glass are static bodies;
+  glass that holds ``n_liquid`` spheres); objects other than the glass are static bodies, or
+  mocap bodies (``add_body(..., mocap=True)``) for one that a disturbance slides;
 - ``via_points(objects, rng, speed) -> list[ViaPoint]``: the teacher's hand path for a placement
   (building blocks in :mod:`pbdkit.sim.teacher`: :class:`~pbdkit.sim.teacher.Person`,
   :func:`~pbdkit.sim.teacher.grasp_via_points`);
 - ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
   what was measured during the run (:class:`pbdkit.sim.execute.RunStats`);
 - ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
-  patch (default: the glass's red band only); ``n_liquid``: spheres in the glass (default 0).
+  patch (default: the glass's red band only); ``n_liquid``: spheres in the glass (default 0);
+  ``move``: the object that ``--perturb move`` slides (:class:`ObjectMove`, optional).
 
 For example, a third task, "put the glass from the table on a green mark on the table"
 (``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
@@ -197,6 +199,34 @@ def _glass_patch() -> dict[str, str]:
     return {"glass": GLASS_PATCH_PREFIX}
 
 
+@dataclass(frozen=True)
+class ObjectMove:
+    """A task's ``move`` disturbance (``pbdkit evaluate --perturb move``): an object slides.
+
+    Attributes
+    ----------
+    obj : str
+        The object that slides on its support (the glass, a free body; or an object the task
+        builds as a MuJoCo mocap body, such as the coaster).
+    distance : float
+        Horizontal length of the slide (m).
+    when : str
+        ``"before_grasp"``: the slide ends before the hand reaches the glass;
+        ``"while_carried"``: it happens while the glass is held (see
+        :func:`pbdkit.sim.perturb.make_disturbance` for the timing).
+    """
+
+    obj: str
+    distance: float
+    when: str
+
+    def __post_init__(self) -> None:
+        if self.when not in ("before_grasp", "while_carried"):
+            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+        if not (self.distance > 0):
+            raise ValueError(f"distance must be > 0 (m), got {self.distance!r}")
+
+
 @dataclass(frozen=True, eq=False)
 class TaskSpec:
     """Everything that makes a task (see the module docstring for how to write one).
@@ -224,6 +254,8 @@ class TaskSpec:
         For each object the cameras can track, the name prefix of its patch's geoms.
     n_liquid : int
         Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
+    move : ObjectMove, optional
+        The task's ``move`` disturbance (``--perturb move``); None: the task has none.
     """
 
     name: str
@@ -234,6 +266,7 @@ class TaskSpec:
     judge: Judge
     patches: Mapping[str, str] = field(default_factory=_glass_patch)
     n_liquid: int = 0
+    move: ObjectMove | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -257,6 +290,13 @@ class TaskSpec:
             )
         if self.n_liquid < 0:
             raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
+        if self.move is not None and (
+            not isinstance(self.move, ObjectMove) or self.move.obj not in ranges
+        ):
+            raise ValueError(
+                f"move of task {self.name!r} must be an ObjectMove of one of its objects "
+                f"{list(ranges)}, got {self.move!r}"
+            )
         for what in ("add_objects", "via_points", "judge"):
             if not callable(getattr(self, what)):
                 raise ValueError(f"{what} of task {self.name!r} must be callable")

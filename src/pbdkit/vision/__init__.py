@@ -14,6 +14,8 @@ Pipeline and names
   :func:`calibrate_intrinsics`: intrinsics from several views of a planar target.
 - :func:`triangulate`: two views -> world points (OpenCV DLT + Gauss-Newton refinement).
 - :class:`StereoTracker`: two frames -> ``{name: Track}``, a status and a position or None.
+- :class:`TrackFilter`: a stream of tracks while a skill runs -> the positions to trust (holds
+  the last good one when the arm hides a patch or carries the object; refuses jumps).
 - :mod:`pbdkit.vision.synthetic`: images of colored discs at known 3-D positions (for tests).
 
 Beyond the paper, both measured to be needed: pixels near the neutral point of the CbCr plane
@@ -44,6 +46,7 @@ from .color import (
     check_image,
     threshold_from_probability,
 )
+from .filter import TrackEvent, TrackFilter
 from .stereo import StereoTracker, Track, TrackStatus, reprojection_error, triangulate
 
 __all__ = [
@@ -55,6 +58,8 @@ __all__ = [
     "PinholeCamera",
     "StereoTracker",
     "Track",
+    "TrackEvent",
+    "TrackFilter",
     "TrackStatus",
     "calibrate_camera",
     "calibrate_intrinsics",

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from .. import tasks as T
 from ..execute import Outcome, RunStats
 from ..scene import Simulation
-from ..tasks import PlacementRange, TaskSpec
+from ..tasks import ObjectMove, PlacementRange, TaskSpec
 from ..teacher import UP, Person, ViaPoint, between, grasp_via_points, radial
 from ..world import LIQUID, SOLID, add_glass, add_liquid
 
@@ -176,6 +176,8 @@ SPEC = TaskSpec(
     via_points=via_points,
     judge=judge,
     n_liquid=N_LIQUID,
+    # --perturb move: the glass slides 4 cm on the table before the grasp.
+    move=ObjectMove("glass", 0.04, "before_grasp"),
 )
 
 

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from .. import tasks as T
 from ..execute import Outcome, RunStats
 from ..scene import Simulation
-from ..tasks import PlacementRange, TaskSpec
+from ..tasks import ObjectMove, PlacementRange, TaskSpec
 from ..teacher import APPROACH, UP, Person, ViaPoint, between, grasp_via_points, radial
 from ..world import add_glass
 
@@ -93,8 +93,9 @@ def _add_shelf(world: Any) -> None:
 
 
 def _add_coaster(world: Any, pos: Float) -> None:
-    # The blue cylinder is also the coaster's patch for the cameras (SPEC.patches).
-    body = world.add_body(name="coaster", pos=[pos[0], pos[1], 0.0])
+    # The blue cylinder is also the coaster's patch for the cameras (SPEC.patches). A mocap
+    # body: static for the physics, but ``--perturb move`` can slide it (SPEC.move).
+    body = world.add_body(name="coaster", pos=[pos[0], pos[1], 0.0], mocap=True)
     body.add_geom(
         name="coaster",
         type=mujoco.mjtGeom.mjGEOM_CYLINDER,
@@ -158,7 +159,7 @@ def judge(sim: Simulation, run: RunStats) -> Outcome:
     """Success and metrics (module docstring) of the state after a run."""
     bottom, _ = sim.glass_pose()
     tilt = math.degrees(sim.glass_tilt())
-    coaster = sim.info.objects["coaster"]
+    coaster = sim.object_positions()["coaster"]  # where it is now (it may have slid)
     err = float(np.linalg.norm(bottom[:2] - coaster[:2]))
     height = float(bottom[2] - coaster[2])
     released = sim.glass_released()
@@ -185,6 +186,8 @@ SPEC = TaskSpec(
     via_points=via_points,
     judge=judge,
     patches={"glass": T.GLASS_PATCH_PREFIX, "coaster": "coaster"},
+    # --perturb move: the coaster slides 5 cm while the glass is carried.
+    move=ObjectMove("coaster", 0.05, "while_carried"),
 )
 
 
