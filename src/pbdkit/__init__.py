@@ -31,6 +31,7 @@ Arrays have rows = samples and are float64: a trajectory is (T, D), a batch lead
 from __future__ import annotations
 
 from . import gaussian, robots
+from .bags import read_bag, write_trajectory_bag
 from .controller import Command, Controller
 from .demos import (
     Demonstration,
@@ -60,7 +61,9 @@ __all__ = [
     "gaussian",
     "load_demonstrations",
     "nullspace_projector",
+    "read_bag",
     "robots",
     "save_demonstrations",
+    "write_trajectory_bag",
 ]
 __version__ = "0.1.0"

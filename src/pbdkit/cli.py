@@ -23,7 +23,11 @@ from ._io import write_json
 from .gmm import MAX_COMPONENTS
 
 if TYPE_CHECKING:
+    from .demos import Demonstration
+    from .reproduce import ReproductionResult
+    from .robot import Robot
     from .sim.tasks import TaskSpec
+    from .skill import Skill
 
 app = typer.Typer(
     add_completion=False,
@@ -300,10 +304,51 @@ def teach(
     console.print(f"wrote {len(items)} demonstrations to {out}")
 
 
+# Suffixes of the files `learn` reads: a pbdkit archive, or a bag (a rosbag2 bag is usually a
+# directory holding metadata.yaml; its storage file, or a ROS 1 bag, works too).
+_BAG_SUFFIXES = (".db3", ".mcap", ".bag")
+
+
+def _is_bag(path: Path) -> bool:
+    return path.is_dir() or path.suffix in _BAG_SUFFIXES
+
+
+def _parse_sources(texts: list[str]) -> dict[str, str | np.ndarray]:
+    """The --object NAME=SOURCE options of `learn`: a topic, tf:frame, or x,y,z (metres)."""
+    sources: dict[str, str | np.ndarray] = {}
+    for text in texts:
+        name, sep, rest = text.partition("=")
+        if not sep or not name or not rest:
+            raise typer.BadParameter(
+                f"expected NAME=SOURCE (a topic, tf:frame or x,y,z), got {text!r}",
+                param_hint="--object",
+            )
+        if name in sources:
+            _fail(f"--object {name} is given twice; give each object once")
+        try:
+            values = [float(v) for v in rest.split(",")]
+        except ValueError:
+            sources[name] = rest
+            continue
+        if len(values) != 3:
+            raise typer.BadParameter(
+                f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
+            )
+        sources[name] = np.array(values)
+    return sources
+
+
 @app.command()
 @_reports_errors
 def learn(
-    demos: Annotated[Path, typer.Argument(help="Demonstrations (.npz from `pbdkit teach`).")],
+    demos: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="DEMOS",
+            help="Demonstrations: one .npz from `pbdkit teach`, or ROS bags, one demonstration "
+            "each (rosbag2 directories, .db3 or .mcap files, ROS 1 .bag files).",
+        ),
+    ],
     robot: Annotated[str, typer.Option(help="katana, panda, or a URDF file.")] = "katana",
     tip: Annotated[str | None, typer.Option(help="Tip frame (URDF robots).")] = None,
     out: Annotated[Path, typer.Option(help="Output skill file.")] = Path("skill.npz"),
@@ -320,18 +365,65 @@ def learn(
             "fixed).",
         ),
     ] = None,
+    joint_topic: Annotated[
+        str | None,
+        typer.Option(help="Bags: topic of sensor_msgs/msg/JointState (default /joint_states)."),
+    ] = None,
+    obj: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--object",
+            help="Bags: NAME=SOURCE, where the object is (repeat for several): a topic of "
+            "PoseStamped, PointStamped or TransformStamped (median over the first second), "
+            "tf:FRAME (a /tf frame), or x,y,z in the robot's base frame (m).",
+        ),
+    ] = None,
+    gripper_topic: Annotated[
+        str | None, typer.Option(help="Bags: topic of std_msgs/msg/Bool or Float64.")
+    ] = None,
+    start: Annotated[
+        float | None,
+        typer.Option(
+            help="Bags: seconds after the first joint state where a demonstration starts."
+        ),
+    ] = None,
+    end: Annotated[
+        float | None,
+        typer.Option(help="Bags: seconds after the first joint state where it ends."),
+    ] = None,
 ) -> None:
-    """Learn a skill (one GMM per space, K chosen by cross-validation) from demonstrations."""
+    """Learn a skill (one GMM per space, K chosen by cross-validation) from demonstrations:
+    an .npz file, or ROS bags (see pbdkit.bags for the topics and conventions)."""
     from . import robots
-    from .demos import load_demonstrations
     from .robot import Robot
     from .skill import Skill
 
     shipped = robot in robots.available()
     if shipped and tip is not None:
         _fail(f"--tip applies to a URDF robot; the shipped {robot} has a fixed tool frame")
+    bag_options = {
+        "--joint-topic": joint_topic,
+        "--object": obj,
+        "--gripper-topic": gripper_topic,
+        "--start": start,
+        "--end": end,
+    }
+    npz = [p for p in demos if p.suffix == ".npz"]
+    if npz and len(demos) > 1:
+        _fail(f"give one .npz file of demonstrations, or bags only; got {len(demos)} paths")
+    if npz:
+        given = [k for k, v in bag_options.items() if v is not None]
+        if given:
+            _fail(f"{', '.join(given)} apply to bags; {npz[0]} is an .npz file")
+    else:
+        unknown = [p for p in demos if p.exists() and not _is_bag(p)]
+        if unknown:
+            _fail(
+                f"{unknown[0]}: not an .npz file of demonstrations nor a ROS bag (a rosbag2 "
+                "directory, .db3, .mcap or .bag file)"
+            )
+    sources = _parse_sources(obj or [])
     _check_output(out, "--out")
-    items = load_demonstrations(demos)
     if shipped:
         arm = robots.load(robot)
     elif Path(robot).is_file():
@@ -341,15 +433,52 @@ def learn(
             f"robot must be one of {robots.available()} or a URDF file, got {robot!r}",
             param_hint="--robot",
         )
+    items = _load_demos(demos, arm, sources, joint_topic, gripper_topic, start, end)
     with console.status("learning ..."):
-        start = time.perf_counter()
+        t_start = time.perf_counter()
         skill = Skill.learn(
             items, arm, n_steps=n_steps, max_components=max_components, objects=task_space or None
         )
-        seconds = time.perf_counter() - start
+        seconds = time.perf_counter() - t_start
     skill.save(out)
     ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components.items())
     console.print(f"learned in {seconds:.2f} s; K per space: {ks}; wrote {out}")
+
+
+def _load_demos(
+    paths: list[Path],
+    arm: Robot,
+    sources: dict[str, str | np.ndarray],
+    joint_topic: str | None,
+    gripper_topic: str | None,
+    start: float | None,
+    end: float | None,
+) -> list[Demonstration]:
+    """The demonstrations of `learn`: an .npz file's, or one per bag (errors name the bag)."""
+    if len(paths) == 1 and paths[0].suffix == ".npz":
+        from .demos import load_demonstrations
+
+        return load_demonstrations(paths[0])
+    from .bags import read_bag
+
+    items = []
+    for path in paths:
+        try:
+            items.append(
+                read_bag(
+                    path,
+                    robot=arm,
+                    joint_topic=joint_topic or "/joint_states",
+                    objects=sources,
+                    gripper_topic=gripper_topic,
+                    start=start,
+                    end=end,
+                )
+            )
+        except ValueError as exc:
+            text = str(exc)
+            raise ValueError(text if str(path) in text else f"{path}: {text}") from exc
+    return items
 
 
 def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]:
@@ -387,6 +516,14 @@ def reproduce(
     use: Annotated[
         list[str] | None, typer.Option(help="Constraints to use (default: all, fused).")
     ] = None,
+    bag: Annotated[
+        Path | None,
+        typer.Option(
+            help="Also write a rosbag2 bag (a new directory) with the trajectory as one "
+            "trajectory_msgs/msg/JointTrajectory on /joint_trajectory (and the gripper as "
+            "std_msgs/msg/Bool on /gripper), timed by the skill's duration.",
+        ),
+    ] = None,
 ) -> None:
     """Reproduce a skill for new object positions (paper Table II)."""
     from ._io import save_npz_atomic
@@ -394,8 +531,12 @@ def reproduce(
 
     objects = _parse_objects(obj)
     _check_output(out, "--out")
+    if bag is not None:
+        _check_bag_output(bag)
     skill = Skill.load(skill_path)
     res = skill.reproduce(objects, use=use or None)
+    # Before writing anything: a skill without a duration or joint names cannot give a bag.
+    timing = None if bag is None else _bag_timing(skill, res)
     arrays = {
         "t": res.t,
         "joints": res.joints,
@@ -407,6 +548,33 @@ def reproduce(
     save_npz_atomic(out, arrays)
     errs = ", ".join(f"{k} {1000 * v.min():.1f} mm" for k, v in res.task_errors.items())
     console.print(f"wrote {out} ({len(res.t)} steps); closest approach: {errs}")
+    if bag is not None and timing is not None:
+        from .bags import write_trajectory_bag
+
+        t, names = timing
+        grip = res.gripper if skill.has_gripper else None
+        write_trajectory_bag(bag, t, res.joints, names, gripper=grip)
+        console.print(f"wrote {bag}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
+
+
+def _check_bag_output(bag: Path) -> None:
+    """Fail unless a new bag (a directory) can be created at ``bag``."""
+    if bag.exists() or bag.is_symlink():
+        _fail(f"--bag {bag}: exists; give a new path (a bag is a directory, never overwritten)")
+    _check_output(bag, "--bag")
+
+
+def _bag_timing(skill: Skill, res: ReproductionResult) -> tuple[np.ndarray, list[str]]:
+    """Times (s, from :meth:`pbdkit.Skill.times`) and joint names (the skill's robot's) of the
+    trajectory bag of `reproduce`."""
+    names = getattr(skill.robot, "joint_names", None)
+    if names is None:
+        _fail("--bag: the skill's robot has no joint names; load it with a pbdkit.Robot")
+    try:
+        t = skill.times(res)
+    except ValueError as exc:
+        _fail(f"--bag: {exc}")
+    return t, [str(n) for n in names]
 
 
 @app.command()

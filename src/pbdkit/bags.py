@@ -1,0 +1,909 @@
+"""ROS bags: demonstrations from recordings of a real arm, trajectories back to ROS 2.
+
+People who teach a real arm record a bag: the joint states of kinesthetic teaching, the object
+poses their perception publishes, the gripper state. :func:`read_bag` turns one such recording
+into a :class:`pbdkit.Demonstration`; :func:`write_trajectory_bag` writes a reproduction as a
+``trajectory_msgs/msg/JointTrajectory`` that a ``ros2_control`` joint trajectory controller can
+replay; :func:`write_demonstration_bag` records a :class:`~pbdkit.Demonstration` as a bag (for
+simulated demonstrations, tests and examples). The `rosbags` library does the reading and
+writing: no ROS installation is needed.
+
+Formats
+-------
+Read: whatever :class:`rosbags.highlevel.AnyReader` reads: a rosbag2 bag (a directory holding
+``metadata.yaml``, sqlite3 or MCAP storage), a single rosbag2 storage file (``.db3``, ``.mcap``),
+or a ROS 1 ``.bag``. The message definitions stored in the bag are used; a bag without them is
+read with ROS 2 Humble's. Written: rosbag2 bags (format version 9), sqlite3 (default) or MCAP
+storage, message definitions included.
+
+=================  ===============================================  =========================
+what               message type                                     field used
+=================  ===============================================  =========================
+joint states       ``sensor_msgs/msg/JointState``                   header.stamp, name,
+                                                                    position
+object (topic)     ``geometry_msgs/msg/PoseStamped``                pose.position
+                   ``geometry_msgs/msg/PointStamped``               point
+                   ``geometry_msgs/msg/TransformStamped``           transform.translation
+object (tf)        ``tf2_msgs/msg/TFMessage`` on ``/tf``,           every transform
+                   ``/tf_static``
+gripper            ``std_msgs/msg/Bool``, ``Float64``, ``Float32``  data (closed where > 0.5)
+trajectory out     ``trajectory_msgs/msg/JointTrajectory``          joint_names, points
+=================  ===============================================  =========================
+
+Conventions
+-----------
+- ROS time is sec + nanosec * 1e-9. Stamps are kept as integer nanoseconds and converted once,
+  as differences, so the 1.7e9 s of an epoch stamp cost no precision.
+- Time of a demonstration: the joint states' ``header.stamp``. ``start`` and ``end`` are
+  seconds after the first joint-state stamp of the bag; the samples stamped within
+  [first + start, first + end] are kept, and the time origin (t = 0) is the first of them: the
+  first joint-state stamp at or after ``start``. The stamps must increase strictly in
+  recording order.
+- Joint positions are reordered to ``robot.joint_names`` by each message's ``name`` field
+  (drivers publish in any order, and the order may change between messages); joints the robot
+  does not have (gripper fingers) are ignored, and so are messages that name none of the
+  robot's joints (another driver publishing on the same topic). A message that names some of
+  them but not all is an error.
+- Objects are positions in the robot's base frame (``robot.base``, the URDF root link), constant
+  during a demonstration (as in the paper). A topic source gives the component-wise median of
+  its messages stamped within the demonstration's first second, [t0, t0 + 1 s]: before the hand
+  moves anything, and robust to a perception outlier. A message in another frame than the base
+  (its ``header.frame_id``, neither empty nor ``robot.base``) is expressed in the base frame
+  through tf, as a ``"tf:frame"`` source is.
+- tf: the transforms of ``/tf`` stamped within the first second and every transform of
+  ``/tf_static``. Each parent -> child link is estimated from its transforms (median
+  translation; the sign-aligned mean of the quaternions, normalized) and a frame's position in
+  the base frame composes the links from the base down to it through their parents (tf2's
+  lookup: the base may itself hang below a common root, such as ``world``). If the base is not
+  reached, the error names both chains up to where they stop.
+- The gripper messages carry no header: they are placed by their recording (log) time against
+  the joint states' log times and held between messages (zero-order hold); before the first
+  message the gripper is open (0).
+
+Bad input
+---------
+Every problem raises before anything is returned or written: :class:`FileNotFoundError` for a
+bag that does not exist, :class:`ValueError` otherwise, naming the argument and the expected
+and actual value: a topic not in the bag (the message lists the bag's topics and types), a topic
+of another type (expected and actual types), non-monotonic stamps (the two messages and their
+stamps), a robot joint missing from a message (named), an empty cut, an object frame that tf
+does not join to the base. Writers refuse an existing path (a bag is a directory: nothing is
+overwritten or deleted) and write atomically: the bag is written into a temporary sibling
+directory and renamed onto the target (``os.replace``), so a reader never sees half a bag.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from ._validation import check_array, check_positive_float
+from .demos import Demonstration
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys.store import Typestore
+
+    from .robot import Robot
+
+__all__ = [
+    "GRIPPER_TYPES",
+    "JOINT_STATE_TYPE",
+    "OBJECT_TYPES",
+    "STORAGES",
+    "TF_TOPICS",
+    "TRAJECTORY_TYPE",
+    "read_bag",
+    "write_demonstration_bag",
+    "write_trajectory_bag",
+]
+
+Float = NDArray[np.float64]
+Storage = Literal["sqlite3", "mcap"]
+
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+#: Message types of an object topic, and where each holds the position.
+OBJECT_TYPES: Mapping[str, str] = {
+    "geometry_msgs/msg/PoseStamped": "pose.position",
+    "geometry_msgs/msg/PointStamped": "point",
+    "geometry_msgs/msg/TransformStamped": "transform.translation",
+}
+GRIPPER_TYPES = ("std_msgs/msg/Bool", "std_msgs/msg/Float64", "std_msgs/msg/Float32")
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TOPICS = ("/tf", "/tf_static")
+TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
+STORAGES: tuple[Storage, ...] = ("sqlite3", "mcap")
+TF_PREFIX = "tf:"
+#: Objects are located from the messages of the demonstration's first second.
+OBJECT_WINDOW_NS = 1_000_000_000
+#: A gripper signal above this is closed.
+GRIPPER_THRESHOLD = 0.5
+_NS = 1_000_000_000
+
+
+@functools.cache
+def _typestore() -> Typestore:
+    """ROS 2 Humble's message types (built once: it takes ~0.1 s)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def _stamp_ns(stamp: Any) -> int:
+    """A builtin_interfaces Time (sec, nanosec) as integer nanoseconds."""
+    return int(stamp.sec) * _NS + int(stamp.nanosec)
+
+
+def _frame(name: str) -> str:
+    """A tf frame id as tf2 keys it: without a leading slash (ROS 1 bags often have one)."""
+    return name.lstrip("/")
+
+
+# ============================================================================ reading
+class _Bag:
+    """An open bag: its topics, and the messages of one topic, deserialized."""
+
+    def __init__(self, reader: AnyReader, path: Path) -> None:
+        self.reader = reader
+        self.path = path
+        self.topics = {name: info.msgtype for name, info in reader.topics.items()}
+
+    def listing(self) -> str:
+        """The bag's topics and types, for error messages."""
+        if not self.topics:
+            return "the bag has no topics"
+        items = ", ".join(f"{t} ({m or 'several types'})" for t, m in sorted(self.topics.items()))
+        return f"its topics: {items}"
+
+    def check_topic(self, topic: str, expected: Sequence[str], what: str) -> str:
+        """The message type of ``topic``, or a ValueError naming what was expected."""
+        if topic not in self.topics:
+            raise ValueError(
+                f"{what}: the bag {self.path} has no topic {topic!r}; {self.listing()}"
+            )
+        actual = self.topics[topic]
+        if actual is None or actual not in expected:
+            want = " or ".join(expected)
+            got = actual or "several types"
+            raise ValueError(f"{what}: topic {topic!r} must be of type {want}, got {got}")
+        return actual
+
+    def messages(self, topic: str) -> list[tuple[int, Any]]:
+        """(log time ns, message) of every message of ``topic``, in recording order."""
+        conns: list[Connection] = [c for c in self.reader.connections if c.topic == topic]
+        return [
+            (int(log), self.reader.deserialize(raw, conn.msgtype))
+            for conn, log, raw in self.reader.messages(connections=conns)
+        ]
+
+
+def _open_reader(path: Path) -> AnyReader:
+    from rosbags.highlevel import AnyReader
+
+    if not path.exists():
+        raise FileNotFoundError(f"bag not found: {path}")
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise ValueError(
+            f"{path} is a directory without metadata.yaml: not a rosbag2 bag (give the bag's "
+            "directory, a .db3 or .mcap storage file, or a ROS 1 .bag file)"
+        )
+    return AnyReader([path], default_typestore=_typestore())
+
+
+def _reader_errors() -> tuple[type[Exception], ...]:
+    from rosbags.highlevel import AnyReaderError
+    from rosbags.rosbag1 import ReaderError as Reader1Error
+    from rosbags.rosbag2 import ReaderError as Reader2Error
+
+    return (AnyReaderError, Reader1Error, Reader2Error)
+
+
+def read_bag(
+    path: str | os.PathLike[str],
+    *,
+    robot: Robot,
+    joint_topic: str = "/joint_states",
+    objects: Mapping[str, str | npt.ArrayLike] | None = None,
+    gripper_topic: str | None = None,
+    start: float | None = None,
+    end: float | None = None,
+) -> Demonstration:
+    """One demonstration from a ROS bag (see the module docstring for the conventions).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A rosbag2 directory (sqlite3 or MCAP storage), a ``.db3`` or ``.mcap`` storage file,
+        or a ROS 1 ``.bag``.
+    robot : Robot
+        The arm: its ``joint_names`` order the joints, its ``base`` (the URDF root link) is
+        the frame of the object positions.
+    joint_topic : str
+        Topic of ``sensor_msgs/msg/JointState`` messages (kinesthetic teaching).
+    objects : dict str -> str or array-like of shape (3,), optional
+        Where each object's position comes from: a topic of ``geometry_msgs/msg/PoseStamped``,
+        ``PointStamped`` or ``TransformStamped`` (median over the first second), a tf frame
+        written ``"tf:frame_name"`` (its position in the base frame), or a fixed position
+        (3,) in the base frame (m). Default: none (a joint-space skill).
+    gripper_topic : str, optional
+        Topic of ``std_msgs/msg/Bool`` or ``Float64`` (``Float32``) messages: closed where
+        > 0.5, held between messages, open before the first. Default: no gripper signal.
+    start, end : float, optional
+        Seconds after the first joint-state stamp of the bag: keep the samples stamped within
+        [start, end] (default: from the first, to the last).
+
+    Returns
+    -------
+    demo : Demonstration
+        t (T,) seconds from the first kept stamp, joints (T, n) in ``robot.joint_names``
+        order, the objects in the order given, gripper (T,) of 0.0 and 1.0 or None.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        A file that is not a bag, a missing topic (the message lists the bag's topics), a
+        topic of the wrong type (expected and actual types), stamps that do not increase, a
+        robot joint missing from a message, fewer than 2 samples between ``start`` and
+        ``end``, an object without messages in the first second, or a frame that tf does not
+        join to the base.
+    """
+    joint_names = getattr(robot, "joint_names", None)
+    base = getattr(robot, "base", None)
+    if not isinstance(joint_names, list) or not isinstance(base, str):
+        raise ValueError(
+            "robot must be a pbdkit.Robot (with joint_names and base), e.g. "
+            f"pbdkit.robots.katana(), got {type(robot).__name__}"
+        )
+    sources = _check_sources(objects)
+    start_ns, end_ns = _check_window(start, end)
+    p = Path(path)
+    try:
+        with _open_reader(p) as reader:
+            bag = _Bag(reader, p)
+            return _read_demonstration(
+                bag,
+                joint_names=[str(n) for n in joint_names],
+                base=_frame(base),
+                joint_topic=joint_topic,
+                sources=sources,
+                gripper_topic=gripper_topic,
+                start_ns=start_ns,
+                end_ns=end_ns,
+            )
+    except _reader_errors() as exc:
+        raise ValueError(f"{p} is not a readable ROS bag: {exc}") from exc
+
+
+def _check_sources(objects: object) -> dict[str, str | Float]:
+    if objects is None:
+        return {}
+    if not isinstance(objects, Mapping):
+        raise ValueError(
+            "objects must be a dict mapping object names to a topic, 'tf:frame' or a position "
+            f"(3,), got {type(objects).__name__}"
+        )
+    out: dict[str, str | Float] = {}
+    for name, source in objects.items():
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"objects keys must be non-empty strings, got {name!r}")
+        if isinstance(source, str):
+            if not source or source == TF_PREFIX:
+                raise ValueError(
+                    f"objects[{name!r}] must be a topic, 'tf:frame' or a position (3,), "
+                    f"got {source!r}"
+                )
+            out[name] = source
+        else:
+            out[name] = check_array(source, f"objects[{name!r}]", shape=(3,))
+    return out
+
+
+def _check_window(start: float | None, end: float | None) -> tuple[int, int | None]:
+    s = 0.0 if start is None else check_positive_float(start, "start", allow_zero=True)
+    if end is None:
+        return round(s * _NS), None
+    e = check_positive_float(end, "end", allow_zero=True)
+    if e <= s:
+        raise ValueError(f"end must be > start ({s!r} s), got {e!r}")
+    return round(s * _NS), round(e * _NS)
+
+
+def _read_demonstration(
+    bag: _Bag,
+    *,
+    joint_names: list[str],
+    base: str,
+    joint_topic: str,
+    sources: Mapping[str, str | Float],
+    gripper_topic: str | None,
+    start_ns: int,
+    end_ns: int | None,
+) -> Demonstration:
+    bag.check_topic(joint_topic, (JOINT_STATE_TYPE,), "joint_topic")
+    # Check every topic before reading any message: a wrong name fails at once.
+    for name, source in sources.items():
+        if isinstance(source, str) and not source.startswith(TF_PREFIX):
+            bag.check_topic(source, tuple(OBJECT_TYPES), f"objects[{name!r}]")
+    if gripper_topic is not None:
+        bag.check_topic(gripper_topic, GRIPPER_TYPES, "gripper_topic")
+
+    stamps, logs, joints = _joint_states(bag, joint_topic, joint_names)
+    rel = stamps - stamps[0]
+    keep = rel >= start_ns
+    if end_ns is not None:
+        keep &= rel <= end_ns
+    if np.count_nonzero(keep) < 2:
+        span = f"{rel[-1] * 1e-9:.3f}"
+        window = f"[{start_ns * 1e-9:g}, {'end' if end_ns is None else f'{end_ns * 1e-9:g}'}]"
+        raise ValueError(
+            f"start/end: {np.count_nonzero(keep)} joint state(s) of {joint_topic!r} within "
+            f"{window} s, need at least 2; the joint states span [0, {span}] s"
+        )
+    stamps, logs, joints = stamps[keep], logs[keep], joints[keep]
+    t0 = int(stamps[0])
+
+    tf: _TfTree | None = None
+
+    def tf_tree() -> _TfTree:
+        nonlocal tf
+        if tf is None:
+            tf = _TfTree.from_bag(bag, t0)
+        return tf
+
+    positions: dict[str, Float] = {}
+    for name, source in sources.items():
+        what = f"objects[{name!r}]"
+        if not isinstance(source, str):
+            positions[name] = source
+        elif source.startswith(TF_PREFIX):
+            frame = _frame(source[len(TF_PREFIX) :])
+            positions[name] = tf_tree().position(frame, base, what)
+        else:
+            positions[name] = _object_position(bag, source, t0, base, tf_tree, what)
+
+    gripper = None if gripper_topic is None else _gripper(bag, gripper_topic, logs)
+    return Demonstration(
+        t=(stamps - t0).astype(np.float64) * 1e-9,
+        joints=joints,
+        objects=positions,
+        gripper=gripper,
+    )
+
+
+def _joint_states(
+    bag: _Bag, topic: str, joint_names: list[str]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], Float]:
+    """Header stamps (ns), log times (ns) and joints (T, n) in ``joint_names`` order.
+
+    A message naming none of the robot's joints comes from another driver sharing the topic
+    (a gripper's fingers) and is skipped; one naming some of them only is an error.
+    """
+    msgs = bag.messages(topic)
+    wanted = set(joint_names)
+    index: list[int] = []  # the message number of each kept sample, for error messages
+    stamps: list[int] = []
+    logs: list[int] = []
+    rows: list[Float] = []
+    order: dict[tuple[str, ...], NDArray[np.intp] | None] = {}  # per layout of names
+    for i, (log, msg) in enumerate(msgs):
+        names = tuple(msg.name)
+        if names not in order:
+            order[names] = (
+                _joint_order(names, joint_names, topic, i) if wanted & set(names) else None
+            )
+        idx = order[names]
+        if idx is None:
+            continue
+        position = np.asarray(msg.position, dtype=np.float64)
+        if position.shape != (len(names),):
+            raise ValueError(
+                f"joint_topic: message {i} of {topic!r} has {len(names)} names and "
+                f"{position.shape[0]} positions; they must match"
+            )
+        rows.append(position[idx])
+        stamps.append(_stamp_ns(msg.header.stamp))
+        logs.append(log)
+        index.append(i)
+    if len(rows) < 2:
+        seen = sorted({n for names in order for n in names})
+        raise ValueError(
+            f"joint_topic: {len(rows)} message(s) of {topic!r} (of {len(msgs)}) name the "
+            f"robot's joints {joint_names}, need at least 2; the messages name {seen}"
+        )
+    stamps_ = np.array(stamps, dtype=np.int64)
+    bad = np.flatnonzero(np.diff(stamps_) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise ValueError(
+            f"joint_topic: the header stamps of {topic!r} must increase strictly in recording "
+            f"order; message {index[k]} is stamped {_seconds(stamps[k])} s, not after message "
+            f"{index[k - 1]} ({_seconds(stamps[k - 1])} s)"
+        )
+    return stamps_, np.array(logs, dtype=np.int64), np.stack(rows)
+
+
+def _seconds(ns: int) -> str:
+    """Integer nanoseconds as exact decimal seconds."""
+    sign = "-" if ns < 0 else ""
+    return f"{sign}{abs(ns) // _NS}.{abs(ns) % _NS:09d}"
+
+
+def _joint_order(
+    names: tuple[str, ...], joint_names: list[str], topic: str, i: int
+) -> NDArray[np.intp]:
+    if len(set(names)) != len(names):
+        raise ValueError(f"joint_topic: message {i} of {topic!r} names a joint twice: {names}")
+    where = {n: k for k, n in enumerate(names)}
+    missing = [n for n in joint_names if n not in where]
+    if missing:
+        raise ValueError(
+            f"joint_topic: joint(s) {missing} of the robot missing from message {i} of "
+            f"{topic!r}, which names {list(names)}"
+        )
+    return np.array([where[n] for n in joint_names], dtype=np.intp)
+
+
+def _position_of(msg: Any, msgtype: str) -> tuple[Float, str]:
+    """(position (3,), frame) of an object message."""
+    if msgtype == "geometry_msgs/msg/PoseStamped":
+        v = msg.pose.position
+    elif msgtype == "geometry_msgs/msg/PointStamped":
+        v = msg.point
+    else:
+        v = msg.transform.translation
+    return np.array([v.x, v.y, v.z], dtype=np.float64), _frame(str(msg.header.frame_id))
+
+
+def _object_position(
+    bag: _Bag,
+    topic: str,
+    t0: int,
+    base: str,
+    tf_tree: Callable[[], _TfTree],
+    what: str,
+) -> Float:
+    msgtype = bag.check_topic(topic, tuple(OBJECT_TYPES), what)
+    msgs = bag.messages(topic)
+    window: list[Float] = []
+    frames: set[str] = set()
+    stamps: list[int] = []
+    for _, msg in msgs:
+        ns = _stamp_ns(msg.header.stamp)
+        stamps.append(ns)
+        if t0 <= ns <= t0 + OBJECT_WINDOW_NS:
+            pos, frame = _position_of(msg, msgtype)
+            window.append(pos)
+            frames.add(frame)
+    if not window:
+        span = (
+            f"its {len(msgs)} messages are stamped from {_seconds(min(stamps) - t0)} to "
+            f"{_seconds(max(stamps) - t0)} s"
+            if msgs
+            else "it has no messages"
+        )
+        raise ValueError(
+            f"{what}: no message of {topic!r} stamped within the first second of the "
+            f"demonstration ([0, 1] s after the first joint state); {span}. Give the position "
+            "as x,y,z, or choose start"
+        )
+    if len(frames) > 1:
+        raise ValueError(
+            f"{what}: the messages of {topic!r} are in several frames {sorted(frames)}"
+        )
+    position = np.median(np.stack(window), axis=0)
+    if not np.all(np.isfinite(position)):
+        raise ValueError(f"{what}: the position from {topic!r} is not finite: {position}")
+    (frame,) = frames
+    if frame in ("", base):
+        return np.asarray(position, dtype=np.float64)
+    rot, trans = tf_tree().transform(frame, base, f"{what} (frame {frame!r} of {topic!r})")
+    return np.asarray(rot @ position + trans, dtype=np.float64)
+
+
+def _gripper(bag: _Bag, topic: str, joint_logs: NDArray[np.int64]) -> Float:
+    """The gripper signal held at each joint state's log time: 1.0 closed, 0.0 open."""
+    msgs = bag.messages(topic)
+    logs = np.array([log for log, _ in msgs], dtype=np.int64)
+    closed = np.array([float(msg.data) > GRIPPER_THRESHOLD for _, msg in msgs], dtype=np.float64)
+    idx = np.searchsorted(logs, joint_logs, side="right") - 1
+    out = np.zeros(joint_logs.shape[0], dtype=np.float64)
+    held = idx >= 0
+    out[held] = closed[idx[held]]
+    return out
+
+
+# ============================================================================ tf
+def _rotation_from_quaternion(q: Float) -> Float:
+    """Rotation matrix of a unit quaternion (x, y, z, w) (Hamilton convention, as tf2)."""
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+class _TfTree:
+    """The tf links of a demonstration's first second: child -> (parent, rotation, translation),
+    the child frame's pose in its parent's."""
+
+    def __init__(self, links: Mapping[str, tuple[str, Float, Float]], source: str) -> None:
+        self.links = dict(links)
+        self.source = source
+
+    @classmethod
+    def from_bag(cls, bag: _Bag, t0: int) -> _TfTree:
+        present = [t for t in TF_TOPICS if t in bag.topics]
+        if not present:
+            raise ValueError(
+                f"tf: the bag {bag.path} has neither /tf nor /tf_static, needed to place a "
+                f"frame in the robot's base frame; {bag.listing()}"
+            )
+        samples: dict[tuple[str, str], list[tuple[Float, Float]]] = {}
+        for topic in present:
+            bag.check_topic(topic, (TF_TYPE,), "tf")
+            static = topic == "/tf_static"
+            for _, msg in bag.messages(topic):
+                for tr in msg.transforms:
+                    ns = _stamp_ns(tr.header.stamp)
+                    if not static and not t0 <= ns <= t0 + OBJECT_WINDOW_NS:
+                        continue
+                    v, r = tr.transform.translation, tr.transform.rotation
+                    key = (_frame(str(tr.header.frame_id)), _frame(str(tr.child_frame_id)))
+                    samples.setdefault(key, []).append(
+                        (np.array([v.x, v.y, v.z]), np.array([r.x, r.y, r.z, r.w]))
+                    )
+        links: dict[str, tuple[str, Float, Float]] = {}
+        for (parent, child), items in samples.items():
+            if child in links:
+                raise ValueError(
+                    f"tf: frame {child!r} has two parents, {links[child][0]!r} and {parent!r}"
+                )
+            links[child] = (parent, *_mean_transform(items, parent, child))
+        return cls(links, " and ".join(present))
+
+    def _to_root(self, frame: str) -> tuple[list[str], Float, Float]:
+        """The chain frame <- parent <- ... <- root and the pose of ``frame`` in the root."""
+        chain = [frame]
+        rot, trans = np.eye(3), np.zeros(3)
+        while chain[-1] in self.links:
+            parent, r, p = self.links[chain[-1]]
+            if parent in chain:
+                raise ValueError(f"tf: the frames {[*chain, parent]} form a cycle")
+            # T_parent_frame = T_parent_child @ T_child_frame
+            rot, trans = r @ rot, r @ trans + p
+            chain.append(parent)
+        return chain, rot, trans
+
+    def transform(self, frame: str, base: str, what: str) -> tuple[Float, Float]:
+        """Rotation (3, 3) and translation (3,) of ``frame`` in ``base``."""
+        chain_f, rot_f, trans_f = self._to_root(frame)
+        chain_b, rot_b, trans_b = self._to_root(base)
+        if chain_f[-1] != chain_b[-1]:
+            raise ValueError(
+                f"{what}: tf does not join {frame!r} to the robot's base {base!r}: "
+                f"{' <- '.join(chain_f)} and {' <- '.join(chain_b)} end in different roots "
+                f"(transforms of {self.source} during the first second)"
+            )
+        # T_base_frame = T_root_base^-1 @ T_root_frame
+        return rot_b.T @ rot_f, rot_b.T @ (trans_f - trans_b)
+
+    def position(self, frame: str, base: str, what: str) -> Float:
+        """Origin of ``frame`` in ``base`` (m)."""
+        return self.transform(frame, base, f"{what} (tf:{frame})")[1]
+
+
+def _mean_transform(
+    items: Sequence[tuple[Float, Float]], parent: str, child: str
+) -> tuple[Float, Float]:
+    """Rotation and translation of one link from its samples: median translation, mean of
+    the sign-aligned quaternions, normalized (the chordal mean: exact for equal samples)."""
+    trans = np.median(np.stack([p for p, _ in items]), axis=0)
+    quats = np.stack([q for _, q in items])
+    quats = quats * np.where(quats @ quats[0] < 0, -1.0, 1.0)[:, None]
+    q = quats.mean(axis=0)
+    norm = float(np.linalg.norm(q))
+    if not (np.isfinite(norm) and norm > 1e-9 and np.all(np.isfinite(trans))):
+        raise ValueError(f"tf: the transform {parent!r} -> {child!r} is not a valid rotation")
+    return _rotation_from_quaternion(q / norm), np.asarray(trans, dtype=np.float64)
+
+
+# ============================================================================ writing
+def _check_new_path(path: str | os.PathLike[str], name: str = "path") -> Path:
+    p = Path(path)
+    if p.exists() or p.is_symlink():
+        raise ValueError(
+            f"{name} {p} exists; give a new path (a bag is a directory and is never overwritten)"
+        )
+    return p
+
+
+def _check_storage(storage: object) -> Storage:
+    if storage not in STORAGES:
+        raise ValueError(f"storage must be one of {list(STORAGES)}, got {storage!r}")
+    return storage
+
+
+def _check_names(names: object, n: int, what: str) -> list[str]:
+    if isinstance(names, str) or not isinstance(names, Sequence):
+        raise ValueError(f"{what} must be a list of {n} names, got {type(names).__name__}")
+    out = list(names)
+    if len(out) != n or not all(isinstance(x, str) and x for x in out):
+        raise ValueError(f"{what} must be {n} non-empty strings, got {out}")
+    if len(set(out)) != n:
+        raise ValueError(f"{what} must be distinct, got {out}")
+    return out
+
+
+def _write_bag_atomic(path: Path, storage: Storage, fill: Callable[[Writer], None]) -> None:
+    """Write a rosbag2 bag at the new ``path``: into a temporary sibling directory, then renamed.
+
+    The bag is built at ``<tmp>/<path.name>`` (so its storage file is ``<path.name>.db3`` or
+    ``.mcap``, as ``ros2 bag record`` names it), flushed to disk, and renamed onto ``path``;
+    on any error the temporary directory is removed and ``path`` is not created.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    parent = Path(os.path.realpath(path.parent))
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent))
+    try:
+        inner = tmp / path.name
+        with Writer(inner, version=9, storage_plugin=plugin) as writer:
+            fill(writer)
+        for item in inner.iterdir():
+            fd = os.open(item, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        _check_new_path(path)  # created while writing: keep what is there
+        os.replace(inner, parent / path.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _header(ns: int, frame_id: str = "") -> Any:
+    ts = _typestore()
+    time_cls = ts.types["builtin_interfaces/msg/Time"]
+    header_cls = ts.types["std_msgs/msg/Header"]
+    return header_cls(stamp=time_cls(sec=ns // _NS, nanosec=ns % _NS), frame_id=frame_id)
+
+
+def write_trajectory_bag(
+    path: str | os.PathLike[str],
+    t: npt.ArrayLike,
+    joints: npt.ArrayLike,
+    joint_names: Sequence[str],
+    gripper: npt.ArrayLike | None = None,
+    *,
+    storage: Storage = "sqlite3",
+    topic: str = "/joint_trajectory",
+    gripper_topic: str = "/gripper",
+) -> None:
+    """Write a joint trajectory as a rosbag2 bag a ``ros2_control`` controller can replay.
+
+    One ``trajectory_msgs/msg/JointTrajectory`` message on ``topic`` (recorded at log time 0,
+    header stamp 0: "start on receipt"), one point per sample with its positions and
+    ``time_from_start`` = t (velocities and accelerations left empty: the joint trajectory
+    controller interpolates); with a gripper, ``std_msgs/msg/Bool`` messages on
+    ``gripper_topic`` (True = closed) at the first sample and at every change, recorded at
+    their time t, so that ``ros2 bag play`` sends them in step with the trajectory.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The bag to create (a directory); it must not exist. Written atomically.
+    t : array-like, shape (T,)
+        Time from the start of each point (s), >= 0 and strictly increasing (to 1 ns), e.g.
+        ``skill.times(res)``.
+    joints : array-like, shape (T, n)
+        Joint positions (rad, or m), e.g. ``res.joints``.
+    joint_names : sequence of str, length n
+        The controller's joint names, e.g. ``robot.joint_names``.
+    gripper : array-like, shape (T,), optional
+        The gripper command (bool, or numbers: closed where > 0.5), e.g. ``res.gripper``.
+    storage : {"sqlite3", "mcap"}
+        rosbag2 storage plugin.
+    topic, gripper_topic : str
+        Topic names.
+
+    Raises
+    ------
+    ValueError
+        An existing ``path``, or a shape, value or name that does not fit (named).
+    """
+    p = _check_new_path(path)
+    plugin = _check_storage(storage)
+    t_ = check_array(t, "t", ndim=1, min_rows=1)
+    if t_[0] < 0:
+        raise ValueError(f"t must be >= 0 (time from start), got t[0]={float(t_[0])!r}")
+    ns = np.round(t_ * _NS).astype(np.int64)
+    if np.any(np.diff(ns) <= 0):
+        i = int(np.argmax(np.diff(ns) <= 0))
+        raise ValueError(
+            f"t must increase strictly (to 1 ns), got t[{i}]={float(t_[i])!r} "
+            f"and t[{i + 1}]={float(t_[i + 1])!r}"
+        )
+    q = check_array(joints, "joints", shape=(t_.shape[0], None))
+    names = _check_names(joint_names, q.shape[1], "joint_names")
+    closed: NDArray[np.bool_] | None = None
+    if gripper is not None:
+        closed = check_array(gripper, "gripper", shape=(t_.shape[0],)) > GRIPPER_THRESHOLD
+
+    ts = _typestore()
+    duration_cls = ts.types["builtin_interfaces/msg/Duration"]
+    point_cls = ts.types["trajectory_msgs/msg/JointTrajectoryPoint"]
+    traj_cls = ts.types[TRAJECTORY_TYPE]
+    bool_cls = ts.types["std_msgs/msg/Bool"]
+    empty = np.zeros(0, dtype=np.float64)
+    points = [
+        point_cls(
+            positions=q[i].copy(),
+            velocities=empty,
+            accelerations=empty,
+            effort=empty,
+            time_from_start=duration_cls(sec=int(ns[i]) // _NS, nanosec=int(ns[i]) % _NS),
+        )
+        for i in range(q.shape[0])
+    ]
+    msg = traj_cls(header=_header(0), joint_names=names, points=points)
+
+    def fill(writer: Writer) -> None:
+        conn = writer.add_connection(topic, TRAJECTORY_TYPE, typestore=ts)
+        writer.write(conn, 0, ts.serialize_cdr(msg, TRAJECTORY_TYPE))
+        if closed is not None:
+            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
+            changes = np.r_[0, np.flatnonzero(np.diff(closed)) + 1]
+            for i in changes:
+                data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
+                writer.write(gconn, int(ns[i]), data)
+
+    _write_bag_atomic(p, plugin, fill)
+
+
+def write_demonstration_bag(
+    path: str | os.PathLike[str],
+    demo: Demonstration,
+    joint_names: Sequence[str],
+    *,
+    storage: Storage = "sqlite3",
+    joint_topic: str = "/joint_states",
+    object_topics: Mapping[str, str | None] | None = None,
+    object_rate: float = 30.0,
+    gripper_topic: str | None = "/gripper",
+    extra_joints: Mapping[str, float] | None = None,
+    shuffle: np.random.Generator | None = None,
+    start_time: float = 1_700_000_000.0,
+    frame_id: str = "base_link",
+) -> None:
+    """Record a demonstration as a rosbag2 bag, as a real arm's teaching session would be.
+
+    For recording simulated demonstrations, and for tests and examples: :func:`read_bag` of
+    the result with the same topics gives the demonstration back (joints and objects exactly,
+    times to 1 ns, the gripper at the 0.5 threshold). Header stamps and log times are equal:
+    ``start_time`` + (t - t[0]).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The bag to create (a directory); it must not exist. Written atomically.
+    demo : Demonstration
+        The demonstration.
+    joint_names : sequence of str, length n
+        Names of the demonstration's joints, in its column order (``robot.joint_names``).
+    storage : {"sqlite3", "mcap"}
+        rosbag2 storage plugin.
+    joint_topic : str
+        Topic of the ``sensor_msgs/msg/JointState`` messages, one per sample.
+    object_topics : dict str -> str or None, optional
+        Topic of each object's ``geometry_msgs/msg/PoseStamped`` messages (default
+        ``"/{name}/pose"``; None: the object is not recorded). Identity orientation.
+    object_rate : float
+        Rate of the object messages (Hz), over the demonstration's duration.
+    gripper_topic : str or None
+        Topic of ``std_msgs/msg/Bool`` messages (closed where the gripper > 0.5), written at
+        the first sample and at every change; None, or a demonstration without gripper: none.
+    extra_joints : dict str -> float, optional
+        Joints the arm does not have (e.g. ``{"finger": 0.02}``), published in every message
+        with these positions, as drivers publish the gripper's fingers.
+    shuffle : numpy.random.Generator, optional
+        If given, each message lists its joints in a new random order drawn from it.
+    start_time : float
+        ROS time (s) of the first sample.
+    frame_id : str
+        ``header.frame_id`` of the object messages: the robot's base frame.
+
+    Raises
+    ------
+    ValueError
+        An existing ``path``, or an argument that does not fit (named).
+    """
+    p = _check_new_path(path)
+    plugin = _check_storage(storage)
+    if not isinstance(demo, Demonstration):
+        raise ValueError(f"demo must be a Demonstration, got {type(demo).__name__}")
+    names = _check_names(joint_names, demo.n_joints, "joint_names")
+    extra = dict(extra_joints or {})
+    clash = [k for k in extra if k in names]
+    if clash:
+        raise ValueError(f"extra_joints {clash} are joints of the demonstration; rename them")
+    all_names = [*names, *extra]
+    _check_names(all_names, len(all_names), "joint_names and extra_joints")
+    rate = check_positive_float(object_rate, "object_rate")
+    t0 = round(check_positive_float(start_time, "start_time", allow_zero=True) * _NS)
+    topics: dict[str, str | None] = {n: f"/{n}/pose" for n in demo.object_names}
+    if object_topics is not None:
+        unknown = [k for k in object_topics if k not in demo.objects]
+        if unknown:
+            raise ValueError(
+                f"object_topics: unknown object(s) {unknown}; the demonstration has "
+                f"{list(demo.object_names)}"
+            )
+        topics.update(object_topics)
+
+    ts = _typestore()
+    js_cls = ts.types[JOINT_STATE_TYPE]
+    pose_cls = ts.types["geometry_msgs/msg/PoseStamped"]
+    pose_t = ts.types["geometry_msgs/msg/Pose"]
+    point_t = ts.types["geometry_msgs/msg/Point"]
+    quat_t = ts.types["geometry_msgs/msg/Quaternion"]
+    bool_cls = ts.types["std_msgs/msg/Bool"]
+    stamps = t0 + np.round((demo.t - demo.t[0]) * _NS).astype(np.int64)
+    values = np.hstack([demo.joints, np.tile(np.array(list(extra.values())), (demo.n_steps, 1))])
+    empty = np.zeros(0, dtype=np.float64)
+    pose_stamps = t0 + np.round(np.arange(0.0, demo.duration + 1e-12, 1.0 / rate) * _NS).astype(
+        np.int64
+    )
+
+    def fill(writer: Writer) -> None:
+        conn = writer.add_connection(joint_topic, JOINT_STATE_TYPE, typestore=ts)
+        for i, ns in enumerate(stamps):
+            order = (
+                np.arange(len(all_names))
+                if shuffle is None
+                else shuffle.permutation(len(all_names))
+            )
+            msg = js_cls(
+                header=_header(int(ns)),
+                name=[all_names[k] for k in order],
+                position=values[i, order],
+                velocity=empty,
+                effort=empty,
+            )
+            writer.write(conn, int(ns), ts.serialize_cdr(msg, JOINT_STATE_TYPE))
+        for name, topic in topics.items():
+            if topic is None:
+                continue
+            oconn = writer.add_connection(topic, "geometry_msgs/msg/PoseStamped", typestore=ts)
+            x, y, z = (float(v) for v in demo.objects[name])
+            pose = pose_t(
+                position=point_t(x=x, y=y, z=z), orientation=quat_t(x=0.0, y=0.0, z=0.0, w=1.0)
+            )
+            for ns in pose_stamps:
+                msg = pose_cls(header=_header(int(ns), frame_id), pose=pose)
+                writer.write(oconn, int(ns), ts.serialize_cdr(msg, "geometry_msgs/msg/PoseStamped"))
+        if gripper_topic is not None and demo.gripper is not None:
+            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
+            closed = demo.gripper > GRIPPER_THRESHOLD
+            for i in np.r_[0, np.flatnonzero(np.diff(closed)) + 1]:
+                data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
+                writer.write(gconn, int(stamps[i]), data)
+
+    _write_bag_atomic(p, plugin, fill)
