@@ -742,3 +742,20 @@ def test_pinv_bad_input() -> None:
         damped_pinv(np.ones((3, 4)), eps=-1.0)
     with pytest.raises(ValueError, match=r"J_pinv must have shape \(4, 3\), got \(3, 4\)"):
         nullspace_projector(np.ones((3, 4)), np.ones((3, 4)))
+
+
+def test_a_pickled_robot_computes_what_the_original_does() -> None:
+    # Worker processes (pbdkit evaluate --workers) receive the skill's robot pickled.
+    import pickle
+
+    from pbdkit.robots import katana, panda
+
+    rng = np.random.default_rng(11)
+    for robot in (katana(), panda()):
+        copy = pickle.loads(pickle.dumps(robot))
+        assert copy.joint_names == robot.joint_names and copy.tip == robot.tip
+        for q in rng.uniform(robot.lower, robot.upper, (5, robot.n_joints)):
+            x, jac = robot.fk_jacobian_unchecked(q)
+            x2, jac2 = copy.fk_jacobian_unchecked(q)
+            assert np.array_equal(x, x2) and np.array_equal(jac, jac2)
+            assert np.array_equal(robot.fk(q), copy.fk(q))

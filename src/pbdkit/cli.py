@@ -596,11 +596,29 @@ def evaluate(
             "Default: every one.",
         ),
     ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="Run the trials in N local worker processes (a Dask LocalCluster); the results "
+            "are those of the serial run.",
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Run the trials on the Dask cluster at this address (tcp://HOST:PORT; start "
+            "it with `dask scheduler` and `dask worker tcp://HOST:PORT`).",
+        ),
+    ] = None,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
     _check_perturb(perturb)
+    if workers is not None and scheduler is not None:
+        raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
+    if workers is not None and workers < 1:
+        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
     if json_path is not None:
@@ -632,6 +650,8 @@ def evaluate(
             online=online,
             perturb=perturb,
             controllers=controller or None,
+            workers=workers,
+            scheduler=scheduler,
         )
     if json_path is not None:
         write_json(json_path, result.as_dict())
@@ -652,6 +672,69 @@ def evaluate(
             f"[red]{result.tracking_failures} placement(s) where the cameras did not locate "
             "every object (counted as failures)"
         )
+
+
+@app.command()
+@_reports_errors
+def study(
+    task: Annotated[str, typer.Option(help=f"{_TASK_HELP}.")] = "coaster",
+    out: Annotated[Path, typer.Option(help="Folder for the report.")] = Path("study-output"),
+    seed: Annotated[int, typer.Option(help="Seed of the demonstrations and placements.")] = 0,
+    full: Annotated[
+        bool, typer.Option("--full", help="The full size (11 x 11 maps, 40 trials per point).")
+    ] = False,
+    workers: Annotated[
+        int | None, typer.Option(help="Run the trials in N local worker processes.")
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Run the trials on the Dask cluster at this address.")
+    ] = None,
+) -> None:
+    """Where a skill works: a map of the table per object, a learning curve (2-10
+    demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
+    _check_output(out, "--out", folder=True)
+    if workers is not None and scheduler is not None:
+        raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
+    if workers is not None and workers < 1:
+        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    spec = _robot_task(task)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from .sim.study import FULL, SMALL, run_study
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    ) as bar:
+        job = bar.add_task(f"{task}: teaching and learning", total=None)
+
+        def tick(stage: str, done: int, total: int) -> None:
+            bar.update(job, description=f"{task}: {stage}", completed=done, total=total)
+
+        result = run_study(
+            spec,
+            out,
+            size=FULL if full else SMALL,
+            seed=seed,
+            workers=workers,
+            scheduler=scheduler,
+            progress=tick,
+        )
+    for obj, m in result["maps"].items():
+        rates = ", ".join(f"{k} {100 * v:.0f}%" for k, v in m["overall"].items())
+        console.print(f"map of the {obj} (grid twice the demonstrated range): {rates}")
+    curve = ", ".join(
+        f"{c['n_demos']}: {100 * c['success_rate']:.0f}%" for c in result["learning_curve"]
+    )
+    console.print(f"fused success by number of demonstrations: {curve}")
+    noise = ", ".join(
+        f"{c['noise_mm']:g} mm: {100 * c['success_rate']:.0f}%" for c in result["noise"]
+    )
+    console.print(f"fused success by tracking noise: {noise}")
+    console.print(f"open {out / 'report.html'} ({result['seconds']:.0f} s)")
 
 
 def _print_components(spec: TaskSpec, n_components: dict[str, int]) -> None:

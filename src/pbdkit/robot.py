@@ -478,6 +478,12 @@ class Robot:
         )
         return cls(urdf, tip)
 
+    def __reduce__(self) -> tuple[type[Robot], tuple[str, str]]:
+        """Pickle as the URDF text and tip (for worker processes; never for files): rebuilt
+        from them, the copy computes exactly what this robot computes. Pickling pinocchio's
+        model and data as they are loses the work data of the fast paths."""
+        return (type(self), (self.urdf, self.tip))
+
     def __repr__(self) -> str:
         return (
             f"Robot(name={self.name!r}, n_joints={self.n_joints}, base={self.base!r}, "

@@ -203,8 +203,9 @@ def execute(
     g_target = g[np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 1)]
 
     act = NoDisturbance() if disturbance is None else disturbance
+    servo = sim.servo_rows(q_target, dq_target)
     for k in range(s.shape[0]):
-        sim.set_targets(q_target[k], dq_target[k])
+        sim.set_servo_row(servo[k])
         sim.set_gripper(bool(g_target[k]))
         recorder.record(k, s[k], q_target[k], bool(g_target[k]))
         if k == n_play:

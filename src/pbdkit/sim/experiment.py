@@ -34,6 +34,7 @@ not move), reported in ``"tracking_failures"``; it never falls back to the true 
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -72,10 +73,12 @@ __all__ = [
     "evaluate",
     "following_error",
     "learn_task",
+    "observation_noise",
     "observe",
     "peak_speed_ratio",
     "run_controller",
     "run_online",
+    "run_trial",
     "run_trials",
     "start_posture",
     "summarize",
@@ -536,6 +539,10 @@ def run_trials(
     online: bool = False,
     perturb: str = "none",
     seed: int = 0,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    noise_mm: float = 0.0,
 ) -> list[Trial]:
     """Execute every controller on every placement (the running half of :func:`evaluate`).
 
@@ -559,10 +566,21 @@ def run_trials(
         for every controller of the trial) from ``seed`` and the trial's index.
     seed : int
         Seeds the disturbances.
+    workers : int, optional
+        Run the trials in this many local worker processes (a Dask ``LocalCluster``,
+        :mod:`pbdkit.sim.parallel`); results are identical to the serial run.
+    scheduler : str, optional
+        Run them on the Dask cluster at this address (``tcp://HOST:PORT``) instead.
+    client : distributed.Client, optional
+        Run them with this Dask client (kept open: a study runs many evaluations on one
+        cluster).
+    noise_mm : float
+        Noise on the positions the skill is told (:func:`run_trial`).
 
     Returns
     -------
     trials : list of Trial
+        In the order of ``placements``.
     """
     for name in controllers:
         controller_use(name, ts.skill.object_names)
@@ -570,47 +588,118 @@ def run_trials(
         raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
     if perturb == "move" and ts.task.move is None:
         raise ValueError(f"task {ts.task.name!r} has no 'move' disturbance (TaskSpec.move)")
-    q_start = start_posture(ts) if tracker is not None else None
-    total, done = len(placements) * len(controllers), 0
+    total = len(placements) * len(controllers)
+    if workers is not None or scheduler is not None or client is not None:
+        from .parallel import run_trials_dask
+
+        return run_trials_dask(
+            ts,
+            placements,
+            controllers,
+            tracker=tracker,
+            progress=progress,
+            online=online,
+            perturb=perturb,
+            seed=seed,
+            workers=workers,
+            scheduler=scheduler,
+            client=client,
+            noise_mm=noise_mm,
+        )
     out = []
     for i, truth in enumerate(placements):
-        told: dict[str, Float] | None = truth
-        statuses: dict[str, str] = {}
-        errors: dict[str, float] | None = None
-        if tracker is not None:
-            try:
-                told = observe(ts.task, truth, tracker, arm=q_start)
-            except ObjectNotSeenError as exc:
-                told = None
-                statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
-            else:
-                errors = tracking_errors(told, truth, tracker.objects)
 
-        def disturbance(truth: dict[str, Float] = truth, i: int = i) -> Disturbance:
-            return trial_disturbance(ts, perturb, truth, seed=seed, index=i)
-
-        described: dict[str, Any] = disturbance().as_dict()
-        runs: dict[str, dict[str, Any]] = {}
-        for name in controllers:
-            if told is None:
-                runs[name] = {"success": False, "tracking_status": statuses}
-            else:
-                act = disturbance()
-                if online:
-                    summary = run_online(
-                        ts, told, name, tracker=tracker, sim_objects=truth, disturbance=act
-                    ).summary()
-                else:
-                    summary = run_controller(
-                        ts, told, name, sim_objects=truth, disturbance=act
-                    ).summary()
-                runs[name] = summary
-                described = act.as_dict()
-            done += 1
+        def tick(k: int, i: int = i) -> None:
             if progress is not None:
-                progress(done, total)
-        out.append(Trial(truth, told, statuses, errors, runs, described))
+                progress(i * len(controllers) + k, total)
+
+        out.append(
+            run_trial(
+                ts,
+                truth,
+                i,
+                controllers,
+                tracker=tracker,
+                online=online,
+                perturb=perturb,
+                seed=seed,
+                progress=tick,
+                noise_mm=noise_mm,
+            )
+        )
     return out
+
+
+def run_trial(
+    ts: TaskSkill,
+    truth: dict[str, Float],
+    index: int,
+    controllers: Sequence[str],
+    *,
+    tracker: SimTracker | None = None,
+    online: bool = False,
+    perturb: str = "none",
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
+    noise_mm: float = 0.0,
+) -> Trial:
+    """One trial of :func:`run_trials`: trial ``index``, every controller at placement ``truth``.
+
+    Depends on nothing but its arguments (the disturbance is drawn from ``seed`` and
+    ``index``), so trials may run in any order, in any process, with the same results.
+    ``progress(k)`` is called after the k-th controller's run. ``noise_mm`` > 0 adds Gaussian
+    noise to the positions the skill is told of the moving objects (after the cameras, if
+    any): isotropic, scaled so that its mean 3-D length is ``noise_mm`` (per-axis standard
+    deviation ``noise_mm / sqrt(8 / pi)``), drawn from ``seed`` and ``index``.
+    """
+    told: dict[str, Float] | None = truth
+    statuses: dict[str, str] = {}
+    errors: dict[str, float] | None = None
+    if tracker is not None:
+        try:
+            told = observe(ts.task, truth, tracker, arm=start_posture(ts))
+        except ObjectNotSeenError as exc:
+            told = None
+            statuses = {k: str(tr.status) for k, tr in exc.tracks.items()}
+        else:
+            errors = tracking_errors(told, truth, tracker.objects)
+    if noise_mm > 0.0 and told is not None:
+        told = observation_noise(ts.task, told, noise_mm, seed=seed, index=index)
+    described: dict[str, Any] = trial_disturbance(
+        ts, perturb, truth, seed=seed, index=index
+    ).as_dict()
+    runs: dict[str, dict[str, Any]] = {}
+    for k, name in enumerate(controllers, start=1):
+        if told is None:
+            runs[name] = {"success": False, "tracking_status": statuses}
+        else:
+            act = trial_disturbance(ts, perturb, truth, seed=seed, index=index)
+            if online:
+                summary = run_online(
+                    ts, told, name, tracker=tracker, sim_objects=truth, disturbance=act
+                ).summary()
+            else:
+                summary = run_controller(
+                    ts, told, name, sim_objects=truth, disturbance=act
+                ).summary()
+            runs[name] = summary
+            described = act.as_dict()
+        if progress is not None:
+            progress(k)
+    return Trial(truth, told, statuses, errors, runs, described)
+
+
+def observation_noise(
+    task: TaskSpec, objects: dict[str, Float], noise_mm: float, *, seed: int, index: int
+) -> dict[str, Float]:
+    """``objects`` with Gaussian noise on the moving objects, of mean 3-D length ``noise_mm``
+    (see :func:`run_trial`), drawn from ``seed`` and ``index``."""
+    if not (noise_mm >= 0.0 and math.isfinite(noise_mm)):
+        raise ValueError(f"noise_mm must be a finite number >= 0, got {noise_mm!r}")
+    rng = np.random.default_rng([seed, 3, index])
+    sd = 1e-3 * noise_mm / math.sqrt(8.0 / math.pi)
+    moving = set(task.tracked_objects)
+    return {k: (v + rng.normal(0.0, sd, 3) if k in moving else v) for k, v in objects.items()}
 
 
 def trial_disturbance(
@@ -716,6 +805,8 @@ def summarize(
     vision: bool,
     online: bool = False,
     perturb: str = "none",
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> Evaluation:
     """The summarising half of :func:`evaluate`: success rates and metric statistics."""
     names = list(trials[0].runs) if trials else []
@@ -776,6 +867,8 @@ def evaluate(
     constrain_fixed: bool = False,
     online: bool = False,
     perturb: str = "none",
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> Evaluation:
     """Success rate of every controller over ``trials`` random new placements.
 
@@ -811,6 +904,9 @@ def evaluate(
         once from the positions seen at the start and play the trajectory.
     perturb : str
         ``"none"``, ``"move"`` or ``"push"`` (:mod:`pbdkit.sim.perturb`).
+    workers, scheduler
+        Run the trials in parallel (:func:`run_trials`): ``workers`` local processes, or on
+        the Dask cluster at ``scheduler``. The results are those of the serial run.
 
     Returns
     -------
@@ -843,6 +939,8 @@ def evaluate(
         online=online,
         perturb=perturb,
         seed=seed,
+        workers=workers,
+        scheduler=scheduler,
     )
     return summarize(
         ts, done, seed=seed, n_demos=n_demos, vision=vision, online=online, perturb=perturb

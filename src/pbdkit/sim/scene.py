@@ -56,6 +56,15 @@ __all__ = [
 Float = NDArray[np.float64]
 
 
+def _as_slice(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
+    """``idx`` as an equivalent slice when its steps are equal and positive, else itself."""
+    if idx.size >= 2:
+        step = int(idx[1] - idx[0])
+        if step > 0 and np.all(np.diff(idx) == step):
+            return slice(int(idx[0]), int(idx[-1]) + 1, step)
+    return idx
+
+
 class Simulation:
     """A MuJoCo model and its state, with the operations the experiment needs.
 
@@ -103,6 +112,14 @@ class Simulation:
         self._glass_qadr = int(m.jnt_qposadr[m.joint("glass_free").id])
         self._glass_vadr = int(m.jnt_dofadr[m.joint("glass_free").id])
         self._renderer: Any = None
+        # The servos' controls as slices where the actuators are evenly spaced (they are:
+        # pos_j, vel_j alternate), else index arrays: set at every physics step.
+        self._ctrl = self.data.ctrl
+        self._pos_slice = _as_slice(self._pos_act)
+        self._vel_slice = _as_slice(self._vel_act)
+        self._closed: bool | None = None
+        both = np.concatenate([self._pos_act, self._vel_act])
+        self._servo_span = (int(both.min()), int(both.max()) + 1)
         self._prefix_masks: dict[str, NDArray[np.bool_]] = {}
         self.set_gripper(False)
         mujoco.mj_forward(m, self.data)
@@ -146,12 +163,29 @@ class Simulation:
 
     def set_targets(self, q: Float, dq: Float) -> None:
         """Servo targets: joint angles q (n,) and joint velocities dq (n,) (feed-forward)."""
-        self.data.ctrl[self._pos_act] = q
-        self.data.ctrl[self._vel_act] = dq
+        self._ctrl[self._pos_slice] = q
+        self._ctrl[self._vel_slice] = dq
+
+    def servo_rows(self, q: Float, dq: Float) -> Float:
+        """The servo controls for many steps at once, shape (S, k): row s is what
+        :meth:`set_targets` (q[s], dq[s]) writes, for :meth:`set_servo_row` (one copy per
+        physics step instead of two scattered writes)."""
+        lo, hi = self._servo_span
+        rows = np.array(np.broadcast_to(self.data.ctrl[lo:hi], (q.shape[0], hi - lo)))
+        rows[:, self._pos_act - lo] = q
+        rows[:, self._vel_act - lo] = dq
+        return rows
+
+    def set_servo_row(self, row: Float) -> None:
+        """Write one row of :meth:`servo_rows` into the controls."""
+        lo, hi = self._servo_span
+        self._ctrl[lo:hi] = row
 
     def set_gripper(self, closed: bool) -> None:
         """Close (force-limited squeeze) or open the two fingers."""
-        self.data.ctrl[self._finger_act] = FINGER_CLOSED if closed else FINGER_OPEN
+        if closed is not self._closed:
+            self.data.ctrl[self._finger_act] = FINGER_CLOSED if closed else FINGER_OPEN
+            self._closed = closed
 
     def finger_opening(self) -> Float:
         """Distance of each finger's inner face from the tool axis (m), shape (2,)."""
@@ -188,8 +222,9 @@ class Simulation:
 
     def glass_tilt(self) -> float:
         """Angle between the glass's axis and the vertical (rad)."""
-        _, rot = self.glass_pose()
-        return float(np.arccos(np.clip(rot[2, 2], -1.0, 1.0)))
+        # rot[2, 2] of glass_pose(), read in place: this runs at every physics step.
+        c = float(self.data.xmat[self._glass_body, 8])
+        return math.acos(min(1.0, max(-1.0, c)))
 
     def object_positions(self) -> dict[str, Float]:
         """Ground-truth object positions o (base frame), name -> (3,), as the cameras define them.

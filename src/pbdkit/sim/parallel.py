@@ -1,0 +1,183 @@
+"""Trials on every core or on a Dask cluster (``pbdkit evaluate --workers N | --scheduler A``).
+
+Dask's ``distributed`` scheduler is the one engine: ``workers=N`` starts a ``LocalCluster`` of N
+single-threaded worker processes on this machine, ``scheduler="tcp://HOST:PORT"`` connects to a
+running cluster (``dask scheduler`` on one machine, ``dask worker tcp://HOST:PORT`` on each of
+the others; every worker needs pbdkit installed with its ``sim`` extra).
+
+What is sent: the skill and the task once per run (scattered to every worker), then one task
+per trial: its index and its placement. A trial (:func:`pbdkit.sim.experiment.run_trial`)
+depends on nothing else (its disturbance is drawn from the seed and its index; physics is
+deterministic), so the trials come back identical to the serial run's, in the placements'
+order, whatever worker ran them. A worker that dies loses only the trials it was running: the
+scheduler runs them again on another worker (up to three times, Dask's
+``distributed.scheduler.allowed-failures``). An exception raised by a trial is a bug, and is
+raised here.
+
+Each worker thread runs on its own copy of the skill (a robot's pinocchio work data must not be
+shared between threads), so ``dask worker --nthreads N`` is safe; one thread per core is best.
+
+A task defined outside pbdkit must be importable on the workers (its functions are sent by
+reference, as Python pickles functions): register it in a module the workers can import.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .tracking import SimTracker
+
+if TYPE_CHECKING:
+    from .experiment import TaskSkill, Trial
+
+__all__ = ["TrialJob", "connect", "run_trials_dask"]
+
+Float = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TrialJob:
+    """What every trial of a run shares, sent once to each worker."""
+
+    ts: TaskSkill
+    controllers: tuple[str, ...]
+    tracker: SimTracker | None
+    online: bool
+    perturb: str
+    seed: int
+    noise_mm: float = 0.0
+
+
+_LOCAL = threading.local()
+
+
+def _own_copy(job: TrialJob) -> TrialJob:
+    """This thread's copy of ``job``: a robot's pinocchio work data must not be shared between
+    threads, and a worker started with several threads (``dask worker --nthreads 4``) runs
+    several trials at once on the one job it received."""
+    held = getattr(_LOCAL, "job", None)
+    if held is None or held[0] is not job:
+        _LOCAL.job = (job, copy.deepcopy(job))
+    mine: TrialJob = _LOCAL.job[1]
+    return mine
+
+
+def _run_one(job: TrialJob, index: int, truth: dict[str, Float]) -> Trial:
+    """One trial on a worker, with BLAS on one thread (a worker is one core)."""
+    from threadpoolctl import threadpool_limits
+
+    from .experiment import run_trial
+
+    job = _own_copy(job)
+    with threadpool_limits(limits=1):
+        return run_trial(
+            job.ts,
+            truth,
+            index,
+            job.controllers,
+            tracker=job.tracker,
+            online=job.online,
+            perturb=job.perturb,
+            seed=job.seed,
+            noise_mm=job.noise_mm,
+        )
+
+
+def connect(
+    workers: int | None = None, scheduler: str | None = None, *, timeout: float = 10.0
+) -> tuple[Any, Any]:
+    """A Dask client: to a new local cluster of ``workers`` processes, or to ``scheduler``
+    (waiting at most ``timeout`` seconds for it).
+
+    Returns
+    -------
+    client : distributed.Client
+    cluster : distributed.LocalCluster or None
+        The cluster started here (close it after the client), None for ``scheduler``.
+
+    Raises
+    ------
+    ValueError
+        Both or neither given, ``workers`` < 1, or a scheduler that cannot be reached.
+    """
+    if (workers is None) == (scheduler is None):
+        raise ValueError("give either workers (local processes) or scheduler (an address)")
+    from distributed import Client, LocalCluster
+
+    if workers is not None:
+        if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+            raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        cluster = LocalCluster(  # type: ignore[no-untyped-call]
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
+        )
+        return Client(cluster), cluster  # type: ignore[no-untyped-call]
+    try:
+        client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
+    except (OSError, TimeoutError) as exc:
+        raise ValueError(
+            f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
+        ) from exc
+    return client, None
+
+
+def run_trials_dask(
+    ts: TaskSkill,
+    placements: Sequence[dict[str, Float]],
+    controllers: Sequence[str],
+    *,
+    tracker: SimTracker | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    online: bool = False,
+    perturb: str = "none",
+    seed: int = 0,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client: Any = None,
+    noise_mm: float = 0.0,
+) -> list[Trial]:
+    """:func:`pbdkit.sim.experiment.run_trials` on Dask workers (arguments as there; with a
+    ``client``, its cluster is used and left open).
+
+    ``progress(done, total)`` counts controller runs, as in the serial run, and advances by a
+    whole trial at a time.
+    """
+    from distributed import as_completed
+
+    # The demonstrations stay here: the workers need the skill and the task only.
+    job = TrialJob(
+        replace(ts, demos=[]), tuple(controllers), tracker, online, perturb, seed, noise_mm
+    )
+    total = len(placements) * len(controllers)
+    own = client is None
+    cluster = None
+    if own:
+        client, cluster = connect(workers, scheduler)
+    try:
+        shared = client.scatter(job, broadcast=True)
+        futures = [
+            client.submit(_run_one, shared, i, truth, pure=False)
+            for i, truth in enumerate(placements)
+        ]
+        done = 0
+        for _ in as_completed(futures):  # type: ignore[no-untyped-call]
+            done += len(controllers)
+            if progress is not None:
+                progress(done, total)
+        trials: list[Trial] = client.gather(futures)
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return trials
