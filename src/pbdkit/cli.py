@@ -177,6 +177,26 @@ def _check_perturb(perturb: str) -> None:
         )
 
 
+def _check_workers(workers: int | None, scheduler: str | None) -> None:
+    if workers is not None and scheduler is not None:
+        raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
+    if workers is not None and workers < 1:
+        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+
+
+def _progress() -> Any:
+    """The progress bar of the long commands (evaluate, study): task, bar, count, time left."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    )
+
+
 @app.command()
 @_reports_errors
 def demo(
@@ -615,26 +635,15 @@ def evaluate(
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
     _check_perturb(perturb)
-    if workers is not None and scheduler is not None:
-        raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
-    if workers is not None and workers < 1:
-        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    _check_workers(workers, scheduler)
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
     if json_path is not None:
         _check_output(json_path, "--json")
     spec = _robot_task(task)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
     from .sim.experiment import evaluate as sim_evaluate
 
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        console=console,
-    ) as bar:
+    with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)
 
         def tick(done: int, total: int) -> None:
@@ -693,22 +702,11 @@ def study(
     """Where a skill works: a map of the table per object, a learning curve (2-10
     demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
     _check_output(out, "--out", folder=True)
-    if workers is not None and scheduler is not None:
-        raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
-    if workers is not None and workers < 1:
-        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    _check_workers(workers, scheduler)
     spec = _robot_task(task)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
     from .sim.study import FULL, SMALL, run_study
 
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        console=console,
-    ) as bar:
+    with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)
 
         def tick(stage: str, done: int, total: int) -> None:

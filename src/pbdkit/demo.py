@@ -138,7 +138,7 @@ def run_robot_demo(
         tracking_errors,
         trial_disturbance,
     )
-    from .sim.perturb import PERTURBATIONS
+    from .sim.perturb import check_perturb
     from .sim.tasks import get_task
     from .sim.video import save_video
 
@@ -147,8 +147,7 @@ def run_robot_demo(
             status(msg)
 
     spec = get_task(task)
-    if perturb not in PERTURBATIONS:
-        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
+    check_perturb(perturb, spec)
     if perturb != "none" and not online:
         raise ValueError("perturb applies to the online run: give online=True (--online) too")
     t_start = time.perf_counter()

@@ -53,7 +53,8 @@ from ..skill import Skill
 from . import tasks as T
 from .execute import ExecutionResult, execute
 from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
-from .perturb import PERTURBATIONS, Disturbance, make_disturbance
+from .parallel import TrialJob
+from .perturb import Disturbance, check_perturb, make_disturbance
 from .scene import Simulation
 from .tasks import TaskSpec
 from .teacher import teach
@@ -293,6 +294,20 @@ def _finite(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
+def _prepare_run(
+    ts: TaskSkill,
+    objects: dict[str, Float],
+    controller: str,
+    sim_objects: dict[str, Float] | None,
+) -> tuple[list[str] | None, dict[str, Float], dict[str, Float]]:
+    """The controller's ``use``, the positions the skill is told (its own objects) and the
+    world's (every object), for :func:`run_controller` and :func:`run_online`."""
+    use = controller_use(controller, ts.skill.object_names)
+    known = ts.task.full_placement(objects)
+    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
+    return use, {k: known[k] for k in ts.skill.object_names}, world
+
+
 def run_controller(
     ts: TaskSkill,
     objects: dict[str, Float],
@@ -319,10 +334,7 @@ def run_controller(
     ValueError
         An unknown controller or object, or a moving object without a position.
     """
-    use = controller_use(controller, ts.skill.object_names)
-    known = ts.task.full_placement(objects)
-    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
-    told = {k: known[k] for k in ts.skill.object_names}
+    use, told, world = _prepare_run(ts, objects, controller, sim_objects)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
@@ -368,10 +380,7 @@ def run_online(
     ``tracker``, else the true ones (:class:`pbdkit.sim.online.TruthObserver`). Arguments as
     :func:`run_controller`.
     """
-    use = controller_use(controller, ts.skill.object_names)
-    known = ts.task.full_placement(objects)
-    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
-    told = {k: known[k] for k in ts.skill.object_names}
+    use, told, world = _prepare_run(ts, objects, controller, sim_objects)
     names = ts.skill.object_names
     observer: Observer = TruthObserver(names) if tracker is None else VisionObserver(tracker, names)
     with warnings.catch_warnings(record=True) as caught:
@@ -584,28 +593,15 @@ def run_trials(
     """
     for name in controllers:
         controller_use(name, ts.skill.object_names)
-    if perturb not in PERTURBATIONS:
-        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
-    if perturb == "move" and ts.task.move is None:
-        raise ValueError(f"task {ts.task.name!r} has no 'move' disturbance (TaskSpec.move)")
-    total = len(placements) * len(controllers)
+    check_perturb(perturb, ts.task)
+    job = TrialJob(ts, tuple(controllers), tracker, online, perturb, seed, noise_mm)
     if workers is not None or scheduler is not None or client is not None:
         from .parallel import run_trials_dask
 
         return run_trials_dask(
-            ts,
-            placements,
-            controllers,
-            tracker=tracker,
-            progress=progress,
-            online=online,
-            perturb=perturb,
-            seed=seed,
-            workers=workers,
-            scheduler=scheduler,
-            client=client,
-            noise_mm=noise_mm,
+            job, placements, progress=progress, workers=workers, scheduler=scheduler, client=client
         )
+    total = len(placements) * len(controllers)
     out = []
     for i, truth in enumerate(placements):
 
@@ -613,20 +609,7 @@ def run_trials(
             if progress is not None:
                 progress(i * len(controllers) + k, total)
 
-        out.append(
-            run_trial(
-                ts,
-                truth,
-                i,
-                controllers,
-                tracker=tracker,
-                online=online,
-                perturb=perturb,
-                seed=seed,
-                progress=tick,
-                noise_mm=noise_mm,
-            )
-        )
+        out.append(job.run(i, truth, progress=tick))
     return out
 
 
@@ -916,10 +899,7 @@ def evaluate(
     spec = T.get_task(task)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
-    if perturb not in PERTURBATIONS:
-        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {perturb!r}")
-    if perturb == "move" and spec.move is None:
-        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
+    check_perturb(perturb, spec)
     ts = task_skill or learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     names = list(controllers) if controllers else controller_names(ts.skill.object_names)
     for name in names:

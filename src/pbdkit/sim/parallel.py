@@ -44,7 +44,8 @@ Float = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class TrialJob:
-    """What every trial of a run shares, sent once to each worker."""
+    """What every trial of a run shares (the arguments of
+    :func:`pbdkit.sim.experiment.run_trial` but the trial's own), sent once to each worker."""
 
     ts: TaskSkill
     controllers: tuple[str, ...]
@@ -53,6 +54,25 @@ class TrialJob:
     perturb: str
     seed: int
     noise_mm: float = 0.0
+
+    def run(
+        self, index: int, truth: dict[str, Float], progress: Callable[[int], None] | None = None
+    ) -> Trial:
+        """Trial ``index`` at placement ``truth`` (:func:`pbdkit.sim.experiment.run_trial`)."""
+        from .experiment import run_trial
+
+        return run_trial(
+            self.ts,
+            truth,
+            index,
+            self.controllers,
+            tracker=self.tracker,
+            online=self.online,
+            perturb=self.perturb,
+            seed=self.seed,
+            progress=progress,
+            noise_mm=self.noise_mm,
+        )
 
 
 _LOCAL = threading.local()
@@ -73,21 +93,8 @@ def _run_one(job: TrialJob, index: int, truth: dict[str, Float]) -> Trial:
     """One trial on a worker, with BLAS on one thread (a worker is one core)."""
     from threadpoolctl import threadpool_limits
 
-    from .experiment import run_trial
-
-    job = _own_copy(job)
     with threadpool_limits(limits=1):
-        return run_trial(
-            job.ts,
-            truth,
-            index,
-            job.controllers,
-            tracker=job.tracker,
-            online=job.online,
-            perturb=job.perturb,
-            seed=job.seed,
-            noise_mm=job.noise_mm,
-        )
+        return _own_copy(job).run(index, truth)
 
 
 def connect(
@@ -132,22 +139,17 @@ def connect(
 
 
 def run_trials_dask(
-    ts: TaskSkill,
+    job: TrialJob,
     placements: Sequence[dict[str, Float]],
-    controllers: Sequence[str],
     *,
-    tracker: SimTracker | None = None,
     progress: Callable[[int, int], None] | None = None,
-    online: bool = False,
-    perturb: str = "none",
-    seed: int = 0,
     workers: int | None = None,
     scheduler: str | None = None,
     client: Any = None,
-    noise_mm: float = 0.0,
 ) -> list[Trial]:
-    """:func:`pbdkit.sim.experiment.run_trials` on Dask workers (arguments as there; with a
-    ``client``, its cluster is used and left open).
+    """:func:`pbdkit.sim.experiment.run_trials` on Dask workers: ``job`` at every placement,
+    on ``workers`` local processes, the cluster at ``scheduler``, or with ``client`` (its
+    cluster is used and left open).
 
     ``progress(done, total)`` counts controller runs, as in the serial run, and advances by a
     whole trial at a time.
@@ -155,10 +157,9 @@ def run_trials_dask(
     from distributed import as_completed
 
     # The demonstrations stay here: the workers need the skill and the task only.
-    job = TrialJob(
-        replace(ts, demos=[]), tuple(controllers), tracker, online, perturb, seed, noise_mm
-    )
-    total = len(placements) * len(controllers)
+    job = replace(job, ts=replace(job.ts, demos=[]))
+    per_trial = len(job.controllers)
+    total = len(placements) * per_trial
     own = client is None
     cluster = None
     if own:
@@ -171,7 +172,7 @@ def run_trials_dask(
         ]
         done = 0
         for _ in as_completed(futures):  # type: ignore[no-untyped-call]
-            done += len(controllers)
+            done += per_trial
             if progress is not None:
                 progress(done, total)
         trials: list[Trial] = client.gather(futures)

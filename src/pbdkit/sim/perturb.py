@@ -39,6 +39,7 @@ __all__ = [
     "NoDisturbance",
     "PushArm",
     "SlideObject",
+    "check_perturb",
     "grasp_time",
     "make_disturbance",
 ]
@@ -98,18 +99,17 @@ class SlideObject(Disturbance):
     grasp_s: float | None = None
     name: str = field(default="move", init=False)
     _origin: Float | None = field(default=None, init=False, repr=False)
-    _start0: float = field(default=0.0, init=False, repr=False)
+    _done: bool = field(default=False, init=False, repr=False)
 
     def apply(self, sim: Simulation, t: float) -> None:
-        if t < self.start:
+        if t < self.start or self._done:
             return
         if self._origin is None:
             self._origin = sim.object_positions()[self.obj]
         if t >= self.start + self.duration + 1e-12:
-            if math.isfinite(self.start):
-                # the end: put it at its final place once, at rest
-                sim.place_object(self.obj, self._origin + self.displacement)
-                self.start = math.inf
+            # the end: put it at its final place once, at rest
+            sim.place_object(self.obj, self._origin + self.displacement)
+            self._done = True
             return
         frac = (t - self.start) / self.duration
         velocity = self.displacement / self.duration
@@ -121,7 +121,7 @@ class SlideObject(Disturbance):
             "name": self.name,
             "object": self.obj,
             "displacement_m": [float(v) for v in self.displacement],
-            "start_s": float(self._start0),
+            "start_s": float(self.start),
             "duration_s": float(self.duration),
             "final_position": None if end is None else [float(v) for v in end],
             "grasp_s": self.grasp_s,
@@ -129,7 +129,6 @@ class SlideObject(Disturbance):
 
     def __post_init__(self) -> None:
         self.displacement = np.asarray(self.displacement, dtype=np.float64)
-        self._start0 = float(self.start)
 
 
 @dataclass
@@ -173,6 +172,20 @@ class PushArm(Disturbance):
             "duration_s": float(self.duration),
             "grasp_s": self.grasp_s,
         }
+
+
+def check_perturb(name: str, spec: TaskSpec | None = None) -> None:
+    """Refuse a name that is not one of :data:`PERTURBATIONS`, or ``"move"`` for a task
+    (``spec``) without :attr:`TaskSpec.move`.
+
+    Raises
+    ------
+    ValueError
+    """
+    if name not in PERTURBATIONS:
+        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {name!r}")
+    if name == "move" and spec is not None and spec.move is None:
+        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
 
 
 def grasp_time(times: Float, gripper: Float | None) -> float:
@@ -237,15 +250,13 @@ def make_disturbance(
     ValueError
         An unknown name, or ``"move"`` for a task without :attr:`TaskSpec.move`.
     """
-    if name not in PERTURBATIONS:
-        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {name!r}")
+    check_perturb(name, spec)
     if name == "none":
         return NoDisturbance()
     t_grasp = grasp_time(times, gripper)
     if name == "move":
         move = spec.move
-        if move is None:
-            raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
+        assert move is not None  # check_perturb
         d = _slide_direction(spec, move.obj, objects[move.obj], move.distance, rng)
         if move.when == "while_carried":
             start = t_grasp + 0.5
