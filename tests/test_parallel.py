@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
+import time
 from typing import Any
 
 import pytest
@@ -16,7 +18,7 @@ pytest.importorskip("distributed")
 from pbdkit import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
-from pbdkit.sim.parallel import connect
+from pbdkit.sim.parallel import connect, session
 from pbdkit.sim.teacher import teach
 
 
@@ -103,3 +105,27 @@ def test_connect_refuses_bad_arguments() -> None:
         connect(workers=0)
     with pytest.raises(ValueError, match="cannot reach a Dask scheduler"):
         connect(scheduler="tcp://127.0.0.1:9", timeout=1.0)
+
+
+def _imported_sim() -> bool:
+    return "pbdkit.sim.experiment" in sys.modules
+
+
+def _profiling() -> bool:
+    import dask
+
+    return bool(dask.config.get("distributed.worker.profile.enabled"))
+
+
+def test_a_session_starts_quiet_workers_that_import_at_once() -> None:
+    with session() as none:
+        assert none is None  # serial: no cluster
+    with session(workers=1) as client:
+        # Dask's statistical profiler made trials about 25 % slower: off on our workers.
+        assert list(client.run(_profiling).values()) == [False]
+        # The workers import pbdkit's simulation without being sent a trial.
+        deadline = time.monotonic() + 60.0
+        while not all(client.run(_imported_sim).values()):
+            assert time.monotonic() < deadline, "the workers did not import pbdkit.sim"
+            time.sleep(0.2)
+    assert client.status == "closed"

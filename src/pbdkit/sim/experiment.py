@@ -53,7 +53,7 @@ from ..skill import Skill
 from . import tasks as T
 from .execute import ExecutionResult, execute
 from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
-from .parallel import TrialJob
+from .parallel import TrialJob, session
 from .perturb import Disturbance, check_perturb, make_disturbance
 from .scene import Simulation
 from .tasks import TaskSpec
@@ -900,28 +900,32 @@ def evaluate(
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
     check_perturb(perturb, spec)
-    ts = task_skill or learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
-    names = list(controllers) if controllers else controller_names(ts.skill.object_names)
-    for name in names:
-        controller_use(name, ts.skill.object_names)
-    # Placements come from their own stream so that they do not depend on the teacher's draws.
-    rng = np.random.default_rng([seed, 1])
-    placements = [spec.sample_objects(rng) for _ in range(trials)]
-    vision = not ground_truth
-    if vision and tracker is None:
-        tracker = calibrate_tracker(ts)
-    done = run_trials(
-        ts,
-        placements,
-        names,
-        tracker=tracker if vision else None,
-        progress=progress,
-        online=online,
-        perturb=perturb,
-        seed=seed,
-        workers=workers,
-        scheduler=scheduler,
-    )
+    # The cluster starts first: its workers import while the skill is learned here.
+    with session(workers, scheduler) as client:
+        ts = task_skill or learn_task(
+            spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed
+        )
+        names = list(controllers) if controllers else controller_names(ts.skill.object_names)
+        for name in names:
+            controller_use(name, ts.skill.object_names)
+        # Placements come from their own stream so that they do not depend on the teacher's
+        # draws.
+        rng = np.random.default_rng([seed, 1])
+        placements = [spec.sample_objects(rng) for _ in range(trials)]
+        vision = not ground_truth
+        if vision and tracker is None:
+            tracker = calibrate_tracker(ts)
+        done = run_trials(
+            ts,
+            placements,
+            names,
+            tracker=tracker if vision else None,
+            progress=progress,
+            online=online,
+            perturb=perturb,
+            seed=seed,
+            client=client,
+        )
     return summarize(
         ts, done, seed=seed, n_demos=n_demos, vision=vision, online=online, perturb=perturb
     )

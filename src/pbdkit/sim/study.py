@@ -166,21 +166,13 @@ def run_study(
     study : dict
         What ``study.json`` holds.
     """
-    from .parallel import connect
+    from .parallel import session
 
     spec = T.get_task(task)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    client, cluster = (None, None)
-    if workers is not None or scheduler is not None:
-        client, cluster = connect(workers, scheduler)
-    try:
+    with session(workers, scheduler) as client:
         result = _run(spec, out, size, seed, client, progress)
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
     result["seconds"] = time.perf_counter() - start
     write_json(out / "study.json", result)
     _write_report(spec, out, result)
