@@ -26,7 +26,7 @@ from __future__ import annotations
 import copy
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -139,16 +139,16 @@ def connect(
                 silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
             )
         client = Client(cluster)  # type: ignore[no-untyped-call]
-        _warm_up(client)
-        return client, cluster
-    try:
-        client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
-    except (OSError, TimeoutError) as exc:
-        raise ValueError(
-            f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
-        ) from exc
+    else:
+        cluster = None
+        try:
+            client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
+        except (OSError, TimeoutError) as exc:
+            raise ValueError(
+                f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
+            ) from exc
     _warm_up(client)
-    return client, None
+    return client, cluster
 
 
 def _import_sim() -> None:
@@ -165,8 +165,9 @@ def _warm_up(client: Any) -> None:
         fire_and_forget(client.submit(_import_sim, workers=[address], pure=False))  # type: ignore[no-untyped-call]
 
 
-@contextmanager
-def session(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+def session(
+    workers: int | None = None, scheduler: str | None = None
+) -> AbstractContextManager[Any]:
     """A Dask client for a block of work (:func:`connect`), closed (with the cluster started
     here) at its end; None when neither ``workers`` nor ``scheduler`` is given (serial).
 
@@ -174,8 +175,13 @@ def session(workers: int | None = None, scheduler: str | None = None) -> Iterato
     learned here.
     """
     if workers is None and scheduler is None:
-        yield None
-        return
+        return nullcontext(None)
+    return _connected(workers, scheduler)
+
+
+@contextmanager
+def _connected(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    """:func:`connect`, the client and its cluster closed at the end of the block."""
     client, cluster = connect(workers, scheduler)
     try:
         yield client
@@ -207,11 +213,9 @@ def run_trials_dask(
     job = replace(job, ts=replace(job.ts, demos=[]))
     per_trial = len(job.controllers)
     total = len(placements) * per_trial
-    own = client is None
-    cluster = None
-    if own:
-        client, cluster = connect(workers, scheduler)
-    try:
+    # A client of the caller's is used and left open; otherwise one is opened for this run.
+    opened = _connected(workers, scheduler) if client is None else nullcontext(client)
+    with opened as client:
         shared = client.scatter(job, broadcast=True)
         futures = [
             client.submit(_run_one, shared, i, truth, pure=False)
@@ -223,9 +227,4 @@ def run_trials_dask(
             if progress is not None:
                 progress(done, total)
         trials: list[Trial] = client.gather(futures)
-    finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
     return trials
