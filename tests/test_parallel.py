@@ -7,9 +7,9 @@ import json
 import os
 import signal
 import sys
-import time
 from typing import Any
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
@@ -18,7 +18,7 @@ pytest.importorskip("distributed")
 from pbdkit import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
-from pbdkit.sim.parallel import connect, session
+from pbdkit.sim.parallel import Session, connect, session
 from pbdkit.sim.teacher import teach
 
 
@@ -50,7 +50,7 @@ def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
     )
     assert _json(parallel) == _json(serial)
     assert serial.vision and serial.tracking_error_mm is not None
-    assert ticks[-1] == (6, 6) and len(ticks) == 3  # one tick per trial, counting runs
+    assert ticks == [(k, 6) for k in range(1, 7)]  # one tick per controller run
 
 
 def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
@@ -117,15 +117,85 @@ def _profiling() -> bool:
     return bool(dask.config.get("distributed.worker.profile.enabled"))
 
 
-def test_a_session_starts_quiet_workers_that_import_at_once() -> None:
+def _forked_from_a_server() -> tuple[str, int]:
+    import multiprocessing
+
+    return multiprocessing.current_process().name, os.getppid()
+
+
+def test_a_session_starts_quiet_workers_that_have_imported_the_simulation() -> None:
     with session() as none:
         assert none is None  # serial: no cluster
-    with session(workers=1) as client:
+    with session(workers=2) as run:
+        assert isinstance(run, Session)
+        client = run.client
         # Dask's statistical profiler made trials about 25 % slower: off on our workers.
-        assert list(client.run(_profiling).values()) == [False]
-        # The workers import pbdkit's simulation without being sent a trial.
-        deadline = time.monotonic() + 60.0
-        while not all(client.run(_imported_sim).values()):
-            assert time.monotonic() < deadline, "the workers did not import pbdkit.sim"
-            time.sleep(0.2)
+        assert list(client.run(_profiling).values()) == [False, False]
+        # Forked from a server that imported pbdkit's simulation: nothing left to import.
+        assert list(client.run(_imported_sim).values()) == [True, True]
+        parents = {ppid for _, ppid in client.run(_forked_from_a_server).values()}
+        assert len(parents) == 1 and os.getpid() not in parents
     assert client.status == "closed"
+
+
+def test_a_session_refuses_bad_arguments_at_once_and_reports_a_failed_start(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from pbdkit.sim import parallel
+
+    with pytest.raises(ValueError, match="workers must be an integer >= 1"), session(workers=0):
+        pass
+    with (
+        pytest.raises(ValueError, match="cannot reach a Dask scheduler"),
+        session(scheduler="tcp://127.0.0.1:9"),
+    ):
+        pass
+
+    def fail(workers: int) -> None:
+        raise OSError("no ports left")
+
+    # The local cluster starts in a background thread: its error reaches whoever needs it.
+    monkeypatch.setattr(parallel, "_local_cluster", fail)
+    with session(workers=1) as run:
+        assert run is not None
+        with pytest.raises(OSError, match="no ports left"):
+            run.client  # noqa: B018
+
+
+def test_one_session_runs_the_same_evaluation_twice(coaster: E.TaskSkill) -> None:
+    # The same job scattered twice on one client (a study's maps of two objects): Dask
+    # released the first one's data under the second's key ("lost dependencies").
+    placements = [
+        E.T.get_task("coaster").sample_objects(np.random.default_rng([3, i])) for i in range(2)
+    ]
+    args: dict[str, Any] = {"seed": 0}
+    serial = E.run_trials(coaster, placements, ["fused"], **args)
+    with session(workers=2) as run:
+        for _ in range(3):
+            again = E.run_trials(coaster, placements, ["fused"], client=run, **args)
+            assert [t.runs for t in again] == [t.runs for t in serial]
+
+
+_TWO_SESSIONS = """
+import sys
+from pbdkit.sim.parallel import session
+assert "distributed" not in sys.modules
+for _ in range(2):
+    with session(workers=1) as run:
+        run.client.submit(abs, -1).result()
+import dask
+print(dask.config.get("distributed.worker.profile.enabled"))
+"""
+
+
+def test_sessions_one_after_another_keep_dasks_settings() -> None:
+    # Each local session sets Dask's worker settings for its duration and undoes them. In a
+    # process that had not imported Dask's distributed yet, undoing them deleted Dask's own
+    # defaults: the second cluster failed with KeyError 'comm'.
+    import subprocess
+
+    out = subprocess.run(
+        [sys.executable, "-c", _TWO_SESSIONS], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True"]

@@ -30,21 +30,48 @@ Arrays have rows = samples and are float64: a trajectory is (T, D), a batch lead
 
 from __future__ import annotations
 
-from . import gaussian, robots
-from .bags import read_bag, write_trajectory_bag
-from .controller import Command, Controller
-from .demos import (
-    Demonstration,
-    LimitWarning,
-    demonstration_from_csv,
-    load_demonstrations,
-    save_demonstrations,
-)
-from .gmm import GMM
-from .kinematics import damped_pinv, nullspace_projector
-from .reproduce import ReachWarning, ReproductionResult
-from .robot import Robot
-from .skill import Skill
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from . import gaussian, robots
+    from .bags import read_bag, write_trajectory_bag
+    from .controller import Command, Controller
+    from .demos import (
+        Demonstration,
+        LimitWarning,
+        demonstration_from_csv,
+        load_demonstrations,
+        save_demonstrations,
+    )
+    from .gmm import GMM
+    from .kinematics import damped_pinv, nullspace_projector
+    from .reproduce import ReachWarning, ReproductionResult
+    from .robot import Robot
+    from .skill import Skill
+
+# The public names and the modules they live in. They are imported on first use (PEP 562), so
+# that `import pbdkit` and the command line start in a fraction of a second: scikit-learn,
+# SciPy and pinocchio are loaded when a name that needs them is first used.
+_WHERE = {
+    "GMM": "gmm",
+    "Command": "controller",
+    "Controller": "controller",
+    "Demonstration": "demos",
+    "LimitWarning": "demos",
+    "ReachWarning": "reproduce",
+    "ReproductionResult": "reproduce",
+    "Robot": "robot",
+    "Skill": "skill",
+    "damped_pinv": "kinematics",
+    "demonstration_from_csv": "demos",
+    "load_demonstrations": "demos",
+    "nullspace_projector": "kinematics",
+    "read_bag": "bags",
+    "save_demonstrations": "demos",
+    "write_trajectory_bag": "bags",
+}
+_SUBMODULES = ("gaussian", "robots")
 
 __all__ = [
     "GMM",
@@ -67,3 +94,18 @@ __all__ = [
     "write_trajectory_bag",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'pbdkit' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{where}", __name__), name)
+    globals()[name] = value  # the next look-up is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -7,6 +7,7 @@ commands expose one step each.
 from __future__ import annotations
 
 import functools
+import gc
 import os
 import time
 from collections.abc import Callable
@@ -19,8 +20,8 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from ._defaults import MAX_COMPONENTS
 from ._io import write_json
-from .gmm import MAX_COMPONENTS
 
 if TYPE_CHECKING:
     from .demos import Demonstration
@@ -182,6 +183,16 @@ def _check_workers(workers: int | None, scheduler: str | None) -> None:
         raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
     if workers is not None and workers < 1:
         raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+
+
+def _start_workers_early(workers: int | None) -> None:
+    """Local workers fork from a server that imports the simulation once: start it before this
+    process imports the simulation itself, so that the two imports overlap (call it after the
+    cheap checks of the options)."""
+    if workers is not None:
+        from . import _forkserver
+
+        _forkserver.start()
 
 
 def _progress() -> Any:
@@ -634,12 +645,13 @@ def evaluate(
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
-    _check_perturb(perturb)
     _check_workers(workers, scheduler)
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
     if json_path is not None:
         _check_output(json_path, "--json")
+    _start_workers_early(workers)
+    _check_perturb(perturb)  # imports the simulation
     spec = _robot_task(task)
     from .sim.experiment import evaluate as sim_evaluate
 
@@ -703,6 +715,7 @@ def study(
     demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
     _check_output(out, "--out", folder=True)
     _check_workers(workers, scheduler)
+    _start_workers_early(workers)
     spec = _robot_task(task)
     from .sim.study import FULL, SMALL, run_study
 
@@ -767,6 +780,11 @@ def main() -> None:
     except _USER_ERRORS as exc:
         console.print(Text.assemble(("error: ", "bold red"), _error_message(exc)), soft_wrap=True)
         raise SystemExit(2) from None
+    finally:
+        # The process ends here: the interpreter's last collection would walk every object
+        # the command loaded (0.3-0.5 s after a simulation; benchmarks/README.md), only for the
+        # operating system to free them. Frozen objects are left out of it.
+        gc.freeze()
 
 
 if __name__ == "__main__":

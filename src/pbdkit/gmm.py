@@ -62,6 +62,7 @@ from sklearn.base import BaseEstimator, DensityMixin
 from sklearn.exceptions import NotFittedError
 from threadpoolctl import threadpool_limits
 
+from ._defaults import MAX_COMPONENTS as MAX_COMPONENTS  # its documented home: pbdkit.gmm
 from ._validation import check_array, check_int, check_positive_float
 from .gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 
@@ -402,9 +403,6 @@ def candidate_grid(max_components: int) -> list[int]:
     return grid
 
 
-#: Default largest K tried when K is chosen (Skill.learn, the CLI). The demonstrations of the
-#: simulated tasks need 8-20 components per space (benchmarks/bench_selection.py).
-MAX_COMPONENTS = 30
 #: EM tolerance of the fits screened while choosing K (the kept fit is refined to ``tol``).
 SWEEP_TOL = 1e-2
 #: "auto": a K whose cross-validated error is within this fraction of the best K's is as good

@@ -61,12 +61,15 @@ from .teacher import teach
 from .tracking import ObjectNotSeenError, SimTracker, observed_objects
 
 __all__ = [
+    "ControllerOutcome",
     "ControllerRun",
     "ControllerStats",
     "Evaluation",
     "OnlineControllerRun",
     "TaskSkill",
     "Trial",
+    "TrialObservation",
+    "assemble_trial",
     "calibrate_tracker",
     "constrained_objects",
     "controller_names",
@@ -76,10 +79,12 @@ __all__ = [
     "learn_task",
     "observation_noise",
     "observe",
+    "observe_trial",
     "peak_speed_ratio",
     "run_controller",
     "run_online",
     "run_trial",
+    "run_trial_controller",
     "run_trials",
     "start_posture",
     "summarize",
@@ -580,9 +585,9 @@ def run_trials(
         :mod:`pbdkit.sim.parallel`); results are identical to the serial run.
     scheduler : str, optional
         Run them on the Dask cluster at this address (``tcp://HOST:PORT``) instead.
-    client : distributed.Client, optional
-        Run them with this Dask client (kept open: a study runs many evaluations on one
-        cluster).
+    client : distributed.Client or pbdkit.sim.parallel.Session, optional
+        Run them with this Dask client, or the client of this session (kept open: a study runs
+        many evaluations on one cluster).
     noise_mm : float
         Noise on the positions the skill is told (:func:`run_trial`).
 
@@ -634,7 +639,68 @@ def run_trial(
     noise to the positions the skill is told of the moving objects (after the cameras, if
     any): isotropic, scaled so that its mean 3-D length is ``noise_mm`` (per-axis standard
     deviation ``noise_mm / sqrt(8 / pi)``), drawn from ``seed`` and ``index``.
+
+    The same three steps run apart on Dask workers (:mod:`pbdkit.sim.parallel`):
+    :func:`observe_trial` once, :func:`run_trial_controller` per controller, then
+    :func:`assemble_trial`.
     """
+    seen = observe_trial(ts, truth, index, tracker=tracker, seed=seed, noise_mm=noise_mm)
+    runs: list[ControllerOutcome] = []
+    for k, name in enumerate(controllers, start=1):
+        runs.append(
+            run_trial_controller(
+                ts, seen, truth, index, name,
+                tracker=tracker, online=online, perturb=perturb, seed=seed,
+            )
+        )  # fmt: skip
+        if progress is not None:
+            progress(k)
+    return assemble_trial(ts, truth, index, seen, runs, perturb=perturb, seed=seed)
+
+
+@dataclass(frozen=True)
+class TrialObservation:
+    """What the skill of a trial is told (:func:`observe_trial`).
+
+    Attributes
+    ----------
+    told : dict str -> ndarray, shape (3,), or None
+        The positions the skill is told; None if the cameras did not locate every tracked
+        object.
+    statuses : dict str -> str
+        The tracker's status per object when ``told`` is None, else empty.
+    errors_mm : dict str -> float or None
+        Distance from the observed to the true position per tracked object (vision only).
+    """
+
+    told: dict[str, Float] | None
+    statuses: dict[str, str]
+    errors_mm: dict[str, float] | None
+
+
+@dataclass(frozen=True)
+class ControllerOutcome:
+    """One controller's run in a trial (:func:`run_trial_controller`): its name, its summary
+    (:meth:`ControllerRun.summary`) and the trial's disturbance as it acted
+    (:meth:`pbdkit.sim.perturb.Disturbance.as_dict`; None if nothing ran)."""
+
+    controller: str
+    summary: dict[str, Any]
+    disturbance: dict[str, Any] | None
+
+
+def observe_trial(
+    ts: TaskSkill,
+    truth: dict[str, Float],
+    index: int,
+    *,
+    tracker: SimTracker | None = None,
+    seed: int = 0,
+    noise_mm: float = 0.0,
+) -> TrialObservation:
+    """The positions the skill of trial ``index`` is told (:func:`run_trial`): the cameras'
+    with a ``tracker`` (the arm waiting at its start posture), else the truth; plus
+    ``noise_mm`` of noise drawn from ``seed`` and ``index``."""
     told: dict[str, Float] | None = truth
     statuses: dict[str, str] = {}
     errors: dict[str, float] | None = None
@@ -648,28 +714,65 @@ def run_trial(
             errors = tracking_errors(told, truth, tracker.objects)
     if noise_mm > 0.0 and told is not None:
         told = observation_noise(ts.task, told, noise_mm, seed=seed, index=index)
-    described: dict[str, Any] = trial_disturbance(
-        ts, perturb, truth, seed=seed, index=index
-    ).as_dict()
-    runs: dict[str, dict[str, Any]] = {}
-    for k, name in enumerate(controllers, start=1):
-        if told is None:
-            runs[name] = {"success": False, "tracking_status": statuses}
-        else:
-            act = trial_disturbance(ts, perturb, truth, seed=seed, index=index)
-            if online:
-                summary = run_online(
-                    ts, told, name, tracker=tracker, sim_objects=truth, disturbance=act
-                ).summary()
-            else:
-                summary = run_controller(
-                    ts, told, name, sim_objects=truth, disturbance=act
-                ).summary()
-            runs[name] = summary
-            described = act.as_dict()
-        if progress is not None:
-            progress(k)
-    return Trial(truth, told, statuses, errors, runs, described)
+    return TrialObservation(told, statuses, errors)
+
+
+def run_trial_controller(
+    ts: TaskSkill,
+    seen: TrialObservation,
+    truth: dict[str, Float],
+    index: int,
+    controller: str,
+    *,
+    tracker: SimTracker | None = None,
+    online: bool = False,
+    perturb: str = "none",
+    seed: int = 0,
+) -> ControllerOutcome:
+    """One controller of trial ``index`` (:func:`run_trial`), told ``seen``; a failure
+    without running when the cameras did not locate the objects."""
+    if seen.told is None:
+        return ControllerOutcome(
+            controller, {"success": False, "tracking_status": seen.statuses}, None
+        )
+    act = trial_disturbance(ts, perturb, truth, seed=seed, index=index)
+    if online:
+        summary = run_online(
+            ts, seen.told, controller, tracker=tracker, sim_objects=truth, disturbance=act
+        ).summary()
+    else:
+        summary = run_controller(
+            ts, seen.told, controller, sim_objects=truth, disturbance=act
+        ).summary()
+    return ControllerOutcome(controller, summary, act.as_dict())
+
+
+def assemble_trial(
+    ts: TaskSkill,
+    truth: dict[str, Float],
+    index: int,
+    seen: TrialObservation,
+    runs: Sequence[ControllerOutcome],
+    *,
+    perturb: str = "none",
+    seed: int = 0,
+) -> Trial:
+    """The :class:`Trial` of :func:`run_trial` from its observation and its controllers' runs
+    (in the order of the controllers)."""
+    acted = [r.disturbance for r in runs if r.disturbance is not None]
+    described = (
+        acted[-1]
+        if acted
+        else trial_disturbance(ts, perturb, truth, seed=seed, index=index).as_dict()
+    )
+    return Trial(
+        truth,
+        seen.told,
+        seen.statuses,
+        seen.errors_mm,
+        {r.controller: r.summary for r in runs},
+        described,
+    )
 
 
 def observation_noise(

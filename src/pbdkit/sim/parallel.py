@@ -5,17 +5,27 @@ single-threaded worker processes on this machine, ``scheduler="tcp://HOST:PORT"`
 running cluster (``dask scheduler`` on one machine, ``dask worker tcp://HOST:PORT`` on each of
 the others; every worker needs pbdkit installed with its ``sim`` extra).
 
-What is sent: the skill and the task once per run (scattered to every worker), then one task
-per trial: its index and its placement. A trial (:func:`pbdkit.sim.experiment.run_trial`)
-depends on nothing else (its disturbance is drawn from the seed and its index; physics is
-deterministic), so the trials come back identical to the serial run's, in the placements'
-order, whatever worker ran them. A worker that dies loses only the trials it was running: the
-scheduler runs them again on another worker (up to three times, Dask's
-``distributed.scheduler.allowed-failures``). An exception raised by a trial is a bug, and is
-raised here.
+What is sent: the skill and the task once per run (scattered to every worker), then per trial
+one task that observes the placement (:func:`pbdkit.sim.experiment.observe_trial`: the
+cameras) and one task per controller that runs it
+(:func:`pbdkit.sim.experiment.run_trial_controller`), which depends on the observation; the
+trial is assembled here (:func:`pbdkit.sim.experiment.assemble_trial`). Tasks of a controller
+run, not of a whole trial: the last worker to finish waits for one controller run, not for a
+whole trial, and a cluster of more workers than trials still has work for all of them (on 2
+workers and 20 trials the two ways take the same time, within the machine's noise). A trial
+depends on nothing but its index and placement (its disturbance is drawn from the seed and its
+index; physics is deterministic), so the trials come back identical to the serial run's, in
+the placements' order, whatever worker ran them. A worker that dies loses only the tasks it
+was running (and the observations it held): the scheduler runs them again on another worker
+(up to three times, Dask's ``distributed.scheduler.allowed-failures``). An exception raised by
+a task is a bug, and is raised here.
 
 Each worker thread runs on its own copy of the skill (a robot's pinocchio work data must not be
 shared between threads), so ``dask worker --nthreads N`` is safe; one thread per core is best.
+
+Start-up cost, local workers (:func:`session`): they are forked from a server process that has
+imported pbdkit's simulation once (:mod:`pbdkit._forkserver`), started before the learning, so
+that the workers start in a fraction of a second once the skill is learned.
 
 A task defined outside pbdkit must be importable on the workers (its functions are sent by
 reference, as Python pickles functions): register it in a module the workers can import.
@@ -26,19 +36,20 @@ from __future__ import annotations
 import copy
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import _forkserver
 from .tracking import SimTracker
 
 if TYPE_CHECKING:
-    from .experiment import TaskSkill, Trial
+    from .experiment import ControllerOutcome, TaskSkill, Trial, TrialObservation
 
-__all__ = ["WORKER_CONFIG", "TrialJob", "connect", "run_trials_dask", "session"]
+__all__ = ["WORKER_CONFIG", "Session", "TrialJob", "connect", "run_trials_dask", "session"]
 
 Float = NDArray[np.float64]
 
@@ -75,6 +86,41 @@ class TrialJob:
             noise_mm=self.noise_mm,
         )
 
+    def observe(self, index: int, truth: dict[str, Float]) -> TrialObservation:
+        """What the skill of trial ``index`` is told
+        (:func:`pbdkit.sim.experiment.observe_trial`)."""
+        from .experiment import observe_trial
+
+        return observe_trial(
+            self.ts, truth, index, tracker=self.tracker, seed=self.seed, noise_mm=self.noise_mm
+        )
+
+    def run_controller(
+        self, seen: TrialObservation, index: int, truth: dict[str, Float], controller: str
+    ) -> ControllerOutcome:
+        """One controller of trial ``index``
+        (:func:`pbdkit.sim.experiment.run_trial_controller`)."""
+        from .experiment import run_trial_controller
+
+        return run_trial_controller(
+            self.ts, seen, truth, index, controller,
+            tracker=self.tracker, online=self.online, perturb=self.perturb, seed=self.seed,
+        )  # fmt: skip
+
+    def assemble(
+        self,
+        index: int,
+        truth: dict[str, Float],
+        seen: TrialObservation,
+        runs: Sequence[ControllerOutcome],
+    ) -> Trial:
+        """Trial ``index`` from its parts (:func:`pbdkit.sim.experiment.assemble_trial`)."""
+        from .experiment import assemble_trial
+
+        return assemble_trial(
+            self.ts, truth, index, seen, runs, perturb=self.perturb, seed=self.seed
+        )
+
 
 #: Dask settings of the local workers. The worker's statistical profiler (a look at every
 #: thread's stack each 10 ms, for the dashboard's profile page) made a trial about 25 % slower
@@ -97,12 +143,34 @@ def _own_copy(job: TrialJob) -> TrialJob:
     return mine
 
 
-def _run_one(job: TrialJob, index: int, truth: dict[str, Float]) -> Trial:
-    """One trial on a worker, with BLAS on one thread (a worker is one core)."""
-    from threadpoolctl import threadpool_limits
+_BLAS: Any = None
 
-    with threadpool_limits(limits=1):
-        return _own_copy(job).run(index, truth)
+
+def _one_blas_thread() -> AbstractContextManager[Any]:
+    """BLAS on one thread while a task runs (a worker is one core). threadpoolctl's controller
+    is built once per process: ``threadpool_limits`` builds one per call, which scans the
+    loaded libraries (3-10 ms, paid by every task)."""
+    global _BLAS
+    if _BLAS is None:
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS = ThreadpoolController()
+    limit: AbstractContextManager[Any] = _BLAS.limit(limits=1)
+    return limit
+
+
+def _observe_one(job: TrialJob, index: int, truth: dict[str, Float]) -> TrialObservation:
+    """A trial's observation on a worker, with BLAS on one thread."""
+    with _one_blas_thread():
+        return _own_copy(job).observe(index, truth)
+
+
+def _control_one(
+    job: TrialJob, seen: TrialObservation, index: int, truth: dict[str, Float], controller: str
+) -> ControllerOutcome:
+    """A trial's controller run on a worker, with BLAS on one thread."""
+    with _one_blas_thread():
+        return _own_copy(job).run_controller(seen, index, truth, controller)
 
 
 def connect(
@@ -122,33 +190,65 @@ def connect(
     ValueError
         Both or neither given, ``workers`` < 1, or a scheduler that cannot be reached.
     """
+    _check_arguments(workers, scheduler)
+    if workers is not None:
+        with _local_config():
+            return _local_cluster(workers)
+    return _remote(scheduler, timeout), None
+
+
+def _check_arguments(workers: int | None, scheduler: str | None) -> None:
     if (workers is None) == (scheduler is None):
         raise ValueError("give either workers (local processes) or scheduler (an address)")
+    if workers is not None and (
+        not isinstance(workers, int) or isinstance(workers, bool) or workers < 1
+    ):
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+
+
+def _local_config() -> AbstractContextManager[Any]:
+    """Dask settings while a local cluster runs: our workers' (:data:`WORKER_CONFIG`, which
+    the nannies pass on to them) and the forkserver for every worker a nanny (re)starts."""
     import dask
+    import distributed  # noqa: F401  (first: see below)
+
+    _forkserver.start()
+    # Dask's defaults for distributed are registered when it is imported: a key set before
+    # that would be deleted when the setting is undone, with the defaults under it.
+    return dask.config.set({**WORKER_CONFIG, _forkserver.METHOD_KEY: "forkserver"})
+
+
+def _local_cluster(workers: int) -> tuple[Any, Any]:
     from distributed import Client, LocalCluster
 
-    if workers is not None:
-        if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-            raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
-        with dask.config.set(WORKER_CONFIG):  # the nannies pass it on to their workers
-            cluster = LocalCluster(  # type: ignore[no-untyped-call]
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
-            )
+    cluster = LocalCluster(  # type: ignore[no-untyped-call]
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
+    )
+    try:
         client = Client(cluster)  # type: ignore[no-untyped-call]
-    else:
-        cluster = None
-        try:
-            client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
-        except (OSError, TimeoutError) as exc:
-            raise ValueError(
-                f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
-            ) from exc
-    _warm_up(client)
+    except BaseException:
+        cluster.close()
+        raise
     return client, cluster
+
+
+def _remote(scheduler: str | None, timeout: float) -> Any:
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
+    except (OSError, TimeoutError) as exc:
+        raise ValueError(
+            f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
+        ) from exc
+    # A cluster of the user's imports pbdkit in each worker: have it start now, without
+    # waiting, so that the imports overlap the teaching and the learning.
+    _warm_up(client)
+    return client
 
 
 def _import_sim() -> None:
@@ -156,39 +256,84 @@ def _import_sim() -> None:
 
 
 def _warm_up(client: Any) -> None:
-    """Have every worker import pbdkit's simulation now (about 3 s), without waiting: the
-    imports overlap whatever the caller does next (teaching and learning the skill), instead
-    of delaying the first trial."""
+    """Have every worker import pbdkit's simulation now, without waiting: the imports overlap
+    whatever the caller does next (teaching and learning the skill), instead of delaying the
+    first trial."""
     from distributed import fire_and_forget
 
     for address in client.scheduler_info()["workers"]:
         fire_and_forget(client.submit(_import_sim, workers=[address], pure=False))  # type: ignore[no-untyped-call]
 
 
+class Session:
+    """Dask workers for a block of work (:func:`session`).
+
+    Local workers: the forkserver they fork from starts here, at once and without waiting
+    (:mod:`pbdkit._forkserver`: its imports overlap the caller's teaching and learning); the
+    cluster starts when :attr:`client` is first wanted, in a fraction of a second. Starting it
+    in a background thread instead made the learning here up to twice as slow (the scheduler
+    and the nannies live in this process and take the interpreter's lock). A remote scheduler
+    is connected at once, so that a wrong address fails before any work.
+    """
+
+    def __init__(self, workers: int | None = None, scheduler: str | None = None) -> None:
+        _check_arguments(workers, scheduler)
+        self._workers = workers
+        self._stack = ExitStack()
+        self._result: tuple[Any, Any] | None = None
+        if workers is None:
+            self._result = (_remote(scheduler, 10.0), None)
+        else:
+            _forkserver.start()
+
+    @property
+    def client(self) -> Any:
+        """The ``distributed.Client`` (a local cluster is started on the first call)."""
+        if self._result is None:
+            assert self._workers is not None
+            self._stack.enter_context(_local_config())
+            self._result = _local_cluster(self._workers)
+        return self._result[0]
+
+    def close(self) -> None:
+        """Close the client, and the cluster if it was started here."""
+        try:
+            if self._result is not None:
+                client, cluster = self._result
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+        finally:
+            self._stack.close()
+
+
 def session(
     workers: int | None = None, scheduler: str | None = None
-) -> AbstractContextManager[Any]:
-    """A Dask client for a block of work (:func:`connect`), closed (with the cluster started
-    here) at its end; None when neither ``workers`` nor ``scheduler`` is given (serial).
+) -> AbstractContextManager[Session | None]:
+    """A :class:`Session` for a block of work, closed (with the cluster started here) at its
+    end; None when neither ``workers`` nor ``scheduler`` is given (serial).
 
-    Connect before teaching and learning: the workers start and import while the skill is
-    learned here.
+    Open it before teaching and learning: local workers start while the skill is learned, a
+    remote cluster's workers import pbdkit meanwhile.
+
+    Raises
+    ------
+    ValueError
+        Both ``workers`` and ``scheduler`` given, ``workers`` < 1, or a scheduler that cannot
+        be reached.
     """
     if workers is None and scheduler is None:
         return nullcontext(None)
-    return _connected(workers, scheduler)
+    return _opened(workers, scheduler)
 
 
 @contextmanager
-def _connected(workers: int | None, scheduler: str | None) -> Iterator[Any]:
-    """:func:`connect`, the client and its cluster closed at the end of the block."""
-    client, cluster = connect(workers, scheduler)
+def _opened(workers: int | None, scheduler: str | None) -> Iterator[Session]:
+    run = Session(workers, scheduler)
     try:
-        yield client
+        yield run
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        run.close()
 
 
 def run_trials_dask(
@@ -201,30 +346,36 @@ def run_trials_dask(
     client: Any = None,
 ) -> list[Trial]:
     """:func:`pbdkit.sim.experiment.run_trials` on Dask workers: ``job`` at every placement,
-    on ``workers`` local processes, the cluster at ``scheduler``, or with ``client`` (its
-    cluster is used and left open).
+    on ``workers`` local processes, the cluster at ``scheduler``, or with ``client`` (a
+    ``distributed.Client`` or a :class:`Session`; used and left open).
 
-    ``progress(done, total)`` counts controller runs, as in the serial run, and advances by a
-    whole trial at a time.
+    ``progress(done, total)`` counts controller runs, as in the serial run.
     """
     from distributed import as_completed
 
     # The demonstrations stay here: the workers need the skill and the task only.
     job = replace(job, ts=replace(job.ts, demos=[]))
-    per_trial = len(job.controllers)
-    total = len(placements) * per_trial
+    total = len(placements) * len(job.controllers)
     # A client of the caller's is used and left open; otherwise one is opened for this run.
-    opened = _connected(workers, scheduler) if client is None else nullcontext(client)
-    with opened as client:
-        shared = client.scatter(job, broadcast=True)
-        futures = [
-            client.submit(_run_one, shared, i, truth, pure=False)
-            for i, truth in enumerate(placements)
-        ]
-        done = 0
-        for _ in as_completed(futures):  # type: ignore[no-untyped-call]
-            done += per_trial
+    opened = session(workers, scheduler) if client is None else nullcontext(client)
+    with opened as run:
+        client = run.client if isinstance(run, Session) else run
+        # A key of its own: the same job scattered again on this client (a study's second
+        # map) must not share a key with the last one's, which Dask may be releasing.
+        shared = client.scatter(job, broadcast=True, hash=False)
+        seen, runs = [], []
+        for i, truth in enumerate(placements):
+            obs = client.submit(_observe_one, shared, i, truth, pure=False)
+            seen.append(obs)
+            runs.append(
+                [
+                    client.submit(_control_one, shared, obs, i, truth, name, pure=False)
+                    for name in job.controllers
+                ]
+            )
+        finished = as_completed([f for row in runs for f in row])  # type: ignore[no-untyped-call]
+        for done, _ in enumerate(finished, start=1):
             if progress is not None:
                 progress(done, total)
-        trials: list[Trial] = client.gather(futures)
-    return trials
+        observed, outcomes = client.gather([seen, runs])
+    return [job.assemble(i, truth, observed[i], outcomes[i]) for i, truth in enumerate(placements)]
