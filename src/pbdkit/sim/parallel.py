@@ -179,6 +179,10 @@ def connect(
     """A Dask client: to a new local cluster of ``workers`` processes, or to ``scheduler``
     (waiting at most ``timeout`` seconds for it).
 
+    :func:`session` is the usual way: it starts the local workers' server before the learning
+    and keeps Dask's setting that workers are forked while the cluster lives; a worker that a
+    nanny restarts after this call has returned is spawned, and imports the simulation itself.
+
     Returns
     -------
     client : distributed.Client
