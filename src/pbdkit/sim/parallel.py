@@ -173,8 +173,15 @@ def _control_one(
         return _own_copy(job).run_controller(seen, index, truth, controller)
 
 
+#: Seconds to wait for a remote scheduler (:func:`connect`, :func:`session`).
+SCHEDULER_TIMEOUT = 10.0
+
+
 def connect(
-    workers: int | None = None, scheduler: str | None = None, *, timeout: float = 10.0
+    workers: int | None = None,
+    scheduler: str | None = None,
+    *,
+    timeout: float = SCHEDULER_TIMEOUT,
 ) -> tuple[Any, Any]:
     """A Dask client: to a new local cluster of ``workers`` processes, or to ``scheduler``
     (waiting at most ``timeout`` seconds for it).
@@ -196,6 +203,7 @@ def connect(
     """
     _check_arguments(workers, scheduler)
     if workers is not None:
+        _forkserver.start()
         with _local_config():
             return _local_cluster(workers)
     return _remote(scheduler, timeout), None
@@ -212,11 +220,11 @@ def _check_arguments(workers: int | None, scheduler: str | None) -> None:
 
 def _local_config() -> AbstractContextManager[Any]:
     """Dask settings while a local cluster runs: our workers' (:data:`WORKER_CONFIG`, which
-    the nannies pass on to them) and the forkserver for every worker a nanny (re)starts."""
+    the nannies pass on to them) and the forkserver for every worker a nanny (re)starts (the
+    caller starts the server: :func:`pbdkit._forkserver.start`)."""
     import dask
     import distributed  # noqa: F401  (first: see below)
 
-    _forkserver.start()
     # Dask's defaults for distributed are registered when it is imported: a key set before
     # that would be deleted when the setting is undone, with the defaults under it.
     return dask.config.set({**WORKER_CONFIG, _forkserver.METHOD_KEY: "forkserver"})
@@ -286,7 +294,7 @@ class Session:
         self._stack = ExitStack()
         self._result: tuple[Any, Any] | None = None
         if workers is None:
-            self._result = (_remote(scheduler, 10.0), None)
+            self._result = (_remote(scheduler, SCHEDULER_TIMEOUT), None)
         else:
             _forkserver.start()
 
