@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from numpy.typing import NDArray
 
 from pbdkit import robots
@@ -144,6 +145,18 @@ def test_katana_model_matches_design(katana: Robot) -> None:
     np.testing.assert_allclose(katana.upper, KATANA_UPPER, rtol=0, atol=1e-12)
     np.testing.assert_allclose(katana.velocity_limit, 1.19, rtol=0, atol=1e-12)
     assert katana.revolute.all()
+
+
+def test_katana_limits_from_the_shipped_yaml(katana: Robot) -> None:
+    # The maker publishes no acceleration or jerk limits: conservative ones, the same on every
+    # joint; the velocity stays the URDF's (the YAML does not repeat it).
+    assert robots.katana_joint_limits_path().is_file()
+    declared = yaml.safe_load(robots.katana_joint_limits_path().read_text())["joint_limits"]
+    assert list(declared) == katana.joint_names
+    assert not any("has_velocity_limits" in entry for entry in declared.values())
+    np.testing.assert_array_equal(katana.velocity_limit, np.full(5, 1.19))
+    np.testing.assert_array_equal(katana.acceleration_limit, np.full(5, 6.0))
+    np.testing.assert_array_equal(katana.jerk_limit, np.full(5, 60.0))
 
 
 def test_katana_fk_equals_independent_transforms(katana: Robot) -> None:
@@ -282,6 +295,59 @@ def test_panda_factory(panda: Robot) -> None:
     assert panda.joint_names[0] == "panda_joint1"
     np.testing.assert_allclose(panda.upper[3], -0.0698, rtol=0, atol=0)
     np.testing.assert_allclose(panda.effort_limit[[0, 6]], [87.0, 12.0], rtol=0, atol=0)
+
+
+def test_panda_has_frankas_published_limits(panda: Robot) -> None:
+    # Franka, "Robot and interface specifications", limits for Panda.
+    np.testing.assert_array_equal(
+        panda.velocity_limit, [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]
+    )
+    np.testing.assert_array_equal(panda.acceleration_limit, [15, 7.5, 10, 12.5, 15, 20, 20])
+    np.testing.assert_array_equal(panda.jerk_limit, [7500, 3750, 5000, 6250, 7500, 10000, 10000])
+    # ... read from the shipped YAML, not from the generated URDF (which has no velocity)
+    assert robots.panda_joint_limits_path().name == "panda_joint_limits.yaml"
+    without = Robot.from_urdf(panda.urdf, tip="flange")
+    assert np.isinf(without.velocity_limit).all() and np.isinf(without.jerk_limit).all()
+
+
+def test_limit_arrays_are_float64_and_read_only(panda: Robot) -> None:
+    for name in ("lower", "upper", "velocity_limit", "acceleration_limit", "jerk_limit"):
+        arr = getattr(panda, name)
+        assert arr.dtype == np.float64 and arr.shape == (7,), name
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = 1.0
+
+
+def test_a_urdf_velocity_of_zero_means_no_limit() -> None:
+    urdf = chain_urdf(KATANA_ORIGINS[:3], (0.1, 0, 0)).replace('velocity="1"', 'velocity="0"', 1)
+    robot = Robot.from_urdf(urdf, tip="tip")
+    np.testing.assert_array_equal(robot.velocity_limit, [np.inf, 1.0, 1.0])
+    # no YAML: no acceleration or jerk limit anywhere
+    np.testing.assert_array_equal(robot.acceleration_limit, np.full(3, np.inf))
+    np.testing.assert_array_equal(robot.jerk_limit, np.full(3, np.inf))
+    # a continuous joint without <limit> gets velocity 0 in the URDF: no limit either
+    text = (
+        '<robot name="c"><link name="a"/><link name="b"/>'
+        '<joint name="spin" type="continuous"><parent link="a"/><child link="b"/>'
+        '<axis xyz="0 0 1"/></joint></robot>'
+    )
+    np.testing.assert_array_equal(Robot.from_urdf(text).velocity_limit, [np.inf])
+
+
+def test_from_dh_acceleration_and_jerk() -> None:
+    table = [[0, 0, 0.1, 0], [0.2, 0, 0, 0]]
+    robot = Robot.from_dh(table, velocity=[1.0, 0.0], acceleration=3.0, jerk=[30.0, np.inf])
+    np.testing.assert_array_equal(robot.velocity_limit, [1.0, np.inf])
+    np.testing.assert_array_equal(robot.acceleration_limit, [3.0, 3.0])
+    np.testing.assert_array_equal(robot.jerk_limit, [30.0, np.inf])
+    plain = Robot.from_dh(table)
+    assert np.isinf(plain.velocity_limit).all() and np.isinf(plain.acceleration_limit).all()
+    with pytest.raises(ValueError, match=r"acceleration\[1\] must be > 0 \(rad/s\^2; inf for no "):
+        Robot.from_dh(table, acceleration=[1.0, 0.0])
+    with pytest.raises(ValueError, match=r"jerk\[0\] must be > 0 .* got nan"):
+        Robot.from_dh(table, jerk=np.nan)
+    with pytest.raises(ValueError, match=r"jerk must have shape \(2,\) \(one value per joint\)"):
+        Robot.from_dh(table, jerk=[1.0, 2.0, 3.0])
 
 
 @pytest.mark.parametrize("convention", ["modified", "standard"])
@@ -657,6 +723,15 @@ def test_dh_bad_input() -> None:
         urdf_from_dh(np.zeros((2, 4)), lower=[0.0, 0.0, 0.0])
 
 
+def test_dh_scalar_limits_apply_to_every_joint() -> None:
+    # documented "shape (n,) or scalar": a scalar used to be refused as shape (1,)
+    robot = Robot.from_dh(np.zeros((3, 4)), lower=-1.0, upper=2.0, velocity=1.5, effort=4.0)
+    np.testing.assert_array_equal(robot.lower, np.full(3, -1.0))
+    np.testing.assert_array_equal(robot.upper, np.full(3, 2.0))
+    np.testing.assert_array_equal(robot.velocity_limit, np.full(3, 1.5))
+    np.testing.assert_array_equal(robot.effort_limit, np.full(3, 4.0))
+
+
 # ------------------------------------------------------------------------------------------
 # damped pseudo-inverse and null space
 # ------------------------------------------------------------------------------------------
@@ -754,6 +829,9 @@ def test_a_pickled_robot_computes_what_the_original_does() -> None:
     for robot in (katana(), panda()):
         copy = pickle.loads(pickle.dumps(robot))
         assert copy.joint_names == robot.joint_names and copy.tip == robot.tip
+        assert copy.urdf == robot.urdf
+        for name in ("lower", "upper", "velocity_limit", "acceleration_limit", "jerk_limit"):
+            np.testing.assert_array_equal(getattr(copy, name), getattr(robot, name))
         for q in rng.uniform(robot.lower, robot.upper, (5, robot.n_joints)):
             x, jac = robot.fk_jacobian_unchecked(q)
             x2, jac2 = copy.fk_jacobian_unchecked(q)

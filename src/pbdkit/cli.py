@@ -382,6 +382,15 @@ def learn(
     ],
     robot: Annotated[str, typer.Option(help="katana, panda, or a URDF file.")] = "katana",
     tip: Annotated[str | None, typer.Option(help="Tip frame (URDF robots).")] = None,
+    joint_limits: Annotated[
+        Path | None,
+        typer.Option(
+            "--joint-limits",
+            metavar="YAML",
+            help="URDF robots: a joint_limits.yaml (MoveIt / ros2_control format) with the "
+            "velocity, acceleration and jerk limits; its velocities win over the URDF's.",
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Output skill file.")] = Path("skill.npz"),
     n_steps: Annotated[int, typer.Option(help="Steps of the time grid.")] = 1000,
     max_components: Annotated[
@@ -432,6 +441,11 @@ def learn(
     shipped = robot in robots.available()
     if shipped and tip is not None:
         _fail(f"--tip applies to a URDF robot; the shipped {robot} has a fixed tool frame")
+    if shipped and joint_limits is not None:
+        _fail(
+            f"--joint-limits applies to a URDF robot; the shipped {robot} has its own limits "
+            "(pass its URDF file to --robot to use other limits)"
+        )
     bag_options = {
         "--joint-topic": joint_topic,
         "--object": obj,
@@ -458,7 +472,7 @@ def learn(
     if shipped:
         arm = robots.load(robot)
     elif Path(robot).is_file():
-        arm = Robot.from_urdf(Path(robot), tip=tip)
+        arm = Robot.from_urdf(Path(robot), tip=tip, joint_limits=joint_limits)
     else:
         raise typer.BadParameter(
             f"robot must be one of {robots.available()} or a URDF file, got {robot!r}",

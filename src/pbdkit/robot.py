@@ -18,6 +18,14 @@ locked. A ``<mimic>`` joint (one that follows another joint) on that path is ref
 become an independent actuated joint; off the path it is locked like any other. Meshes are never
 loaded: only kinematics is built.
 
+Limits. Position and velocity limits come from the URDF's ``<limit>`` tags; a velocity of 0
+(URDF's "not limited", also what a continuous joint without ``<limit>`` gets) reads inf. URDF has
+no acceleration or jerk limits: they come from a ``joint_limits.yaml`` file in the format of
+MoveIt and ros2_control (``Robot.from_urdf(..., joint_limits=...)``, see
+:mod:`pbdkit._joint_limits` for the rules), which also overrides the URDF's velocity limits (as
+in MoveIt) and, with ``has_position_limits: true``, its position limits. A joint without a
+declared limit has inf.
+
 :func:`urdf_from_dh` writes a URDF from a Denavit-Hartenberg table (modified/Craig or standard),
 and :meth:`Robot.from_dh` loads it.
 """
@@ -37,6 +45,7 @@ import numpy.typing as npt
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from ._joint_limits import JointLimits, JointLimitsSource, joint_limits_mapping, read_joint_limits
 from ._validation import check_array, shape_str
 
 __all__ = ["Robot", "urdf_from_dh"]
@@ -191,6 +200,23 @@ def _choose_tip(root: ET.Element, tip: str | None) -> tuple[str, str]:
     return roots[0], leaves[0]
 
 
+def _write_position_limits(root: ET.Element, declared: dict[str, JointLimits]) -> bool:
+    """Write declared position limits into the ``<limit>`` tags of the chain's joints.
+
+    Returns True if the tree was modified.
+    """
+    changed = False
+    for joint in root.iter("joint"):
+        lim = declared.get(joint.get("name", ""))
+        limit = joint.find("limit")
+        if lim is None or lim.position is None or limit is None or joint.find("parent") is None:
+            continue
+        limit.set("lower", repr(lim.position[0]))
+        limit.set("upper", repr(lim.position[1]))
+        changed = True
+    return changed
+
+
 # --------------------------------------------------------------------------------------------
 # The numpy chain (batch path)
 # --------------------------------------------------------------------------------------------
@@ -320,9 +346,18 @@ class Robot:
     joint_names : list of str, length n
         Joint names in chain order (from the base to the tip).
     lower, upper : ndarray, shape (n,)
-        Joint position limits (rad for revolute joints, m for prismatic ones).
-    velocity_limit, effort_limit : ndarray, shape (n,)
-        Limits from the URDF ``<limit>`` tags (0 when the URDF gives none).
+        Joint position limits (rad for revolute joints, m for prismatic ones): the URDF's, or the
+        joint_limits YAML's where it declares ``has_position_limits: true``.
+    velocity_limit : ndarray, shape (n,)
+        Joint speed limits, rad/s (m/s for prismatic joints), > 0: the joint_limits YAML's where
+        it declares one (it wins over the URDF, as in MoveIt), else the URDF's; inf where neither
+        limits the joint (a URDF velocity of 0 means "not limited").
+    acceleration_limit : ndarray, shape (n,)
+        rad/s^2 (m/s^2), > 0, from the joint_limits YAML; inf where it declares none.
+    jerk_limit : ndarray, shape (n,)
+        rad/s^3 (m/s^3), > 0, from the joint_limits YAML; inf where it declares none.
+    effort_limit : ndarray, shape (n,)
+        From the URDF ``<limit>`` tags (N m or N; 0 when the URDF gives none).
     revolute : ndarray of bool, shape (n,)
         True for revolute joints, False for prismatic ones.
     tip : str
@@ -332,11 +367,19 @@ class Robot:
     name : str
         The URDF robot name.
     urdf : str
-        The URDF XML text that was loaded (continuous joints already turned into revolute ones),
-        so that a simulator can load the same model.
+        The URDF XML text that was loaded (continuous joints already turned into revolute ones,
+        position limits from the joint_limits YAML written into the ``<limit>`` tags), so that a
+        simulator can load the same model.
+
+    All limit arrays are float64 and read-only.
     """
 
-    def __init__(self, urdf: str, tip: str | None = None) -> None:
+    def __init__(
+        self,
+        urdf: str,
+        tip: str | None = None,
+        joint_limits: JointLimitsSource | None = None,
+    ) -> None:
         """Build from URDF XML text; prefer :meth:`from_urdf`, which also accepts a file path.
 
         Parameters
@@ -345,7 +388,10 @@ class Robot:
             The URDF XML text.
         tip : str, optional
             The frame to control (see :meth:`from_urdf`).
+        joint_limits : str, path-like or mapping, optional
+            Velocity, acceleration and jerk limits (see :meth:`from_urdf`).
         """
+        declared = {} if joint_limits is None else read_joint_limits(joint_limits)
         root = _parse_urdf(urdf)
         if _normalize_joints(root):
             urdf = ET.tostring(root, encoding="unicode")
@@ -374,6 +420,25 @@ class Robot:
         upper = np.array(model.upperPositionLimit, dtype=np.float64)
         names = [str(model.names[i]) for i in range(1, model.njoints)]
         _refuse_mimic_joints(root, names)
+        velocity = np.array(model.velocityLimit, dtype=np.float64)
+        velocity[~(velocity > 0)] = np.inf  # URDF writes velocity="0" for "not limited"
+        acceleration, jerk = np.full(len(names), np.inf), np.full(len(names), np.inf)
+        on_chain = {name: declared[name] for name in names if name in declared}  # not fingers
+        for i, name in enumerate(names):
+            lim = on_chain.get(name, JointLimits())
+            for arr, value in (
+                (velocity, lim.velocity),
+                (acceleration, lim.acceleration),
+                (jerk, lim.jerk),
+            ):
+                if value is not None:
+                    arr[i] = value
+            if lim.position is not None:
+                lower[i], upper[i] = lim.position
+        if _write_position_limits(root, on_chain):
+            urdf = ET.tostring(root, encoding="unicode")
+            model.lowerPositionLimit = lower.copy()
+            model.upperPositionLimit = upper.copy()
         if not (
             np.all(np.isfinite(lower)) and np.all(np.isfinite(upper)) and np.all(lower <= upper)
         ):
@@ -391,10 +456,20 @@ class Robot:
         self.joint_names: list[str] = names
         self.lower = lower
         self.upper = upper
-        self.velocity_limit = np.array(model.velocityLimit, dtype=np.float64)
+        self.velocity_limit = velocity
+        self.acceleration_limit = acceleration
+        self.jerk_limit = jerk
         self.effort_limit = np.array(model.effortLimit, dtype=np.float64)
         self.revolute = self._revolute.copy()
-        for arr in (self.lower, self.upper, self.velocity_limit, self.effort_limit, self.revolute):
+        for arr in (
+            self.lower,
+            self.upper,
+            self.velocity_limit,
+            self.acceleration_limit,
+            self.jerk_limit,
+            self.effort_limit,
+            self.revolute,
+        ):
             arr.flags.writeable = False
         self.tip: str = tip_name
         self.base: str = base_name
@@ -414,8 +489,13 @@ class Robot:
     # ---------------------------------------------------------------- constructors
 
     @classmethod
-    def from_urdf(cls, path_or_xml: str | os.PathLike[str], tip: str | None = None) -> Robot:
-        """Load a robot from a URDF file or URDF XML text.
+    def from_urdf(
+        cls,
+        path_or_xml: str | os.PathLike[str],
+        tip: str | None = None,
+        joint_limits: JointLimitsSource | None = None,
+    ) -> Robot:
+        """Load a robot from a URDF file or URDF XML text, and optionally a joint_limits YAML.
 
         Parameters
         ----------
@@ -425,6 +505,19 @@ class Robot:
         tip : str, optional
             Name of the frame (link or joint) to control. If None, the URDF must be a chain
             (no branches) and its last link is used.
+        joint_limits : str, path-like or mapping, optional
+            Limits in the ``joint_limits.yaml`` format of MoveIt and ros2_control: a path to
+            such a file, its YAML text (a string with a newline or ``joint_limits:``), or the
+            parsed mapping ``{"joint_limits": {joint: {"has_acceleration_limits": True,
+            "max_acceleration": 15.0, ...}}}``. Read with ``yaml.safe_load`` only.
+            ``has_X_limits: true`` with ``max_X`` (> 0, ``.inf`` for none) sets the velocity,
+            acceleration or jerk limit; ``has_X_limits: false`` removes it (inf) even if
+            ``max_X`` is given. A velocity limit here wins over the URDF's (as in MoveIt);
+            ``has_position_limits: true`` with ``min_position``/``max_position`` replaces the
+            URDF's position limits (and is written into :attr:`urdf`). Joints of the chain the
+            YAML does not name keep the URDF's limits and get no acceleration or jerk limit
+            (inf); joints it names that are not on the chain (fingers, ...) are ignored, and so
+            are other keys (effort, deceleration, scaling factors). Default: no YAML.
 
         Returns
         -------
@@ -434,9 +527,12 @@ class Robot:
         ------
         ValueError
             If the file does not exist, the text is not a URDF, the tip frame does not exist,
-            the tree branches and no tip is given, or a joint type is not supported.
+            the tree branches and no tip is given, or a joint type is not supported; if the
+            joint_limits file is missing or not YAML, has no ``joint_limits`` mapping, a
+            ``has_*`` flag is not a boolean, a flag is true without its value, or a value is
+            not a number > 0 (the message names the source, the joint and the key).
         """
-        return cls(_read_urdf_text(path_or_xml), tip)
+        return cls(_read_urdf_text(path_or_xml), tip, joint_limits)
 
     @classmethod
     def from_dh(
@@ -454,13 +550,33 @@ class Robot:
         tip: str = "tip",
         velocity: npt.ArrayLike | None = None,
         effort: npt.ArrayLike | None = None,
+        acceleration: npt.ArrayLike | None = None,
+        jerk: npt.ArrayLike | None = None,
     ) -> Robot:
         """Build a robot from a Denavit-Hartenberg table (see :func:`urdf_from_dh`).
+
+        Parameters
+        ----------
+        table, joint_types, lower, upper, tip_offset, convention, name, joint_names, \
+link_prefix, tip, velocity, effort
+            As for :func:`urdf_from_dh` (``velocity`` goes into the URDF; 0, the default,
+            reads inf: no limit).
+        acceleration, jerk : array-like, shape (n,) or scalar, optional
+            Limits in rad/s^2 and rad/s^3 (m/s^2, m/s^3 for prismatic joints), each > 0 or inf
+            (no limit). Default: none (inf). They are not part of a URDF: they become the
+            robot's :attr:`acceleration_limit` and :attr:`jerk_limit`, as a joint_limits YAML
+            would make them in :meth:`from_urdf`.
 
         Returns
         -------
         robot : Robot
             Its tip is the frame ``tip``; ``robot.urdf`` holds the generated URDF.
+
+        Raises
+        ------
+        ValueError
+            Bad input to :func:`urdf_from_dh`, or an acceleration or jerk limit that is not
+            > 0 (or has the wrong shape).
         """
         urdf = urdf_from_dh(
             table,
@@ -476,13 +592,29 @@ class Robot:
             velocity=velocity,
             effort=effort,
         )
-        return cls(urdf, tip)
+        if acceleration is None and jerk is None:
+            return cls(urdf, tip)
+        names = [
+            str(j.get("name"))
+            for j in ET.fromstring(urdf).iter("joint")
+            if j.get("type") != "fixed"
+        ]
+        limits = joint_limits_mapping(
+            names,
+            acceleration=_positive_per_joint(acceleration, "acceleration", len(names), "rad/s^2"),
+            jerk=_positive_per_joint(jerk, "jerk", len(names), "rad/s^3"),
+        )
+        return cls(urdf, tip, limits)
 
-    def __reduce__(self) -> tuple[type[Robot], tuple[str, str]]:
-        """Pickle as the URDF text and tip (for worker processes; never for files): rebuilt
-        from them, the copy computes exactly what this robot computes. Pickling pinocchio's
-        model and data as they are loses the work data of the fast paths."""
-        return (type(self), (self.urdf, self.tip))
+    def __reduce__(self) -> tuple[type[Robot], tuple[str, str, dict[str, Any]]]:
+        """Pickle as the URDF text, tip and limits (for worker processes; never for files):
+        rebuilt from them, the copy computes exactly what this robot computes and has the same
+        limits (position limits from a joint_limits YAML are in :attr:`urdf`). Pickling
+        pinocchio's model and data as they are loses the work data of the fast paths."""
+        limits = joint_limits_mapping(
+            self.joint_names, self.velocity_limit, self.acceleration_limit, self.jerk_limit
+        )
+        return (type(self), (self.urdf, self.tip, limits))
 
     def __repr__(self) -> str:
         return (
@@ -707,10 +839,29 @@ def _per_joint(
     if value is None:
         return default
     arr = check_array(value, name, ndim=(0, 1))
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
+    if np.ndim(value) == 0:  # check_array makes a scalar (1,)
+        return np.full(n, arr.item())
     if arr.shape != (n,):
         raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
+    return arr
+
+
+def _positive_per_joint(
+    value: npt.ArrayLike | None, name: str, n: int, unit: str
+) -> NDArray[np.float64] | None:
+    """None, or a number or (n,) values, each > 0 or inf (no limit) -> ndarray (n,)."""
+    if value is None:
+        return None
+    arr = check_array(value, name, ndim=(0, 1), finite=False)
+    if np.ndim(value) == 0:
+        arr = np.full(n, arr.item())
+    elif arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
+    bad = np.flatnonzero(~(arr > 0))  # zero, negative or NaN
+    if bad.size:
+        i = int(bad[0])
+        got = float(arr[i])
+        raise ValueError(f"{name}[{i}] must be > 0 ({unit}; inf for no limit), got {got!r}")
     return arr
 
 

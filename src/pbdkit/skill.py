@@ -21,7 +21,12 @@ written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_
 unicode, ``has_gripper``, ``reach`` (m), ``robot_urdf``
 (the URDF text, empty if the robot was not built from a URDF), ``robot_tip``, and for each space
 ``gmm_joint_*`` / ``gmm_{i}_*`` (object i in ``object_names`` order) with ``weights`` (K,),
-``means`` (K, D) and ``covariances`` (K, D, D).
+``means`` (K, D) and ``covariances`` (K, D, D). When the robot has them (a :class:`pbdkit.Robot`
+always does), ``robot_velocity_limit``, ``robot_acceleration_limit`` and ``robot_jerk_limit``:
+float64 (n_joints,), rad/s, rad/s^2, rad/s^3, each > 0 or inf (no limit); :meth:`Skill.load`
+rebuilds the robot with them (they win over the URDF's velocity, as a joint_limits YAML does).
+These keys were added within version 1: a file without them loads as before (velocity from the
+URDF, no acceleration or jerk limit).
 """
 
 from __future__ import annotations
@@ -496,7 +501,10 @@ class Skill:
         """Save the skill to a versioned ``.npz`` file (no pickle, written atomically).
 
         The robot is stored as its URDF text and tip frame when it has them (a
-        :class:`pbdkit.Robot`); otherwise :meth:`load` needs the robot again.
+        :class:`pbdkit.Robot`); otherwise :meth:`load` needs the robot again. Its velocity,
+        acceleration and jerk limits are stored too when it has them (attributes
+        ``velocity_limit``, ``acceleration_limit``, ``jerk_limit`` of shape (n_joints,); a value
+        that is not > 0, such as a URDF's 0, is stored as inf: no limit).
 
         Parameters
         ----------
@@ -504,6 +512,12 @@ class Skill:
         """
         urdf = getattr(self.robot, "urdf", "")
         tip = getattr(self.robot, "tip", "")
+        limits: dict[str, NDArray[np.float64]] = {}
+        for kind in ("velocity", "acceleration", "jerk"):
+            value = getattr(self.robot, f"{kind}_limit", None)
+            arr = None if value is None else np.asarray(value, dtype=np.float64)
+            if arr is not None and arr.shape == (self.n_joints,):
+                limits[f"robot_{kind}_limit"] = np.where(arr > 0, arr, np.inf)
         arrays: dict[str, Any] = {
             "format": np.array(FORMAT_NAME),
             "version": np.array(FORMAT_VERSION, dtype=np.int64),
@@ -517,6 +531,7 @@ class Skill:
             "duration": np.array(self.duration),
             "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
             "robot_tip": np.array(tip if isinstance(tip, str) else ""),
+            **limits,
         }
         for i, k in enumerate(self.constraint_names):
             key = "joint" if k == JOINT else str(i - 1)
@@ -540,8 +555,11 @@ class Skill:
         ----------
         path : str or path-like
         robot : KinematicModel, optional
-            The arm to use. Default: rebuilt from the stored URDF and tip frame with
-            :meth:`pbdkit.Robot.from_urdf`.
+            The arm to use, as it is (the stored limits are checked, not applied to it).
+            Default: rebuilt from the stored URDF and tip frame with
+            :meth:`pbdkit.Robot.from_urdf`, with the stored velocity, acceleration and jerk
+            limits (a file without them: the URDF's velocity limits, no acceleration or jerk
+            limits).
 
         Returns
         -------
@@ -555,6 +573,8 @@ class Skill:
         ValueError
             A corrupt or foreign file, another format version, or inconsistent content.
         """
+        from ._joint_limits import check_limit_array, joint_limits_mapping
+
         p = Path(path)
         data = load_npz_safe(p, what=FORMAT_NAME + " file")
         fmt = data.get("format")
@@ -619,6 +639,14 @@ class Skill:
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: reach must be > 0, got {reach}"
             )
+        stored_limits: dict[str, NDArray[np.float64]] = {}
+        for kind in ("velocity", "acceleration", "jerk"):
+            name = f"robot_{kind}_limit"
+            if name in data:  # files written before the limits were stored lack them
+                try:
+                    stored_limits[kind] = check_limit_array(data[name], name, n_joints)
+                except ValueError as exc:
+                    raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
         if robot is None:
             if not urdf:
                 raise ValueError(
@@ -629,6 +657,9 @@ class Skill:
 
             try:
                 robot = Robot.from_urdf(urdf, tip=tip or None)
+                if stored_limits and robot.n_joints == n_joints:  # else refused below
+                    limits = joint_limits_mapping(robot.joint_names, **stored_limits)
+                    robot = Robot.from_urdf(urdf, tip=tip or None, joint_limits=limits)
             except ValueError as exc:
                 raise ValueError(
                     f"{p} is not a valid {FORMAT_NAME} file: its robot URDF does not load: {exc}"
