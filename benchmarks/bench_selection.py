@@ -9,6 +9,11 @@ basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
   time-indexed model beats), worst joint;
 - basin task: the wrist roll at the end against the demonstrations' mean, and its overshoot over
   the largest demonstrated roll;
+- the largest one-step change of each space's GMR mean over the time grid (joints in mrad, the
+  largest over the joints; task spaces in mm, the norm of the 3-D step), and its ratio to the
+  demonstrations' own largest one-step change (rescaled to the same grid; for a task space the
+  hand position f(theta) minus the object's): a ratio well above 1 is a jump of the
+  generalized trajectory (pbdkit.gmm, "Time floor");
 - the fused reproduction's peak joint speed over the URDF limit, played over ``skill.times()``,
   from q0 = None and from every demonstration's first posture (worst);
 - learning time.
@@ -27,7 +32,9 @@ Then the alternatives, on the same data (peers measured in the same run):
 and on LASA (26 shapes, 7 demonstrations): K range and the GMR mean's RMSE over the pointwise
 mean's. Last, the accuracy of the approximate leave-one-out against exact refits.
 
-Run: ``.venv/bin/python benchmarks/bench_selection.py [--seeds N]`` (about 6 minutes).
+Run: ``.venv/bin/python benchmarks/bench_selection.py [--seeds N]`` (about 6 minutes);
+``--min-time-spread 0 --skip-alternatives`` gives the plain EM, before the time floor (about 2
+minutes).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
+from unittest import mock
 
 import numpy as np
 from _common import print_table
@@ -47,6 +55,7 @@ from pbdkit.gmm import (
     CV_TOLERANCE,
     GMM,
     MAX_COMPONENTS,
+    MIN_TIME_SPREAD,
     pooled_spread,
     sequences_from_time,
 )
@@ -70,6 +79,32 @@ def joint_quality(skill: Skill, demos: list[Demonstration]) -> dict[str, float]:
         "roll_end": float(abs(mean[-1, ROLL] - rescaled[:, -1, ROLL].mean())),
         "overshoot": float(mean[:, ROLL].max() - rescaled[:, :, ROLL].max()),
     }
+
+
+def mean_jumps(skill: Skill, demos: list[Demonstration]) -> dict[str, tuple[float, float]]:
+    """Per space: the GMR mean's largest one-step change (rad or m) and its ratio to the
+    demonstrations' own (rescaled to the skill's grid; task spaces: f(theta) - o)."""
+    c = skill.constraints()
+    rescaled = [d.rescaled(skill.n_steps) for d in demos]
+    joints = np.stack([d.joints for d in rescaled])  # (M, T, n)
+    own = float(np.abs(np.diff(joints, axis=1)).max())
+    step = float(np.abs(np.diff(c.joint_mean, axis=0)).max())
+    out = {JOINT: (step, step / own)}
+    hand = [np.asarray(skill.robot.fk(d.joints), dtype=np.float64) for d in rescaled]
+    for name in skill.object_names:
+        rel = np.stack([x - d.objects[name] for x, d in zip(hand, rescaled, strict=True)])
+        own = float(np.linalg.norm(np.diff(rel, axis=1), axis=2).max())
+        step = float(np.linalg.norm(np.diff(c.task_mean[name], axis=0), axis=1).max())
+        out[name] = (step, step / own)
+    return out
+
+
+def format_jumps(jumps: dict[str, tuple[float, float]]) -> str:
+    """``joint 21.3 mrad (1.0x) / glass 3.7 mm (0.6x)``."""
+    unit = {JOINT: "mrad"}
+    return " / ".join(
+        f"{k} {1e3 * v:.1f} {unit.get(k, 'mm')} ({r:.1f}x)" for k, (v, r) in jumps.items()
+    )
 
 
 def peak_speed_ratio(skill: Skill, demos: list[Demonstration]) -> tuple[float, float, float]:
@@ -179,7 +214,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--skip-alternatives", action="store_true")
+    parser.add_argument(
+        "--min-time-spread",
+        type=float,
+        default=MIN_TIME_SPREAD,
+        help="GMM's min_time_spread in every fit of the run (0: plain EM, before the time floor)",
+    )
     args = parser.parse_args()
+    # Skill.learn builds its GMMs with the defaults: the run changes the default.
+    with mock.patch.dict(GMM.__init__.__kwdefaults__, {"min_time_spread": args.min_time_spread}):
+        run(args)
+
+
+def run(args: argparse.Namespace) -> None:
     warnings.simplefilter("ignore")
     robot = katana()
     cases = []
@@ -191,6 +238,7 @@ def main() -> None:
             skill = Skill.learn(demos, robot, objects=constrained_objects(task))
             learn_s = time.perf_counter() - start
             q = joint_quality(skill, demos)
+            jumps = mean_jumps(skill, demos)
             v, jerk, demo_jerk = peak_speed_ratio(skill, demos)
             ks = " / ".join(f"{k} {n}" for k, n in skill.n_components.items())
             roll = f"{q['roll_end']:.3f} / {q['overshoot']:+.3f}" if task == "basin" else "-"
@@ -201,12 +249,13 @@ def main() -> None:
                     ks,
                     f"{q['ratio']:.2f}",
                     roll,
+                    format_jumps(jumps),
                     f"{v:.3f}",
                     f"{1e3 * jerk:.1f} / {1e3 * demo_jerk:.1f}",
                     f"{learn_s:.2f} s",
                 ]
             )
-            cases.append((task, seed, demos, skill, q, v, learn_s))
+            cases.append((task, seed, demos, skill, q, v, learn_s, jumps))
     print(f"\nDefaults (max_components = {MAX_COMPONENTS}, CV tolerance {CV_TOLERANCE:g}):")
     print_table(
         [
@@ -215,6 +264,7 @@ def main() -> None:
             "K per space",
             "joint RMSE / floor (worst joint)",
             "roll end error / overshoot (rad)",
+            "largest one-step change of the GMR mean (x demos')",
             "peak speed / limit",
             "max 2nd difference, fused / demos (mrad)",
             "learn",
@@ -226,11 +276,15 @@ def main() -> None:
     speeds = [c[5] for c in cases]
     learn = [c[6] for c in cases]
     basin = [c[4] for c in cases if c[0] == "basin"]
+    joint_jump = max(c[7][JOINT][1] for c in cases)
+    task_jump = max(r for c in cases for k, (_, r) in c[7].items() if k != JOINT)
     print(
         f"\nSummary: K {min(all_k)}-{max(all_k)} (cap {MAX_COMPONENTS}); worst joint ratio "
         f"{max(ratios):.2f}; basin roll end error <= {max(q['roll_end'] for q in basin):.3f} rad, "
-        f"overshoot <= {max(q['overshoot'] for q in basin):+.3f} rad; peak speed <= "
-        f"{max(speeds):.3f} x limit; learn median {np.median(learn):.2f} s (max {max(learn):.2f})"
+        f"overshoot <= {max(q['overshoot'] for q in basin):+.3f} rad; largest one-step change of "
+        f"the GMR mean <= {joint_jump:.2f} x the demonstrations' (joints), {task_jump:.2f} x "
+        f"(task spaces); peak speed <= {max(speeds):.3f} x limit; learn median "
+        f"{np.median(learn):.2f} s (max {max(learn):.2f})"
     )
     if args.skip_alternatives:
         return

@@ -1,4 +1,5 @@
-"""A Franka Panda skill from ROS 2 bags, reproduced for a new glass, written back as a bag.
+"""A Franka Panda skill from ROS 2 bags, reproduced for a new glass, written back as a bag, and
+run online at 1 kHz within Franka's limits.
 
 Run:  python examples/panda_from_bags.py [OUTPUT_FOLDER]   (default: a temporary folder)
 
@@ -8,10 +9,24 @@ driver, with the two finger joints and a new joint order in every message; the g
 perception at 30 Hz; the gripper as std_msgs/Bool), then:
 
     bags -> pbdkit.read_bag -> Skill.learn -> skill.reproduce(new glass) -> write_trajectory_bag
+                                           -> skill.controller(new glass).stream(1000)
 
-The trajectory bag holds one trajectory_msgs/msg/JointTrajectory on /joint_trajectory, which
-`ros2 bag play` sends to a ros2_control joint trajectory controller (remap the topic to
-/<controller>/joint_trajectory), and the gripper command on /gripper.
+Offline, the reproduction is timed within Franka's velocity, acceleration and jerk limits
+(pbdkit.robots.panda() declares them): a lead-in from the arm's posture to the skill's first
+posture, then the skill's steps, slowed where the arm could not follow them. The trajectory bag
+holds it as one trajectory_msgs/msg/JointTrajectory on /joint_trajectory, every point with its
+velocities and accelerations, which `ros2 bag play` sends to a ros2_control joint trajectory
+controller (remap the topic to /<controller>/joint_trajectory), and the gripper command on
+/gripper.
+
+Online, the skill runs in the arm's 1 kHz loop (libfranka, franka_ros2): every millisecond,
+read the joints, send the next setpoint. A Panda checks every setpoint against the last ones and
+stops on one that needs more velocity, acceleration or jerk than its limits; a
+pbdkit.limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for the
+arm (the joints follow the setpoints, the encoders read them with a little noise).
+
+The output folder gets the demonstration bags, the trajectory bag, the skill (skill.npz) and the
+online run's setpoints (stream.npz: t, q, gripper, and the glass).
 
 Here the demonstrations are synthesized: joint-space via points (start, pre-grasp, grasp,
 lift, retreat) interpolated with minimum-jerk profiles, the teacher's postures and timing
@@ -30,8 +45,10 @@ import numpy as np
 
 import pbdkit
 from pbdkit.bags import write_demonstration_bag
+from pbdkit.limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
 
 RATE = 100.0  # Hz, the joint state rate of the driver
+LOOP_HZ = 1000.0  # the Panda's control loop: one setpoint per millisecond
 START = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])  # Panda "ready"
 GRASP = np.array([0.0, 0.35, 0.0, -2.0, 0.0, 2.35, 0.785])  # hand low in front of the base
 FINGERS = {"panda_finger_joint1": 0.04, "panda_finger_joint2": 0.04}
@@ -65,6 +82,44 @@ def demonstration(
     return pbdkit.Demonstration(t, robot.clip(joints), {"glass": glass}, gripper=gripper)
 
 
+class SimulatedPanda:
+    """Stands in for the arm and its 1 kHz driver: the joints follow the setpoints, the encoders
+    read them with 0.01 mrad of noise."""
+
+    def __init__(self, q: np.ndarray, rng: np.random.Generator) -> None:
+        self.setpoint = np.array(q, dtype=float)  # where the drive holds the arm
+        self.rng = rng
+
+    def read_joints(self) -> np.ndarray:
+        return self.setpoint + self.rng.normal(0.0, 1e-5, self.setpoint.shape)
+
+    def send(self, q: np.ndarray) -> None:
+        self.setpoint = np.array(q, dtype=float)
+
+
+def run_online(
+    skill: pbdkit.Skill, objects: dict[str, np.ndarray], arm: SimulatedPanda, limits: MotionLimits
+) -> tuple[np.ndarray, np.ndarray, MotionPeaks]:
+    """The skill in the arm's 1 kHz loop: the setpoints sent (the first is where the arm
+    started), the gripper command at each, and the stream's peaks over ``limits``."""
+    stream = skill.controller(objects).stream(LOOP_HZ)
+    monitor = StreamMonitor(limits, 1.0 / LOOP_HZ)
+    # The stream starts at rest from the first posture it is given. Give it the drive's last
+    # setpoint (on a Panda, robot_state.q_d), not a reading: that is off by the encoder noise,
+    # and 0.01 mrad in one millisecond is a jerk of 10^4 rad/s^3 (Franka allows 3750 to 10^4).
+    q_measured = arm.setpoint.copy()
+    monitor.update(q_measured)  # the drive holds the arm there before the stream begins
+    setpoints, closed = [q_measured], [False]
+    while not stream.done:
+        q_set = stream.step(q_measured)
+        arm.send(q_set)
+        monitor.update(q_set)
+        setpoints.append(q_set)
+        closed.append(stream.command is not None and stream.command.gripper)
+        q_measured = arm.read_joints()
+    return np.array(setpoints), np.array(closed), monitor.finish()
+
+
 def main(out: Path) -> None:
     began = time.perf_counter()
     robot = pbdkit.robots.panda()
@@ -93,18 +148,45 @@ def main(out: Path) -> None:
         for b in bags
     ]
 
-    # 3. Learn, and reproduce for a glass placed where no demonstration had it.
+    # 3. Learn, and reproduce for a glass placed where no demonstration had it, the arm at
+    #    "ready": a lead-in to the skill's first posture, then its steps, within the limits.
     skill = pbdkit.Skill.learn(demos, robot, max_components=15)
+    skill.save(out / "skill.npz")
     new_grasp = GRASP + np.array([0.2, 0.05, 0.0, -0.05, 0.0, 0.05, 0.0])
     glass = robot.fk(new_grasp)
-    res = skill.reproduce({"glass": glass})
+    res = skill.reproduce({"glass": glass}, q0=START)
     closest = float(res.task_errors["glass"].min())
     joint_only = float(skill.reproduce({"glass": glass}, use=["joint"]).task_errors["glass"].min())
 
-    # 4. Write the trajectory for a joint trajectory controller.
+    # 4. Write the trajectory for a joint trajectory controller, with the velocities and
+    #    accelerations of its timing (the controller's splines then follow the timed motion).
     trajectory = out / "trajectory"
     t = skill.times(res)
-    pbdkit.write_trajectory_bag(trajectory, t, res.joints, robot.joint_names, gripper=res.gripper)
+    pbdkit.write_trajectory_bag(
+        trajectory,
+        t,
+        res.joints,
+        robot.joint_names,
+        gripper=res.gripper,
+        velocities=res.velocities,
+        accelerations=res.accelerations,
+    )
+    limits = MotionLimits.from_robot(robot, robot.n_joints)  # Franka's published limits
+    offline = motion_peaks(t, res.joints, limits)
+
+    # 5. Online: the skill in the arm's 1 kHz loop, from "ready", every setpoint checked.
+    setpoints, closed, online = run_online(
+        skill, {"glass": glass}, SimulatedPanda(START, rng), limits
+    )
+    np.savez(
+        out / "stream.npz",
+        t=np.arange(len(setpoints)) / LOOP_HZ,
+        q=setpoints,
+        gripper=closed,
+        glass=glass,
+    )
+    grasp_offline = np.linalg.norm(robot.fk(res.joints[np.argmax(res.gripper)]) - glass)
+    grasp_online = np.linalg.norm(robot.fk(setpoints[np.argmax(closed)]) - glass)
 
     seen = [d.objects["glass"] for d in demos]
     print(f"recorded {len(bags)} demonstration bags in {out}")
@@ -119,8 +201,24 @@ def main(out: Path) -> None:
         f"closest approach to the glass: {1000 * closest:.1f} mm "
         f"(joint space only, the demonstrated postures: {1000 * joint_only:.1f} mm)"
     )
-    print(f"gripper closes at {t[int(np.argmax(res.gripper))]:.2f} s of {t[-1]:.2f} s")
+    n_lead = int(np.count_nonzero(res.lead_in))
+    print(
+        f"offline: {n_lead} lead-in points from ready + {skill.n_steps} steps, over "
+        f"{t[-1]:.2f} s (the steps {res.stretch:.2f}x their demonstrated pace); "
+        f"gripper closes at {t[int(np.argmax(res.gripper))]:.2f} s"
+    )
     print(f"wrote {trajectory}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
+    n_set = len(setpoints) - 1  # after the start posture
+    print(f"streamed at 1 kHz from ready: {n_set} setpoints over {n_set / LOOP_HZ:.2f} s")
+    for name, peaks in (("trajectory points", offline), ("1 kHz stream", online)):
+        print(
+            f"peak / Franka's limit, {name}: velocity {peaks.velocity:.3f}, "
+            f"acceleration {peaks.acceleration:.3f}, jerk {peaks.jerk:.3f}"
+        )
+    print(
+        f"hand when the gripper closes: {1000 * grasp_online:.1f} mm from the glass online "
+        f"({1000 * grasp_offline:.1f} mm offline)"
+    )
     print(f"done in {time.perf_counter() - began:.1f} s")
 
 

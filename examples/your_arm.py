@@ -10,11 +10,18 @@ Every step a user of another arm takes, on a 4-DOF arm this script describes its
    ``gripper``), read with ``pbdkit.demonstration_from_csv`` and the object positions your
    perception measured (from a ROS 2 bag instead: ``pbdkit.read_bag``, see
    ``panda_from_bags.py``);
-3. ``Skill.learn``, then ``skill.reproduce`` for new object positions (offline, a trajectory),
-   saved as ``skill.npz`` and as a trajectory bag for a ``ros2_control`` controller;
+3. ``Skill.learn``, then ``skill.reproduce`` for new object positions (offline, a trajectory
+   within the arm's limits: a lead-in from where the arm is to the skill's first posture, then
+   the skill's steps), saved as ``skill.npz`` and as a trajectory bag for a ``ros2_control``
+   controller;
 4. the online controller, closed on the arm: every ``ctrl.dt`` seconds, read the joints,
    send the next target. Your driver replaces ``ServoArm`` (a simulated arm whose servos lag
    behind their references).
+
+The limits the skill keeps are the arm's: here the URDF's velocity limits only. Give
+``Robot.from_urdf`` your arm's acceleration and jerk limits too (``joint_limits=`` a MoveIt /
+ros2_control ``joint_limits.yaml``) and the trajectory and the commands keep those as well
+(``panda_from_bags.py`` runs a Panda within Franka's, streamed at 1 kHz).
 
 The task: pick a cup and put it into a bin; cup and bin are somewhere else each time.
 """
@@ -99,6 +106,13 @@ def record_demonstration(
     }
 
 
+def new_places(robot: pbdkit.Robot) -> dict[str, np.ndarray]:
+    """Where the cup and the bin are this time: inside the demonstrated places, at none of them."""
+    pick = PICK + np.array([0.1, 0.0, 0.05, 0.0])
+    place = PLACE + np.array([0.1, 0.05, 0.0, 0.0])
+    return {"cup": robot.fk(pick), "bin": robot.fk(place) - ABOVE_BIN}
+
+
 class ServoArm:
     """Stands in for your driver: servos that cover 60 % of the way to their reference per
     cycle, and encoders with 0.1 mrad of noise."""
@@ -119,7 +133,7 @@ def main(out: Path) -> None:
     rng = np.random.default_rng(0)
     urdf = out / "my_arm.urdf"
     urdf.write_text(MY_ARM_URDF)
-    robot = pbdkit.Robot.from_urdf(urdf, tip="tool0")
+    robot = pbdkit.Robot.from_urdf(urdf, tip="tool0")  # limits: see the module docstring
 
     demos = []
     for i in range(5):
@@ -130,17 +144,24 @@ def main(out: Path) -> None:
     skill = pbdkit.Skill.learn(demos, robot, max_components=15)
     skill.save(out / "skill.npz")
 
-    pick = PICK + np.array([0.1, 0.0, 0.05, 0.0])  # new places, inside the demonstrated ones
-    place = PLACE + np.array([0.1, 0.05, 0.0, 0.0])
-    objects = {"cup": robot.fk(pick), "bin": robot.fk(place) - ABOVE_BIN}
+    objects = new_places(robot)
     res = skill.reproduce(objects)
-    t = skill.times(res)
+    t = skill.times(res)  # the reproduction's timing, within the arm's velocity limits
     trajectory = out / "trajectory"
-    pbdkit.write_trajectory_bag(trajectory, t, res.joints, robot.joint_names, gripper=res.gripper)
+    pbdkit.write_trajectory_bag(
+        trajectory,
+        t,
+        res.joints,
+        robot.joint_names,
+        gripper=res.gripper,
+        velocities=res.velocities,
+        accelerations=res.accelerations,
+    )
 
     # Online: one command per ctrl.dt from the measured joints (your loop runs at that rate).
+    # The first measured posture is where the commands start, at rest.
     arm = ServoArm(res.joints[0], rng)
-    ctrl = skill.controller(objects, q0=arm.read_joints())
+    ctrl = skill.controller(objects)
     hand_to_cup, hand_to_bin, commands = [], [], 0
     while not ctrl.done:
         cmd = ctrl.step(arm.read_joints())
@@ -160,9 +181,14 @@ def main(out: Path) -> None:
         "offline reproduction, closest approach: "
         + ", ".join(f"{k} {v:.1f} mm" for k, v in offline.items())
     )
-    print(f"wrote {trajectory}: {len(t)} points over {t[-1]:.2f} s")
+    n_lead = int(np.count_nonzero(res.lead_in))
     print(
-        f"online: {commands} commands every {1000 * ctrl.dt:.1f} ms; hand at grasp "
+        f"wrote {trajectory}: {len(t)} points ({n_lead} lead-in + {skill.n_steps} steps) "
+        f"over {t[-1]:.2f} s"
+    )
+    print(
+        f"online: {commands} commands every {1000 * ctrl.dt:.1f} ms "
+        f"({commands * ctrl.dt:.2f} s); hand at grasp "
         f"{1000 * hand_to_cup[0]:.1f} mm from the cup, at release "
         f"{1000 * hand_to_bin[0]:.1f} mm from the release point above the bin"
     )

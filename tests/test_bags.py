@@ -1,8 +1,9 @@
 """ROS bags: teacher demonstrations recorded as bags read back exactly (both rosbag2 storages,
 shuffled joint order, a finger joint, objects at 30 Hz); a skill learned from bags equals one
-learned from the arrays; trajectory bags hold the reproduction (read with rosbags' own reader);
-tf, PointStamped, TransformStamped and fixed sources; cuts; every bad input a clear error; the
-`pbdkit learn BAG...` and `pbdkit reproduce --bag` commands."""
+learned from the arrays; trajectory bags hold the reproduction (read with rosbags' own reader),
+with the timing's velocities and accelerations when given; tf, PointStamped, TransformStamped
+and fixed sources; cuts; every bad input a clear error; the `pbdkit learn BAG...` and
+`pbdkit reproduce --bag` commands."""
 
 from __future__ import annotations
 
@@ -236,9 +237,11 @@ def test_trajectory_bag_holds_the_reproduction(
     ((log, msg),) = _raw(path, "/joint_trajectory")
     assert log == 0 and _stamp(msg) == 0  # stamp zero: the controller starts on receipt
     assert list(msg.joint_names) == robot.joint_names
-    assert len(msg.points) == N_STEPS
+    assert len(msg.points) == len(res.joints)  # the steps and the lead-in from q0
     positions = np.stack([p.positions for p in msg.points])
     np.testing.assert_array_equal(positions, res.joints)
+    # Without velocities and accelerations the points carry positions only.
+    assert all(len(p.velocities) == len(p.accelerations) == len(p.effort) == 0 for p in msg.points)
     tfs = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points])
     np.testing.assert_allclose(tfs, times, rtol=0, atol=1e-9)
     # The gripper: Bool messages at its changes, held between them, equal the reproduction's.
@@ -248,6 +251,55 @@ def test_trajectory_bag_holds_the_reproduction(
     held = closed[np.searchsorted(logs, np.round(times * 1e9), side="right") - 1]
     np.testing.assert_array_equal(held, res.gripper)
     assert 2 <= len(grip) < N_STEPS // 4
+
+
+def _derivatives(msg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The velocities and accelerations of a JointTrajectory's points, (T, n) each."""
+    return (
+        np.stack([p.velocities for p in msg.points]),
+        np.stack([p.accelerations for p in msg.points]),
+    )
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_trajectory_bag_carries_the_timing_velocities_and_accelerations(
+    tmp_path: Path, skill: Skill, robot: Robot, storage: str
+) -> None:
+    res = skill.reproduce({"glass": [0.47, 0.18, 0.175], "coaster": [0.49, -0.17, 0.006]})
+    assert res.velocities is not None and res.accelerations is not None  # the Katana's limits
+    path = tmp_path / "trajectory"
+    write_trajectory_bag(
+        path,
+        skill.times(res),
+        res.joints,
+        robot.joint_names,
+        gripper=res.gripper,
+        velocities=res.velocities,
+        accelerations=res.accelerations,
+        storage=storage,
+    )
+    ((_, msg),) = _raw(path, "/joint_trajectory")
+    vel, acc = _derivatives(msg)
+    np.testing.assert_array_equal(vel, res.velocities)  # float64 in, float64 out: exact
+    np.testing.assert_array_equal(acc, res.accelerations)
+    np.testing.assert_array_equal(np.stack([p.positions for p in msg.points]), res.joints)
+    assert all(len(p.effort) == 0 for p in msg.points)
+    np.testing.assert_allclose(vel[[0, -1]], 0.0, rtol=0, atol=1e-12)  # at rest at both ends
+    assert np.abs(vel).max() > 0.01 and np.abs(acc).max() > 0.01  # and moving in between
+
+
+def test_trajectory_bag_with_velocities_alone(tmp_path: Path, robot: Robot) -> None:
+    # Arbitrary values (not from a timing) round-trip bit for bit; accelerations stay empty.
+    rng = np.random.default_rng(3)
+    q, v = rng.normal(size=(4, 5)), rng.normal(size=(4, 5)) * 1e-7
+    v[1, 2] = -0.0
+    write_trajectory_bag(
+        tmp_path / "v", [0.0, 0.1, 0.25, 0.5], q, robot.joint_names, velocities=v.tolist()
+    )
+    ((_, msg),) = _raw(tmp_path / "v", "/joint_trajectory")
+    np.testing.assert_array_equal(np.stack([p.velocities for p in msg.points]), v)
+    assert np.signbit(msg.points[1].velocities[2])
+    assert all(len(p.accelerations) == 0 for p in msg.points)
 
 
 # ----------------------------------------------------------------------------- object sources
@@ -546,6 +598,35 @@ def test_trajectory_arguments_are_checked(tmp_path: Path, robot: Robot) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_trajectory_velocities_and_accelerations_are_checked(tmp_path: Path, robot: Robot) -> None:
+    t, q, names = [0.0, 1.0, 2.0], np.zeros((3, 5)), robot.joint_names
+    ok = np.zeros((3, 5))
+    with pytest.raises(ValueError, match=r"velocities must have shape \(3, 5\), got \(2, 5\)"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities=ok[:2])
+    with pytest.raises(ValueError, match=r"velocities must have shape \(3, 5\), got \(3, 4\)"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities=ok[:, :4])
+    with pytest.raises(ValueError, match=r"velocities must have shape \(3, 5\), got \(15,\)"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities=ok.ravel())
+    with pytest.raises(
+        ValueError, match=r"accelerations must have shape \(3, 5\), got \(3, 5, 1\)"
+    ):
+        write_trajectory_bag(
+            tmp_path / "a", t, q, names, velocities=ok, accelerations=ok[..., None]
+        )
+    nan, inf = ok.copy(), ok.copy()
+    nan[1, 3] = np.nan
+    inf[0, 0] = -np.inf
+    with pytest.raises(ValueError, match=r"velocities must be finite, got 1 NaN or infinite"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities=nan)
+    with pytest.raises(ValueError, match=r"accelerations must be finite, got 1 NaN or infinite"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities=ok, accelerations=inf)
+    with pytest.raises(ValueError, match=r"velocities must be an array of numbers"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, velocities="fast")
+    with pytest.raises(ValueError, match=r"accelerations need velocities"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, accelerations=ok)
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
 # ----------------------------------------------------------------------------- the CLI
 def _one_line_error(result: Result, *fragments: str) -> None:
     assert result.exit_code == 2, result.output
@@ -611,9 +692,19 @@ def test_cli_learn_from_bags_and_reproduce_to_a_bag(
     ((_, msg),) = _raw(traj, "/joint_trajectory")
     with np.load(tmp_path / "repro.npz") as data:
         np.testing.assert_array_equal(np.stack([p.positions for p in msg.points]), data["joints"])
-    expected = skill.times(skill.reproduce(objects))
+    res = learned.reproduce(objects)  # the command's reproduction, here
+    np.testing.assert_array_equal(np.stack([p.positions for p in msg.points]), res.joints)
+    expected = learned.times(res)
     tfs = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points])
     np.testing.assert_allclose(tfs, expected, rtol=0, atol=1e-9)
+    # The points carry the timing's velocities and accelerations (positions only without one).
+    if res.velocities is None:
+        assert all(len(p.velocities) == len(p.accelerations) == 0 for p in msg.points)
+    else:
+        assert res.accelerations is not None
+        vel, acc = _derivatives(msg)
+        np.testing.assert_array_equal(vel, res.velocities)
+        np.testing.assert_array_equal(acc, res.accelerations)
     assert list(msg.joint_names) == robot.joint_names
     assert [m.data for _, m in _raw(traj, "/gripper")] == [False, True, False]
 

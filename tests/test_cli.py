@@ -108,7 +108,13 @@ def test_learn_and_reproduce_with_tiny_inputs(tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     with np.load(out) as data:
-        assert data["joints"].shape == (30, 5)
+        # The 30 steps after a lead-in from the skill's start posture, timed within the limits.
+        lead = int(data["lead_in"].sum())
+        assert data["joints"].shape == (30 + lead, 5) and data["t"][lead:].tolist() == list(
+            range(30)
+        )
+        assert data["times"][0] == 0.0 and np.all(np.diff(data["times"]) > 0)
+        assert data["velocities"].shape == data["accelerations"].shape == (30 + lead, 5)
 
 
 @pytest.fixture

@@ -34,7 +34,12 @@ def coaster_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_demo_writes_every_artefact(coaster_demo: Path) -> None:
-    for name in ("fig3_cartesian.png", "fig45_constraints.png", "fig6_controllers.png"):
+    for name in (
+        "fig3_cartesian.png",
+        "fig45_constraints.png",
+        "fig6_controllers.png",
+        "fig_limits.png",
+    ):
         assert (coaster_demo / name).read_bytes()[:8] == PNG_MAGIC, name
     video = (coaster_demo / "reproduction.mp4").read_bytes()
     assert len(video) > 10_000
@@ -62,15 +67,24 @@ def test_demo_metrics_show_the_papers_finding(coaster_demo: Path) -> None:
         assert len(sel["scores"]) == len(sel["candidates"]) == len(sel["fold_scores"])
     shares = m["mean_influence_fused"]
     assert sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
+    # What the drives were sent, against the Katana's limits.
+    assert m["motion_limits"] == {
+        "velocity": [1.19] * 5,
+        "acceleration": [6.0] * 5,
+        "jerk": [60.0] * 5,
+    }
+    for kind in ("velocity", "acceleration", "jerk"):
+        assert 0.0 < m["controllers"]["fused"][f"peak_{kind}_ratio"] <= 1.0
 
 
 def test_report_has_every_section_and_embedded_figures(coaster_demo: Path) -> None:
     html = (coaster_demo / "report.html").read_text(encoding="utf-8")
-    for anchor in ("summary", "learned", "cartesian", "controllers", "video", "timings"):
+    for anchor in ("summary", "learned", "cartesian", "controllers", "limits", "video", "timings"):
         assert f'id="{anchor}"' in html, anchor
     images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)
-    assert len(images) == 4  # Figs. 4-5, how K was chosen, Fig. 3, Fig. 6
-    assert 'alt="selection"' in html
+    assert len(images) == 5  # Figs. 4-5, how K was chosen, Fig. 3, Fig. 6, motion limits
+    assert 'alt="selection"' in html and 'alt="motion limits"' in html
+    assert "Servo stream peaks over the limits" in html
     assert 'src="reproduction.mp4"' in html
 
 
@@ -139,6 +153,7 @@ def test_evaluate_basin_lists_the_controllers_of_its_constraints(
             "tilt_deg",
             "peak_speed_ratio",
             "following_error_rad",
+            *(f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("_ratio", "")),
         }
     assert data["online"] is False and data["perturb"] == "none"
     assert data["perturbations"] == [{"name": "none"}]
@@ -243,7 +258,7 @@ def test_teach_learn_reproduce_chain(tmp_path: Path) -> None:
     )
     assert r.exit_code == 0, r.output
     with np.load(repro, allow_pickle=False) as data:
-        assert data["joints"].shape == (200, 5)
+        assert data["joints"].shape == (200 + int(data["lead_in"].sum()), 5)
         total = data["influence_joint"] + data["influence_glass"] + data["influence_coaster"]
         np.testing.assert_allclose(total, 1.0, atol=1e-9)
     # --task-space chooses the recorded objects that get a constraint.

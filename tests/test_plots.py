@@ -4,15 +4,19 @@ in the basin task the pouring gesture is a joint-space constraint)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
 
+from pbdkit.limits import MotionLimits, divided_differences
 from pbdkit.plots import (
     figure_png,
     plot_constraints,
     plot_demonstrations_3d,
+    plot_motion_limits,
     plot_reproductions,
     space_data,
 )
@@ -103,6 +107,54 @@ def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, li
         "task space only (coaster)",
     ]
     figure_png(fig6)
+
+
+def _dashed_levels(ax: Any) -> list[float]:
+    """The y of every horizontal dashed line of ``ax``, sorted."""
+    levels = []
+    for line in ax.get_lines():
+        y = np.asarray(line.get_ydata(), dtype=float)
+        if line.get_linestyle() == "--" and y.size == 2 and y[0] == y[1]:
+            levels.append(float(y[0]))
+    return sorted(levels)
+
+
+def test_motion_limits_figure_shows_the_joint_closest_to_its_acceleration_limit(
+    coaster: tuple[Skill, list],
+) -> None:
+    skill, demos = coaster
+    robot = skill.robot
+    limits = MotionLimits.from_robot(robot, robot.n_joints)
+    objects = {k: v + np.array([0.01, -0.01, 0.0]) for k, v in demos[0].objects.items()}
+    res = skill.reproduce(objects)
+    t = skill.times(res)
+    _, a, _ = divided_differences(t, res.joints)
+    ratio = np.abs(a).max(axis=0) / limits.acceleration
+    joint = int(np.argmax(ratio))
+    assert ratio[joint] > 1.01 * np.sort(ratio)[-2]  # a clear winner, so the test can fail
+    fig = plot_motion_limits(t, res.joints, limits, joint_names=robot.joint_names)
+    axes = fig.axes
+    assert len(axes) == 4  # position, velocity, acceleration, jerk
+    name = robot.joint_names[joint]
+    assert all(name in ax.get_ylabel() for ax in axes)
+    assert _dashed_levels(axes[0]) == []
+    for ax, lim in zip(axes[1:], (limits.velocity, limits.acceleration, limits.jerk), strict=True):
+        assert _dashed_levels(ax) == pytest.approx([-lim[joint], lim[joint]])
+        # The plotted derivative stays between its limit lines: the reproduction is timed.
+        (curve,) = [line for line in ax.get_lines() if line.get_linestyle() == "-"]
+        assert np.abs(curve.get_ydata()).max() <= lim[joint]
+    assert figure_png(fig)[:4] == b"\x89PNG"
+    # Another joint on request, with its range dashed on the position panel.
+    other = (joint + 1) % robot.n_joints
+    fig2 = plot_motion_limits(
+        t, res.joints, limits, joint=other, position_limits=(robot.lower, robot.upper)
+    )
+    assert f"theta{other + 1}" in fig2.axes[0].get_ylabel()
+    assert _dashed_levels(fig2.axes[0]) == pytest.approx(
+        sorted([robot.lower[other], robot.upper[other]])
+    )
+    with pytest.raises(ValueError, match=r"joint must be in 0\.\.4"):
+        plot_motion_limits(t, res.joints, limits, joint=7)
 
 
 def test_figures_leave_the_users_matplotlib_backend_alone() -> None:

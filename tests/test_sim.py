@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 from pbdkit.cli import app
 from pbdkit.demos import load_demonstrations
 from pbdkit.gmm import MAX_COMPONENTS
+from pbdkit.limits import MotionLimits, StreamMonitor, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import (
     Outcome,
@@ -44,6 +45,7 @@ from pbdkit.sim import (
 )
 from pbdkit.sim import experiment as E
 from pbdkit.sim import tasks as T
+from pbdkit.sim.execute import TIMESTEP, Recorder, servo_stream
 from pbdkit.sim.taskdefs import basin as B
 from pbdkit.sim.teacher import APPROACH, UP, Person, between, grasp_via_points, radial
 from pbdkit.sim.world import CAMERA_POSITIONS, CAMERA_TARGET, add_glass
@@ -294,6 +296,10 @@ def test_execute_validates_input() -> None:
         execute(sim, t, np.full((11, 5), np.nan))
     with pytest.raises(ValueError, match="duration must be"):
         execute(sim, t, q, duration=-1.0)
+    with pytest.raises(ValueError, match=r"velocities must have shape \(11, 5\)"):
+        execute(sim, t, q, velocities=np.zeros((10, 5)))
+    with pytest.raises(ValueError, match="limits must be for the arm's 5 joints"):
+        execute(sim, t, q, limits=MotionLimits.unlimited(4))
     # Time steps of a reproduction, played over 0.2 s.
     res = execute(sim, np.arange(11.0), q, settle=0.0, record_rate=100.0, duration=0.2)
     assert res.t[-1] == pytest.approx(0.2, abs=0.011)
@@ -442,6 +448,151 @@ def test_a_run_under_physics_is_the_same_every_time() -> None:
     np.testing.assert_array_equal(runs[0].joints, runs[1].joints)
 
 
+# ----------------------------------------------------------------------------- servo stream
+KINDS = ("velocity", "acceleration", "jerk")
+
+
+def _min_jerk(t: np.ndarray, amplitude: np.ndarray, duration: float) -> tuple[np.ndarray, ...]:
+    """A rest-to-rest minimum-jerk move: positions, velocities, accelerations (len(t), n)."""
+    s = (t / duration)[:, None]
+    q = amplitude * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    v = amplitude * (30 * s**2 - 60 * s**3 + 30 * s**4) / duration
+    a = amplitude * (60 * s - 180 * s**2 + 120 * s**3) / duration**2
+    return q, v, a
+
+
+def test_servo_stream_passes_samples_off_the_physics_grid_on_time() -> None:
+    # 55 samples 37 ms apart (off the 2 ms grid) of a move within the Katana's limits: the
+    # stream passes each one at its grid step, moved along its motion by the difference.
+    limits = MotionLimits.from_robot(katana(), 5)
+    amplitude = np.array([0.5, -0.3, 0.1, 0.0, 0.2])
+    t = np.linspace(0.0, 2.0, 55)
+    q, v, a = _min_jerk(t, amplitude, 2.0)
+    pos, vel = servo_stream(t, q, limits, velocities=v, accelerations=a)
+    assert pos.shape == vel.shape == (1001, 5)  # at rest at the last sample, on time
+    grid = TIMESTEP * np.arange(pos.shape[0])
+    q_grid, v_grid, _ = _min_jerk(grid, amplitude, 2.0)
+    at_samples = np.ceil(t / TIMESTEP - 1e-9).astype(int)
+    # Measured: 3.5e-9 rad at the samples' grid steps, 2e-5 rad between, 1.8e-3 rad/s.
+    np.testing.assert_allclose(pos[at_samples], q_grid[at_samples], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(pos, q_grid, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(vel, v_grid, rtol=0, atol=1e-2)
+    peaks = motion_peaks(grid, pos, limits)
+    assert max(peaks.velocity, peaks.acceleration, peaks.jerk) <= 1.0
+    # Without the samples' derivatives, the cubic spline's are aimed for: as close here.
+    pos_spline, _ = servo_stream(t, q, limits)
+    np.testing.assert_allclose(pos_spline[at_samples], q_grid[at_samples], rtol=0, atol=1e-7)
+    # Without limits: the samples interpolated linearly, the segment's slope as velocity.
+    lin, slope = servo_stream(t, q, MotionLimits.unlimited(5))
+    for j in range(5):
+        np.testing.assert_allclose(lin[:, j], np.interp(grid, t, q[:, j]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(slope[1], (q[1] - q[0]) / (t[1] - t[0]), rtol=1e-12)
+
+
+def test_recorder_measures_the_servo_stream_as_a_stream_monitor_outside_a_push() -> None:
+    # A target stream with a jump at 0.15 s, inside a force window: the jump does not count,
+    # with the same numbers as a StreamMonitor told counted=False there.
+    limits = MotionLimits.from_robot(katana(), 5)
+    rng = np.random.default_rng(40)
+    q, _, _ = _min_jerk(TIMESTEP * np.arange(200), rng.uniform(-0.05, 0.05, 5), 0.4)
+    q[75:] += 0.02
+    window = (0.1, 0.2)
+    peaks = {}
+    with Simulation.from_task("coaster") as sim:
+        for name, w in (("push", window), ("none", None)):
+            rec = Recorder(sim, 50.0, None, 15.0, force_window=w)
+            for k, row in enumerate(q):
+                rec.record(k, k * TIMESTEP, row, False)
+            ex = rec.result()
+            np.testing.assert_array_equal(ex.servo_targets, q)
+            peaks[name] = ex.servo_peaks
+    for name, w in (("push", window), ("none", None)):
+        monitor = StreamMonitor(limits, TIMESTEP)
+        for k, row in enumerate(q):
+            t = k * TIMESTEP
+            monitor.update(row, counted=w is None or not (w[0] <= t <= w[1]))
+        np.testing.assert_allclose(
+            list(monitor.finish().as_dict().values()),
+            list(peaks[name].as_dict().values()),
+            rtol=1e-9,  # the monitor's differences on a uniform grid, rounded otherwise
+            atol=0,
+        )
+    assert peaks["none"].acceleration > 100.0  # 0.02 rad in one step
+    assert peaks["push"].worst <= 1.0
+
+
+@pytest.fixture(scope="module")
+def coaster_run() -> tuple[E.TaskSkill, E.ControllerRun]:
+    # A quick coaster skill (3 fast demonstrations, 300 steps), its fused run played offline.
+    demos = teach("coaster", 3, seed=30, speed=2.0)
+    skill = Skill.learn(
+        demos, katana(), n_steps=300, max_components=5, objects=E.constrained_objects("coaster")
+    )
+    ts = E.TaskSkill("coaster", demos, skill, 0.0, 0.0)
+    placement = sample_objects("coaster", np.random.default_rng(31))
+    return ts, E.run_controller(ts, placement, "fused")
+
+
+def test_playback_servo_stream_is_within_the_limits(
+    coaster_run: tuple[E.TaskSkill, E.ControllerRun],
+) -> None:
+    ts, run = coaster_run
+    ex, res = run.execution, run.reproduction
+    limits = MotionLimits.from_robot(ts.skill.robot, 5)
+    for k in KINDS:
+        np.testing.assert_array_equal(getattr(ex.servo_limits, k), getattr(limits, k))
+    t = ts.skill.times(res)
+    n_play = math.ceil((t[-1] - t[0]) / TIMESTEP - 1e-9)
+    assert ex.servo_period == TIMESTEP
+    # The samples played, then 1 s of settling; the targets come to rest at the last sample
+    # on time or a little later where the limits kept them behind (measured: 56 ms).
+    played = ex.servo_targets.shape[0] - round(1.0 / TIMESTEP) - 1
+    assert n_play <= played <= n_play + round(0.1 / TIMESTEP)
+    np.testing.assert_allclose(
+        ex.servo_targets[played:], np.broadcast_to(res.joints[-1], (501, 5)), rtol=0, atol=1e-7
+    )
+    # What a drive checking its command stream sees, setpoint by setpoint.
+    monitor = StreamMonitor(limits, TIMESTEP)
+    for row in ex.servo_targets:
+        monitor.update(row)
+    seen = monitor.finish()
+    assert max(seen.velocity, seen.acceleration, seen.jerk) <= 1.0
+    np.testing.assert_allclose(  # the same differences, rounded differently
+        list(seen.as_dict().values()), list(ex.servo_peaks.as_dict().values()), rtol=1e-8
+    )
+    # The old playback, the same samples interpolated linearly at 500 Hz, jumps in velocity
+    # at every sample: measured 153 rad/s^2 against 5.7 here.
+    grid = TIMESTEP * np.arange(n_play + 1)
+    linear = np.stack([np.interp(grid, t, res.joints[:, j]) for j in range(5)], axis=1)
+    old = motion_peaks(grid, linear, limits)
+    assert old.acceleration > 10.0
+    assert ex.servo_peaks.acceleration_abs < old.acceleration_abs / 10.0
+    # evaluate's JSON per trial.
+    summary = run.summary()
+    for k in KINDS:
+        assert 0.0 < summary[f"peak_{k}_ratio"] <= 1.0
+        assert summary[f"peak_{k}"] == pytest.approx(getattr(ex.servo_peaks, f"{k}_abs"))
+    json.dumps(summary)
+
+
+def test_playback_servos_follow_the_samples(
+    coaster_run: tuple[E.TaskSkill, E.ControllerRun],
+) -> None:
+    ts, run = coaster_run
+    ex, res = run.execution, run.reproduction
+    t = ts.skill.times(res)
+    grid = ex.servo_period * np.arange(ex.servo_targets.shape[0])
+    at = np.stack([np.interp(t, grid, ex.servo_targets[:, j]) for j in range(5)], axis=1)
+    off = np.abs(at - res.joints).max(axis=1)
+    # Measured: 0.021 rad at worst (a sample whose velocity and acceleration do not fit the
+    # limits with its neighbours'), 4e-4 rad on average; a follower re-planned at every tick
+    # was 0.2 rad off.
+    assert off.max() < 0.03
+    assert off.mean() < 2e-3
+    # The measured joints follow the targets (a glass may hold a finger back a little).
+    assert run.summary()["following_error_rad"] < 0.03
+
+
 # ----------------------------------------------------------------------------- tasks as data
 def test_task_registry_resolves_names_once_and_refuses_bad_specs() -> None:
     assert task_names()[:2] == ("coaster", "basin")
@@ -585,7 +736,9 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
         "released",
         "peak_speed_ratio",
         "following_error_rad",
+        *(f"peak_{k}{suffix}" for k in KINDS for suffix in ("_ratio", "")),
     }
+    assert all(0.0 < run.summary()[f"peak_{k}_ratio"] <= 1.0 for k in KINDS)
     assert run.success == (run.execution.outcome.metrics["placement_error_mm"] <= 20.0)
     # Measured: 11-20 mm with 3 fast demonstrations on a 200-step grid (fused, 3 placements).
     assert run.success
@@ -598,6 +751,13 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     assert set(result["controllers"]) == {"fused", "joint", "task:glass", "task:mark"}
     assert set(result["placements"][0]) == {"glass", "mark"}
     assert all(isinstance(r[0]["success"], bool) for r in result["runs"].values())
+    # The servo stream's peaks over the limits, per trial and worst / median per controller.
+    fused = result["controllers"]["fused"]["metrics"]
+    for k in KINDS:
+        assert 0.0 < result["runs"]["fused"][0][f"peak_{k}_ratio"] <= 1.0
+        assert 0.0 < fused[f"peak_{k}_ratio"]["max"] <= 1.0
+        assert fused[f"peak_{k}_ratio"]["median"] <= fused[f"peak_{k}_ratio"]["max"]
+        assert fused[f"peak_{k}"]["max"] > 0.0
     json.dumps(result)  # JSON-ready
     # Vision in the loop: the cameras learn the mark's green from the task's patches.
     seen = E.evaluate("mark", trials=1, seed=0, task_skill=ts, controllers=["fused"]).as_dict()
@@ -640,8 +800,14 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
         task=SimpleNamespace(name="basin"), skill=skill, constrain_fixed=False, learn_seconds=0.5
     )
     rows = [
-        {"fused": {"success": True, "err": 1.0}, "joint": {"success": False, "err": 9.0}},
-        {"fused": {"success": True, "err": 3.0}, "joint": {"success": True, "err": None}},
+        {
+            "fused": {"success": True, "err": 1.0, "peak_jerk_ratio": 0.5},
+            "joint": {"success": False, "err": 9.0},
+        },
+        {
+            "fused": {"success": True, "err": 3.0, "peak_jerk_ratio": 0.9},
+            "joint": {"success": True, "err": None},
+        },
         {
             "fused": {"success": False, "tracking_status": {"glass": "lost"}},
             "joint": {"success": False, "tracking_status": {"glass": "lost"}},
@@ -656,6 +822,9 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
     assert ev.controllers["fused"].success_rate == pytest.approx(2 / 3)
     assert ev.controllers["fused"].metrics["err"] == {"mean": 2.0, "median": 2.0, "max": 3.0}
     assert ev.controllers["joint"].metrics["err"] == {"mean": 9.0, "median": 9.0, "max": 9.0}
+    # A peak ratio's worst trial and median (a trial without a run has none).
+    jerk = ev.controllers["fused"].metrics["peak_jerk_ratio"]
+    assert jerk == pytest.approx({"mean": 0.7, "median": 0.7, "max": 0.9})
     assert ev.tracking_failures == 1
     d = ev.as_dict()
     assert d["trials"] == 3 and d["observed"][2] is None and d["runs"]["joint"][1]["err"] is None

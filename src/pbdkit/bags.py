@@ -693,6 +693,8 @@ def write_trajectory_bag(
     joint_names: Sequence[str],
     gripper: npt.ArrayLike | None = None,
     *,
+    velocities: npt.ArrayLike | None = None,
+    accelerations: npt.ArrayLike | None = None,
     storage: Storage = "sqlite3",
     topic: str = "/joint_trajectory",
     gripper_topic: str = "/gripper",
@@ -700,11 +702,11 @@ def write_trajectory_bag(
     """Write a joint trajectory as a rosbag2 bag a ``ros2_control`` controller can replay.
 
     One ``trajectory_msgs/msg/JointTrajectory`` message on ``topic`` (recorded at log time 0,
-    header stamp 0: "start on receipt"), one point per sample with its positions and
-    ``time_from_start`` = t (velocities and accelerations left empty: the joint trajectory
-    controller interpolates); with a gripper, ``std_msgs/msg/Bool`` messages on
-    ``gripper_topic`` (True = closed) at the first sample and at every change, recorded at
-    their time t, so that ``ros2 bag play`` sends them in step with the trajectory.
+    header stamp 0: "start on receipt"), one point per sample with its positions, its
+    velocities and accelerations if given (else empty), and ``time_from_start`` = t; with a
+    gripper, ``std_msgs/msg/Bool`` messages on ``gripper_topic`` (True = closed) at the first
+    sample and at every change, recorded at their time t, so that ``ros2 bag play`` sends them
+    in step with the trajectory.
 
     Parameters
     ----------
@@ -719,6 +721,18 @@ def write_trajectory_bag(
         The controller's joint names, e.g. ``robot.joint_names``.
     gripper : array-like, shape (T,), optional
         The gripper command (bool, or numbers: closed where > 0.5), e.g. ``res.gripper``.
+    velocities, accelerations : array-like, shape (T, n), optional
+        Joint velocities (rad/s) and accelerations (rad/s^2) at the points, written into each
+        point's ``velocities`` and ``accelerations``. The joint trajectory controller
+        interpolates between points with them: cubic splines with velocities, quintic with
+        both; positions only: linear. They should come from the timing, e.g.
+        ``res.velocities`` and ``res.accelerations`` (the derivatives of the timing: see
+        :attr:`pbdkit.reproduce.ReproductionResult.velocities`), not from differences of the
+        positions:
+        those are not the derivatives of the timed motion (nor at rest at the ends), and the
+        controller's splines through them would leave the planned, limited motion.
+        ``accelerations`` need ``velocities`` (the controller uses both, or velocities alone).
+        Without them the points carry positions only.
     storage : {"sqlite3", "mcap"}
         rosbag2 storage plugin.
     topic, gripper_topic : str
@@ -746,18 +760,29 @@ def write_trajectory_bag(
     closed: NDArray[np.bool_] | None = None
     if gripper is not None:
         closed = check_array(gripper, "gripper", shape=(t_.shape[0],)) > GRIPPER_THRESHOLD
+    if accelerations is not None and velocities is None:
+        raise ValueError(
+            "accelerations need velocities: the joint trajectory controller interpolates with "
+            "both or with velocities alone; give velocities too (e.g. res.velocities)"
+        )
+    empty = np.zeros(0, dtype=np.float64)
+    vel = None if velocities is None else check_array(velocities, "velocities", shape=q.shape)
+    acc = (
+        None
+        if accelerations is None
+        else check_array(accelerations, "accelerations", shape=q.shape)
+    )
 
     ts = _typestore()
     duration_cls = ts.types["builtin_interfaces/msg/Duration"]
     point_cls = ts.types["trajectory_msgs/msg/JointTrajectoryPoint"]
     traj_cls = ts.types[TRAJECTORY_TYPE]
     bool_cls = ts.types["std_msgs/msg/Bool"]
-    empty = np.zeros(0, dtype=np.float64)
     points = [
         point_cls(
             positions=q[i].copy(),
-            velocities=empty,
-            accelerations=empty,
+            velocities=empty if vel is None else vel[i].copy(),
+            accelerations=empty if acc is None else acc[i].copy(),
             effort=empty,
             time_from_start=duration_cls(sec=int(ns[i]) // _NS, nanosec=int(ns[i]) % _NS),
         )

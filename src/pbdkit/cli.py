@@ -566,7 +566,8 @@ def reproduce(
         typer.Option(
             help="Also write a rosbag2 bag (a new directory) with the trajectory as one "
             "trajectory_msgs/msg/JointTrajectory on /joint_trajectory (and the gripper as "
-            "std_msgs/msg/Bool on /gripper), timed by the skill's duration.",
+            "std_msgs/msg/Bool on /gripper), timed as the reproduction (skill.times), its "
+            "points with the timing's velocities and accelerations when it has them.",
         ),
     ] = None,
 ) -> None:
@@ -590,15 +591,39 @@ def reproduce(
         "covariances": res.covariances,
     }
     arrays.update({f"influence_{k}": v for k, v in res.influence.items()})
+    timed = ""
+    if res.times is not None and res.lead_in is not None:
+        # Within the robot's motion limits: the timing (s), its derivatives, the lead-in.
+        assert res.velocities is not None and res.accelerations is not None
+        arrays.update(
+            times=res.times,
+            velocities=res.velocities,
+            accelerations=res.accelerations,
+            lead_in=res.lead_in,
+        )
+        lead = int(np.count_nonzero(res.lead_in))
+        timed = (
+            f", {lead} of them a lead-in from the start posture; {res.times[-1]:.2f} s within "
+            f"the robot's limits, the skill's steps {res.stretch:.2f}x their demonstrated pace"
+        )
     save_npz_atomic(out, arrays)
     errs = ", ".join(f"{k} {1000 * v.min():.1f} mm" for k, v in res.task_errors.items())
-    console.print(f"wrote {out} ({len(res.t)} steps); closest approach: {errs}")
+    console.print(f"wrote {out} ({len(res.t)} samples{timed}); closest approach: {errs}")
     if bag is not None and timing is not None:
         from .bags import write_trajectory_bag
 
         t, names = timing
         grip = res.gripper if skill.has_gripper else None
-        write_trajectory_bag(bag, t, res.joints, names, gripper=grip)
+        # Velocities and accelerations of the timing (None without limits: positions only).
+        write_trajectory_bag(
+            bag,
+            t,
+            res.joints,
+            names,
+            gripper=grip,
+            velocities=res.velocities,
+            accelerations=res.accelerations if res.velocities is not None else None,
+        )
         console.print(f"wrote {bag}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
 
 

@@ -22,6 +22,7 @@ from .plots import (
     figure_png,
     plot_constraints,
     plot_demonstrations_3d,
+    plot_motion_limits,
     plot_online_run,
     plot_reproductions,
     plot_selection,
@@ -106,7 +107,10 @@ def run_robot_demo(
     ``fig_online.png``, ``online.mp4``, a report section and ``metrics.json["online"]``.
 
     Writes ``demos.npz``, ``skill.npz``, ``fig3_cartesian.png``, ``fig45_constraints.png``,
-    ``fig6_controllers.png``, ``reproduction.mp4``, ``report.html`` and ``metrics.json``.
+    ``fig6_controllers.png``, ``fig_limits.png`` (one joint of the fused run's servo stream
+    against the arm's velocity, acceleration and jerk limits), ``reproduction.mp4``,
+    ``report.html`` and ``metrics.json`` (with the arm's ``"motion_limits"``; every
+    controller's summary has the servo stream's peaks over them).
 
     The skill is told the object positions the stereo tracker measures in the new situation
     (:mod:`pbdkit.sim.tracking`, calibrated at the nominal placement); the simulated world keeps
@@ -218,11 +222,23 @@ def run_robot_demo(
     for k in ts.skill.object_names:
         by_name[k] = runs[f"task:{k}"].reproduction
     fig6 = figure_png(plot_reproductions(ts.skill, by_name))
+    ex = fused.execution
+    robot = ts.skill.robot
+    fig_limits = plot_motion_limits(
+        ex.servo_period * np.arange(ex.servo_targets.shape[0]),
+        ex.servo_targets,
+        ex.servo_limits,
+        joint_names=getattr(robot, "joint_names", None),
+        position_limits=(robot.lower, robot.upper),
+        title="The fused run's servo stream (500 Hz) against the arm's limits: the joint "
+        "closest to its acceleration limit",
+    )
     figures = {
         "fig3_cartesian.png": fig3,
         "fig45_constraints.png": fig45,
         "fig_selection.png": figure_png(plot_selection(ts.skill)),
         "fig6_controllers.png": fig6,
+        "fig_limits.png": figure_png(fig_limits),
     }
     if online_runs:
         fig_online = plot_online_run(
@@ -251,6 +267,7 @@ def run_robot_demo(
         "constrain_fixed": ts.constrain_fixed,
         "success": fused.success,
         "controllers": {name: run.summary() for name, run in runs.items()},
+        "motion_limits": fused.execution.servo_limits.as_dict(),
         "mean_influence_fused": influence,
         "online": None
         if not online_runs
@@ -290,7 +307,8 @@ def _online_sections(demo: DemoRun) -> list[Section]:
         f"{perturb.get('body')} for {perturb.get('duration_s', 0.0):.1f} s from "
         f"t = {perturb.get('start_s', 0.0):.1f} s",
     }[perturb["name"]]
-    keys = [k for k in on.summary() if k not in ("success", "tracking")]
+    absolute = ("peak_velocity", "peak_acceleration", "peak_jerk")  # the limits section has them
+    keys = [k for k in on.summary() if k not in ("success", "tracking", *absolute)]
     rows = [
         [label, run.success, *(run.summary().get(k, "-") for k in keys)]
         for label, run in (("online (in the loop)", on), ("offline (played open loop)", off))
@@ -318,7 +336,8 @@ def _online_sections(demo: DemoRun) -> list[Section]:
                 "under the same disturbance.",
                 "peak_speed_ratio: the fastest measured joint speed over its velocity limit, "
                 "and following_error_rad: the largest distance from the servo reference, both "
-                "outside the push (a real drive faults on either).",
+                "outside the push (a real drive faults on either); peak_*_ratio: the servo "
+                "stream's peak velocity, acceleration and jerk over the arm's limits.",
             ],
             tables={
                 "Online and offline under the same disturbance": (["run", "success", *keys], rows)
@@ -328,6 +347,76 @@ def _online_sections(demo: DemoRun) -> list[Section]:
             anchor="online",
         )
     ]
+
+
+_PEAK_KINDS = ("velocity", "acceleration", "jerk")
+
+
+def _limits_section(demo: DemoRun) -> Section:
+    """What the servos were sent against the arm's limits: every run's peaks and a figure."""
+    runs: list[tuple[str, dict[str, Any]]] = [
+        (name, run.summary()) for name, run in demo.runs.items()
+    ]
+    if demo.online:
+        runs += [
+            (f"fused, {label} ({demo.metrics['online']['perturb']['name']})", run.summary())
+            for label, run in (
+                ("online", demo.online["online"]),
+                ("offline", demo.online["offline"]),
+            )
+        ]
+    rows = [
+        [
+            label,
+            *(row.get(f"peak_{k}_ratio", "-") for k in _PEAK_KINDS),
+            *(row.get(f"peak_{k}", "-") for k in _PEAK_KINDS),
+        ]
+        for label, row in runs
+    ]
+    limits = demo.metrics["motion_limits"]
+
+    def values(kind: str) -> str:
+        got = sorted({v for v in limits[kind] if v is not None})
+        return "none" if not got else ", ".join(f"{v:g}" for v in got)
+
+    return Section(
+        "What the drives were sent: the arm's motion limits",
+        paragraphs=[
+            "A real arm's drives check the setpoints they are sent: a Franka Panda stops on a "
+            "single one whose acceleration or jerk exceeds its limits. The reproduction is timed "
+            "within the arm's velocity, acceleration and jerk limits (steps stretched where "
+            "needed), and the servos follow it through a jerk-limited stream (Ruckig) at the "
+            "physics rate, each sample aimed for with its velocity and acceleration at its time.",
+            f"Limits of the arm (per joint): velocity {values('velocity')} rad/s, acceleration "
+            f"{values('acceleration')} rad/s^2, jerk {values('jerk')} rad/s^3. The table gives, "
+            "per run, the peaks of the servo targets by divided differences at 500 Hz from the "
+            "trajectory's start to the end of the settling time (leaving out a push), as "
+            "ratios to the limits (<= 1: the drives accept the stream) and in rad/s, rad/s^2, "
+            "rad/s^3.",
+        ],
+        tables={
+            "Servo stream peaks over the limits": (
+                [
+                    "run",
+                    *(f"{k} / limit" for k in _PEAK_KINDS),
+                    "velocity (rad/s)",
+                    "acceleration (rad/s^2)",
+                    "jerk (rad/s^3)",
+                ],
+                rows,
+            )
+        },
+        figures=[
+            Figure(
+                demo.figures["fig_limits.png"],
+                "The fused run's servo targets for the joint closest to its acceleration limit: "
+                "position, velocity, acceleration and jerk (divided differences at 500 Hz), "
+                "dashed at +- the limits.",
+                "motion limits",
+            )
+        ],
+        anchor="limits",
+    )
 
 
 def _constraints_text(spec: TaskSpec, ts: Any) -> str:
@@ -533,6 +622,7 @@ def _write_html(demo: DemoRun) -> None:
             anchor="controllers",
         ),
         *_online_sections(demo),
+        _limits_section(demo),
         Section(
             "The run",
             html_paragraphs=[

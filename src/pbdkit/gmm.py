@@ -15,6 +15,29 @@ loops cost 1-3 ms per iteration on these tiny problems. ``reg_covar`` (one value
 dimension) is added to every covariance's diagonal: in the data's units squared, a floor on the
 variability a component can claim.
 
+Time floor (``min_time_spread``). EM on trajectories has degenerate optima along time: the
+demonstrations are sampled on one shared grid of steps, so a component can take the samples of a
+single step (of one demonstration, or a few) and shrink its time variance to ``reg_covar``'s
+jitter; its density there gains several nats per sample in time alone. This happens where each
+demonstration holds still at its own place (the basin task once the glass is carried away: every
+demonstration gets a tight component of its own) and one demonstration's last moving sample is
+explained by none of them. GMR weighs the components by their time marginals only, so at that one
+step the collapsed component takes all the weight and the generalized trajectory (and its
+covariance) leaps to one sample and back: a one-step jump no arm can follow. A component narrower
+in time than a fraction of the spacing of K components models no structure of the motion, so every
+component's time standard deviation is held at ``min_time_spread * span / K`` or more (span: the
+time column's range; the K fitted, also in the folds of the cross-validation). The floor widens
+only the time marginal p(t) and keeps the component's regression p(x | t), its gain and conditional
+covariance (:func:`_floor_time_variance`): the Gaussian log-likelihood splits into the two, so this
+is the exact M-step under the constraint and EM stays monotone; flooring Sigma_tt alone would also
+flatten the component's slope (the gain Sigma_xt / Sigma_tt). GMR's weight then passes from one
+component to the next over at least that fraction of their spacing, never within one step. The
+default, :data:`MIN_TIME_SPREAD`, is below the 1/sqrt(12) of the time bins EM starts from and below
+the time spread of 95 % of the components plain EM finds on the teacher's tasks: it removes the
+collapsed components and leaves the generalized trajectories otherwise about unchanged
+(``benchmarks/README.md``, "GMR mean jumps"). ``min_time_spread=0`` gives plain EM; without a time
+column there is no floor.
+
 Choosing K (``n_components="auto"``). The unit of independent evidence is the demonstration,
 not the sample: 1000 steps of one smooth motion are not 1000 independent draws, so the
 Bayesian information criterion, which counts samples, keeps decreasing up to any cap on dense
@@ -129,14 +152,66 @@ def _sufficient_stats(x: Float, x2: Float, resp: Float) -> tuple[Float, Float, F
     return resp.sum(axis=0), resp.T @ x, (resp.T @ x2).reshape(-1, d, d)
 
 
-def _params_from_stats(s0: Float, s1: Float, s2: Float, floor: Float) -> Params:
-    """M-step: weights, means and covariances (+ the per-dimension floor on the diagonal)."""
+@dataclass(frozen=True)
+class _Floor:
+    """What an M-step may not go below.
+
+    diag : (D,) added to every covariance's diagonal (``reg_covar``).
+    time_dim : the time column, or None.
+    time_spread : the time standard deviation of every component of a K-component mixture is at
+        least ``time_spread / K`` (``min_time_spread`` times the time span: a fraction of the
+        components' spacing); 0 for none.
+    """
+
+    diag: Float
+    time_dim: int | None = None
+    time_spread: float = 0.0
+
+
+def _floor_time_variance(cov: Float, time_dim: int, var_min: float) -> None:
+    """Raise every component's time variance s below v = ``var_min`` to v, keeping p(x | t).
+
+    ``cov`` (K, D, D) is changed in place.
+
+    With Sigma = [[s, b^T], [b, S]] (time first), p(x | t) has the gain A = b / s and the
+    covariance C = S - b b^T / s; s' = v, b' = A v and S' = C + A A^T v keep both. A Gaussian's
+    log-likelihood is log p(t) + log p(x | t) with separate parameters, so this is the exact
+    maximum of the M-step under the constraint s >= v, and EM stays monotone.
+    """
+    s = cov[:, time_dim, time_dim]
+    short = np.flatnonzero(s < var_min)
+    if short.size == 0:
+        return
+    c = cov[short]
+    s_k = s[short]
+    b = c[:, :, time_dim].copy()
+    b[:, time_dim] = 0.0
+    # A = b / s; s = 0 (no reg_covar on time, one time value) has b = 0 and no gain.
+    gain = np.divide(b, s_k[:, None], out=np.zeros_like(b), where=s_k[:, None] > 0.0)
+    c += (var_min - s_k)[:, None, None] * (gain[:, :, None] * gain[:, None, :])
+    c[:, :, time_dim] = var_min * gain
+    c[:, time_dim, :] = var_min * gain
+    c[:, time_dim, time_dim] = var_min
+    cov[short] = c
+
+
+def _params_from_stats(
+    s0: Float, s1: Float, s2: Float, floor: _Floor, n_components: int | None = None
+) -> Params:
+    """M-step: weights, means and covariances (+ the floors: on the diagonal, on time).
+
+    ``n_components`` is the K of the time floor (default: the number of components given); a
+    cross-validation fold that drops components keeps the floor of the model it comes from.
+    """
     nk = s0 + 10.0 * np.finfo(np.float64).eps  # scikit-learn's guard against empty components
     means = s1 / nk[:, None]
     cov = s2 / nk[:, None, None] - means[:, :, None] * means[:, None, :]
     cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
     idx = np.arange(cov.shape[-1])
-    cov[:, idx, idx] += floor
+    cov[:, idx, idx] += floor.diag
+    if floor.time_dim is not None and floor.time_spread > 0.0:
+        k = cov.shape[0] if n_components is None else n_components
+        _floor_time_variance(cov, floor.time_dim, (floor.time_spread / k) ** 2)
     return nk / nk.sum(), means, cov
 
 
@@ -220,7 +295,7 @@ def _e_step(x: Float, x2: Float, params: Params) -> tuple[Float, float]:
 
 
 def _em(
-    x: Float, resp: Float, floor: Float, max_iter: int, tol: float
+    x: Float, resp: Float, floor: _Floor, max_iter: int, tol: float
 ) -> tuple[Params, Float, int, bool, float]:
     """EM for a full-covariance GMM from initial responsibilities (N, K).
 
@@ -281,7 +356,7 @@ def time_based_init(
     resp = _time_bins_resp(x, n_components, time_dim)
     # Floor each bin's covariance with a fraction of the global variance so that a bin of
     # (nearly) constant data still gives a usable start.
-    floor = 1e-3 * np.var(x, axis=0) + reg_covar
+    floor = _Floor(1e-3 * np.var(x, axis=0) + reg_covar)
     w, m, cov = _params_from_stats(*_sufficient_stats(x, _outer_rows(x), resp), floor)
     u = _precision_factors(cov)
     prec = u @ np.swapaxes(u, -1, -2)
@@ -410,6 +485,9 @@ SWEEP_TOL = 1e-2
 #: against exact refits (``benchmarks/bench_selection.py``): smaller differences are not
 #: resolved by it.
 CV_TOLERANCE = 0.015
+#: Default ``min_time_spread``: every component's time standard deviation is at least this
+#: fraction of the components' spacing (the time span over K); module docstring, "Time floor".
+MIN_TIME_SPREAD = 0.2
 
 
 def _select_by_cv(
@@ -461,7 +539,7 @@ def _cv_errors(
     x2: Float,
     resp: Float,
     groups: NDArray[np.intp],
-    floor: Float,
+    floor: _Floor,
     time_dim: int,
     score_dims: Sequence[int],
     scale: Float,
@@ -475,6 +553,7 @@ def _cv_errors(
     GMR mean at m's times, divided by ``scale`` (the pooled spread of each dimension).
     """
     stats = _sufficient_stats(x, x2, resp)
+    n_components = resp.shape[1]  # the fit's K: its time floor holds in every fold
     n_groups = int(groups.max()) + 1
     out_dims = [i for i in range(x.shape[1]) if i != time_dim]
     pos = [out_dims.index(i) for i in score_dims]
@@ -488,12 +567,13 @@ def _cv_errors(
         # it (its downdated moments are rounding noise).
         keep = s0 >= 1.0
         params = _params_from_stats(
-            s0[keep], (stats[1] - own[1])[keep], (stats[2] - own[2])[keep], floor
+            s0[keep], (stats[1] - own[1])[keep], (stats[2] - own[2])[keep], floor, n_components
         )
         n_rest = float(np.count_nonzero(rest))
         r, _ = _e_step(x[rest], x2[rest], params)
         params = _drop_empty(
-            _params_from_stats(*_sufficient_stats(x[rest], x2[rest], r), floor), 0.5 / n_rest
+            _params_from_stats(*_sufficient_stats(x[rest], x2[rest], r), floor, n_components),
+            0.5 / n_rest,
         )
         model = gmr_precompute(*params, (time_dim,))
         mean, _ = gmr_batch(model, x[held][:, [time_dim]], None)
@@ -542,6 +622,13 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         ``"bic"`` only: effective number of samples per sequence (default 20).
     bic_samples : int, optional
         ``"bic"`` only: total effective sample size; overrides ``bic_samples_per_sequence``.
+    min_time_spread : float
+        With a time column: every component's time standard deviation is at least this
+        fraction of the components' spacing, ``min_time_spread * span / K`` (span: the range of
+        the time column), which keeps EM from collapsing a component onto the samples of one
+        time step (module docstring, "Time floor"). Only the time marginal of a component is
+        widened; its regression p(x | t) is kept. 0 disables it. Default
+        :data:`MIN_TIME_SPREAD`.
 
     Attributes
     ----------
@@ -579,6 +666,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         score_dims: Sequence[int] | None = None,
         bic_samples_per_sequence: float = 20.0,
         bic_samples: int | None = None,
+        min_time_spread: float = MIN_TIME_SPREAD,
     ) -> None:
         self.n_components = n_components
         self.max_components = max_components
@@ -591,6 +679,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self.score_dims = score_dims
         self.bic_samples_per_sequence = bic_samples_per_sequence
         self.bic_samples = bic_samples
+        self.min_time_spread = min_time_spread
 
     # ------------------------------------------------------------------ fitting
     def _check_params(self, n_samples: int, n_dims: int) -> tuple[str, list[int], Float]:
@@ -676,9 +765,10 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         """
         x_raw = check_array(X, "X", ndim=2, min_rows=2)
         n, d = x_raw.shape
-        method, candidates, floor = self._check_params(n, d)
+        method, candidates, diag = self._check_params(n, d)
+        spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
         # A constant column with no floor gives every component a zero variance there.
-        flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (floor <= 0.0))
+        flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (diag <= 0.0))
         if flat.size:
             j = int(flat[0])
             also = f" (so are dimensions {flat[1:].tolist()})" if flat.size > 1 else ""
@@ -705,6 +795,11 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         x2 = _outer_rows(x)
         max_iter, tol = int(self.max_iter), float(self.tol)
         fits: dict[int, _Fit] = {}
+        if self.time_dim is None:
+            floor = _Floor(diag)
+        else:
+            # The smallest time standard deviation of K components: spread * span / K.
+            floor = _Floor(diag, int(self.time_dim), spread * float(np.ptp(x[:, self.time_dim])))
 
         # Screening fits of a sweep stop at a looser tolerance; the kept one is refined below.
         sweep_tol = tol if method == "fixed" else max(tol, SWEEP_TOL)
@@ -720,7 +815,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                 assert self.time_dim is not None
                 td = int(self.time_dim)
                 score_dims = self._check_score_dims(d, td)
-                scale = np.maximum(pooled_spread(x, grp, td)[score_dims], floor[score_dims])
+                scale = np.maximum(pooled_spread(x, grp, td)[score_dims], diag[score_dims])
                 scale = np.where(scale > 0, scale, 1.0)
 
                 def cv(k: int) -> Float:

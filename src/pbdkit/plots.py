@@ -1,4 +1,4 @@
-"""Figures: GMM ellipses, GMR mean with its covariance tube, demonstrations.
+"""Figures: GMM ellipses, GMR mean with its covariance tube, demonstrations, motion limits.
 
 matplotlib is imported inside each function (the core never needs it). Figures are built with
 matplotlib's object-oriented API (``matplotlib.figure.Figure``), never through pyplot: they render
@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ._io import atomic_write_bytes
@@ -25,6 +26,7 @@ if TYPE_CHECKING:
 
     from .demos import Demonstration
     from .gmm import GMM
+    from .limits import MotionLimits
     from .reproduce import ReproductionResult
     from .sim.execute import ExecutionResult
     from .sim.online import OnlineRun
@@ -38,6 +40,7 @@ __all__ = [
     "plot_gmr_tube",
     "plot_influence",
     "plot_lasa_summary",
+    "plot_motion_limits",
     "plot_online_run",
     "plot_reproductions",
     "plot_selection",
@@ -481,6 +484,108 @@ def plot_selection(skill: Skill) -> Figure:
         f"{100 * CV_TOLERANCE:.1f} % of the best; line: K kept)",
         fontsize=9,
     )
+    fig.tight_layout()
+    figure: Figure = fig
+    return figure
+
+
+def plot_motion_limits(
+    t: npt.ArrayLike,
+    joints: npt.ArrayLike,
+    limits: MotionLimits,
+    *,
+    joint: int | None = None,
+    joint_names: Sequence[str] | None = None,
+    position_limits: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    title: str = "",
+) -> Figure:
+    """One joint's position, velocity, acceleration and jerk against its limits.
+
+    Four panels over time. The derivatives are the divided differences that check a motion
+    against its limits (:func:`pbdkit.limits.divided_differences`, with the rest before the
+    first sample and after the last), each drawn at the mean time of the samples it spans;
+    dashed lines at +- the joint's limits (and at its range with ``position_limits``).
+
+    Parameters
+    ----------
+    t : array-like, shape (K,)
+        Strictly increasing times (s): a servo stream (e.g.
+        :attr:`pbdkit.sim.execute.ExecutionResult.servo_targets` every ``servo_period``) or a
+        reproduction's samples at :meth:`pbdkit.Skill.times`.
+    joints : array-like, shape (K, n)
+    limits : MotionLimits
+        n joints.
+    joint : int, optional
+        The joint to show; default: the one closest to its acceleration limit (largest peak
+        |acceleration| / limit).
+    joint_names : sequence of str, optional
+        n names for the labels (default theta1 ... thetan).
+    position_limits : (array-like (n,), array-like (n,)), optional
+        Lower and upper joint limits.
+    title : str
+
+    Returns
+    -------
+    Figure
+    """
+    from .limits import PAD_REST, divided_differences
+
+    t_ = np.asarray(t, dtype=np.float64)
+    q = np.asarray(joints, dtype=np.float64)
+    v, a, jerk = divided_differences(t_, q, pad_rest=PAD_REST)
+    n = q.shape[1]
+    if limits.n_joints != n:
+        raise ValueError(f"limits are for {limits.n_joints} joints, joints has {n}")
+    if joint is None:
+        peak_a = np.abs(a).max(axis=0)
+        score = np.where(np.isfinite(limits.acceleration), peak_a / limits.acceleration, 0.0)
+        joint = int(np.argmax(score if score.max() > 0 else peak_a))
+    if not 0 <= joint < n:
+        raise ValueError(f"joint must be in 0..{n - 1}, got {joint}")
+    name = joint_names[joint] if joint_names is not None else f"theta{joint + 1}"
+    # Times of the padded samples (spaced like the end steps), and of each difference.
+    h0, h1 = t_[1] - t_[0], t_[-1] - t_[-2]
+    pad = np.arange(1, PAD_REST + 1)
+    tp = np.concatenate([t_[0] - h0 * pad[::-1], t_, t_[-1] + h1 * pad])
+    windows = np.lib.stride_tricks.sliding_window_view
+
+    fig = _new_figure(figsize=(9.0, 7.2))
+    axes = fig.subplots(4, 1, sharex=True)
+    series = [
+        ("position", "rad", t_, q[:, joint], None),
+        ("velocity", "rad/s", windows(tp, 2).mean(axis=1), v[:, joint], limits.velocity[joint]),
+        (
+            "acceleration",
+            "rad/s^2",
+            windows(tp, 3).mean(axis=1),
+            a[:, joint],
+            limits.acceleration[joint],
+        ),
+        ("jerk", "rad/s^3", windows(tp, 4).mean(axis=1), jerk[:, joint], limits.jerk[joint]),
+    ]
+    for ax, (kind, unit, times, values, lim) in zip(axes, series, strict=True):
+        ax.plot(times, values, color="k", lw=0.8, label=kind)
+        peak = float(np.abs(values).max()) if values.size else 0.0
+        if lim is not None and np.isfinite(lim):
+            for sign in (1.0, -1.0):
+                ax.axhline(sign * lim, color="tab:red", lw=0.9, ls="--")
+            ax.set_title(
+                f"{kind}: peak {peak:.3g} {unit}, {peak / lim:.2f} of the limit "
+                f"(dashed: +-{lim:.3g})",
+                fontsize=9,
+            )
+        elif kind == "position" and position_limits is not None:
+            lo = float(np.asarray(position_limits[0], dtype=np.float64)[joint])
+            hi = float(np.asarray(position_limits[1], dtype=np.float64)[joint])
+            for bound in (lo, hi):
+                ax.axhline(bound, color="tab:red", lw=0.9, ls="--")
+            ax.set_title(f"{kind} (dashed: the joint's range)", fontsize=9)
+        else:
+            ax.set_title(kind if kind == "position" else f"{kind}: no limit", fontsize=9)
+        ax.set_ylabel(f"{name} [{unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[-1].set_xlabel("time (s)", fontsize=8)
+    fig.suptitle(title or f"{name} against its limits", fontsize=10)
     fig.tight_layout()
     figure: Figure = fig
     return figure

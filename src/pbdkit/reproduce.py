@@ -83,8 +83,51 @@ it is halved (up to ``MAX_HALVINGS`` times; a Gauss-Newton step is a descent dir
 so a short enough step lowers it), the standard line search that globalizes Gauss-Newton
 (Nocedal & Wright, Numerical Optimization, ch. 10). The check reuses f(theta_{j+1}), which the
 next step needs anyway, and changes nothing where Table II converges (the steps lower E_j
-already). It does not remove every oscillation: a limit cycle whose steps each lower E_j
-survives (README, "Known limits"). ``line_search=False`` gives the paper's loop as written.
+already). ``line_search=False`` gives the paper's loop as written.
+
+The line search alone leaves a limit cycle whose steps each lower E_j: a joint reversing at every
+step at the velocity bound (measured on the simulated teacher's coaster skills, seeds 0-9 and 4
+placements: 35-128 reversals between fast steps in 6 of 40 reproductions). Its cause is the
+curvature Gauss-Newton drops, so the step also uses Newton's Hessian (``newton=True``, the
+default): E_j's exact Hessian adds sum_i w_i d^2 f_i / d theta^2 with w = sum_n P_n (f(theta) -
+o(n) - x_hat^(n)) = P x - h, and for a serial chain d^2 x / (d theta_a d theta_b) =
+omega_a x J_b (a <= b; omega_a the world axis of revolute joint a, J_b the position Jacobian's
+column), so the (a, b) entry is (w x omega_a) . J_b: one more n x n product and Cholesky solve
+per step, from the frame Jacobian's angular rows (:meth:`pbdkit.Robot.fk_jacobian_axes_unchecked`).
+The Newton step is taken where its Hessian is positive definite and the step is shorter than
+Gauss-Newton's (where the curvature stiffens it: the directions Gauss-Newton overshoots in);
+elsewhere the Gauss-Newton step. Measured: the 35-128 reversals become 0, at the same accuracy
+(``tests/test_motion.py``); it costs about 40 % of a step (``benchmarks/bench_motion.py``). A
+robot without the axes gets Gauss-Newton steps.
+
+Motion limits. The loop above computes the path, one posture per step of the skill's time grid.
+What a real arm needs is a timing within its velocity, acceleration and jerk limits, starting and
+ending at rest; Table II at the demonstrations' pace asks up to 20-115 rad/s^2 of the Katana
+(limit 6) and starts from rest at full speed. With ``limits`` (:meth:`pbdkit.Skill.reproduce`
+gives the robot's by default) the result is :func:`timed_path`'s:
+
+1. a lead-in: the time-optimal jerk-limited move (:func:`pbdkit.otg.point_to_point`) from
+   ``q0`` to the skill's first posture (:func:`first_posture`: Table II's step 0 iterated until
+   still, the product of the constraints at t_0), so that a start away from it is a separate
+   move and the skill keeps its own timing;
+2. Table II from that posture, without a velocity bound (``step_limit`` is not used; the
+   trust region ``max_step``, the line search, Newton's term and the joint limits apply);
+3. the timing: :func:`pbdkit.limits.retime` gives every step the demonstrations' duration
+   ``dt``, or more where the limits need it (stretching a neighbourhood by f divides
+   velocities by f, accelerations by f^2, jerks by f^3), until the samples played at those
+   times, padded with rest at both ends, are within the limits by divided differences. The
+   postures are kept exactly: every constraint is met where it was, the gripper events stay
+   with their steps, and :attr:`ReproductionResult.stretch` says how much longer the skill's
+   part became. A step is never made shorter than ``dt``. Clipping at a joint limit, which stops
+   a joint within one step, is slowed by the same rule.
+
+The samples carry velocities and accelerations (:attr:`ReproductionResult.velocities`: the
+clamped cubic spline's through them at their times, the lead-in's own), for a
+``JointTrajectory`` or a follower: :func:`pbdkit.otg.follow` turns them into a continuous
+jerk-limited motion sampled at any rate (the simulator's 500 Hz servos, a 1 kHz loop). The
+limits are planned at :data:`pbdkit.limits.LIMIT_SAFETY` of the declared ones so that rounding
+never puts a measured value above them. The online controller plans with :func:`timed_path`
+too, from a state along the way (a moving start, at a phase).
 
 Reach. With ``reach`` given (a :class:`pbdkit.Skill` passes its estimate, see
 :func:`reach_from_samples`), every object in use is checked before the loop: at the step where
@@ -141,7 +184,7 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -150,6 +193,8 @@ from scipy.linalg.lapack import dposv
 
 from ._validation import check_array, check_positions, check_positive_float
 from .kinematics import damped_pinv
+from .limits import LIMIT_SAFETY, MotionLimits, positive_bounds, retime, times_from_durations
+from .otg import point_to_point, spline_derivatives
 
 __all__ = [
     "Constraints",
@@ -158,14 +203,24 @@ __all__ = [
     "ReproductionResult",
     "RunSetup",
     "check_objects",
+    "first_posture",
     "reach_from_samples",
     "reproduce",
     "setup_run",
     "step_limit_from_velocity",
+    "timed_path",
 ]
 
 Float = NDArray[np.float64]
 JOINT = "joint"
+#: The lead-in is planned at this fraction of the limits the whole reproduction is timed with.
+LEAD_IN_MARGIN = 0.999
+#: The lead-in's samples are at least this far apart (s), whatever the skill's step.
+LEAD_IN_PERIOD = 0.01
+# skew(w)^T = _LEVI_CIVITA . w: the Levi-Civita symbol, entry (i, j) sum_k eps_ijk w_k.
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _LEVI_CIVITA[_i, _j, _k], _LEVI_CIVITA[_j, _i, _k] = 1.0, -1.0
 # Line search of the fused loop: at most this many halvings of a step (module docstring).
 MAX_HALVINGS = 8
 # step_limit = v dt VELOCITY_SAFETY: floating-point rounding never plays a step above v.
@@ -347,7 +402,27 @@ class ReproductionResult:
         The constraints in use.
     limited : ndarray of bool, shape (T,)
         True at the steps j whose step theta_{j-1} -> theta_j was scaled down by ``step_limit``
-        (the velocity limit) or ``max_step``; False at step 0.
+        (the velocity limit) or ``max_step``; with motion limits (``limits``), the steps whose
+        duration the limits stretched. False at step 0.
+    times : ndarray, shape (T,), or None
+        With motion limits: the time (s) of each sample, from 0, such that the samples played
+        at these times respect the limits, starting and ending at rest (module docstring,
+        "Motion limits"). None without them (:meth:`pbdkit.Skill.times` then spreads the steps
+        over the skill's duration).
+    velocities, accelerations : ndarray, shape (T, n), or None
+        With motion limits: joint velocities and accelerations at the samples, from the timing
+        (the derivatives of the cubic spline through the samples at ``times``, at rest at both
+        ends; the lead-in's samples carry the time-optimal move's own, at rest where it
+        arrives), e.g. for a ``JointTrajectory``.
+    lead_in : ndarray of bool, shape (T,)
+        True for the samples of the lead-in move from ``q0`` to the skill's first posture
+        (their ``t`` is the first step's); all False without motion limits.
+    nominal_dt : float
+        With motion limits: the duration of a step at the demonstrations' pace (s); NaN
+        without. :attr:`stretch` compares the timing with it.
+
+    With motion limits the result has a sample per step of the skill plus the lead-in samples:
+    T = L + n_steps.
     """
 
     t: Float
@@ -361,6 +436,23 @@ class ReproductionResult:
     task_errors: dict[str, Float]
     used: tuple[str, ...]
     limited: NDArray[np.bool_]
+    times: Float | None = None
+    velocities: Float | None = None
+    accelerations: Float | None = None
+    lead_in: NDArray[np.bool_] | None = None
+    nominal_dt: float = float("nan")
+
+    @property
+    def stretch(self) -> float:
+        """How much longer the motion limits made the skill's own part (after the lead-in)
+        than the steps at their nominal duration: 1.0 where nothing was slowed; NaN without
+        motion limits."""
+        if self.times is None or self.lead_in is None:
+            return float("nan")
+        start = int(np.count_nonzero(self.lead_in))
+        own = self.times[start:]
+        nominal = self.nominal_dt * (own.shape[0] - 1)
+        return float((own[-1] - own[0]) / nominal) if nominal > 0 else float("nan")
 
 
 def check_objects(objects: object, names: Sequence[str], name: str = "objects") -> dict[str, Float]:
@@ -499,6 +591,9 @@ def reproduce(
     reach: float | None = None,
     on_unreachable: Literal["raise", "warn"] = "raise",
     line_search: bool = True,
+    newton: bool = True,
+    limits: MotionLimits | None = None,
+    dt: float | None = None,
 ) -> ReproductionResult:
     """Closed-loop reproduction of Table II for new object positions.
 
@@ -527,6 +622,7 @@ def reproduce(
         joint unbounded): a step with |dtheta_i| > step_limit_i for some joint is scaled down
         uniformly, keeping its direction, before ``max_step`` applies. Velocity limits v (rad/s)
         give v dt (:func:`step_limit_from_velocity`). None (default): no per-joint bound.
+        Not used with ``limits`` (the timing bounds the speed there).
     reach : float, optional
         Reach of the arm (m, from the base origin). If given, the most constrained target
         o + x_hat of every object in use is checked against it.
@@ -536,11 +632,29 @@ def reproduce(
     line_search : bool
         Fused controller: shorten a step that would raise the fused energy of its step (module
         docstring, "Stability"). False: the paper's loop as written.
+    newton : bool
+        Fused controller: use the curvature of the forward kinematics where it stiffens a step
+        (module docstring, "Stability"; it needs ``robot.fk_jacobian_axes_unchecked``, which a
+        :class:`pbdkit.Robot` has). False: Gauss-Newton steps only.
+    limits : MotionLimits, optional
+        Velocity, acceleration and jerk limits (module docstring, "Motion limits"): the result
+        then has :attr:`ReproductionResult.times` within them, a lead-in from ``q0`` and rest at
+        both ends. Needs ``dt``.
+    dt : float, optional
+        The duration of a step at the demonstrations' pace (s), with ``limits``.
 
     Returns
     -------
     result : ReproductionResult
     """
+    timed = limits is not None and limits.any
+    if timed:
+        if dt is None or not (math.isfinite(dt) and dt > 0):
+            raise ValueError(
+                "limits are in seconds and need the duration of a step: pass dt > 0 (s), "
+                f"got {dt!r}"
+            )
+        step_limit = None  # the timing bounds the speed
     run = setup_run(
         robot,
         constraints,
@@ -553,38 +667,124 @@ def reproduce(
         reach=reach,
         on_unreachable=on_unreachable,
     )
-    c, objs, used, tasks, alpha = run.constraints, run.objects, run.used, run.tasks, run.alpha
-    step_cap, bound, lower, upper, theta0 = (
-        run.max_step,
-        run.step_limit,
-        run.lower,
-        run.upper,
-        run.theta0,
-    )
-    if JOINT in used and tasks:
-        joints, positions, covs, influence, influence_js, limited = _fused_loop(
-            robot, c, objs, tasks, theta0, lower, upper, step_cap, bound, bool(line_search)
+    if timed:
+        assert limits is not None and dt is not None
+        return timed_path(
+            robot, run, limits, dt, line_search=bool(line_search), newton=bool(newton)
         )
-    elif JOINT in used:
-        joints, limited = _joint_only(c.joint_mean, theta0, lower, upper, step_cap, bound)
-        positions = np.asarray(robot.fk(joints), dtype=np.float64)
-        covs = c.joint_cov.copy()
-        influence = {JOINT: np.ones(c.n_steps)}
-        influence_js = {JOINT: np.ones(c.n_steps)}
-    else:
-        joints, positions, covs, influence, limited = _task_loop(
-            robot, c, objs, tasks, theta0, lower, upper, alpha, step_cap, bound
-        )
-        # Rank-3 covariance: no joint-space precision to compare; the task-space shares.
-        influence_js = {k: v.copy() for k, v in influence.items()}
+    path = _table_ii(robot, run, run.theta0, line_search=bool(line_search), newton=bool(newton))
+    return _result(run, run.constraints.t.copy(), path, None, None, None, None, float("nan"))
 
+
+def timed_path(
+    robot: KinematicModel,
+    run: RunSetup,
+    limits: MotionLimits,
+    dt: float,
+    *,
+    line_search: bool = True,
+    newton: bool = True,
+    theta: Float | None = None,
+    phase: float = 0.0,
+    velocity: Float | None = None,
+) -> ReproductionResult:
+    """The reproduction within motion limits (module docstring, "Motion limits"), from the
+    start or from a state along the way.
+
+    From the start (``phase`` 0, ``velocity`` None): a lead-in from ``theta`` (default
+    ``run.theta0``) to the skill's first posture (:func:`first_posture`), then Table II from
+    there. Along the way (what the online controller re-plans from): Table II from ``theta``
+    at ``phase`` (steps floor(phase) + 1 .. T - 1 follow), the path starting at ``velocity``
+    (rad/s). Either way the samples are timed by :func:`pbdkit.limits.retime` (within
+    ``limits`` times :data:`pbdkit.limits.LIMIT_SAFETY`, at rest at the end), and their
+    velocities and accelerations are those of the cubic spline through them at those times.
+
+    Returns
+    -------
+    ReproductionResult
+        Its ``t`` holds each sample's phase (``phase`` for the first one along the way, the
+        first step's for the lead-in); ``times`` start at 0.
+    """
+    c = run.constraints
+    plan = limits.scaled(LIMIT_SAFETY)
+    theta0 = run.theta0 if theta is None else np.asarray(theta, dtype=np.float64)
+    moving = velocity is not None and bool(np.any(velocity))
+    fused = (
+        _fused_step(robot, run, line_search, newton) if JOINT in run.used and run.tasks else None
+    )
+    if phase <= 0.0 and not moving:
+        start = first_posture(robot, run, line_search=line_search, newton=newton, fused=fused)
+        path = _table_ii(robot, run, start, line_search=line_search, newton=newton, fused=fused)
+        steps = c.t.copy()
+        # Planned a little inside `plan`, so that rounding never puts it above what is checked;
+        # sampled every step, or every LEAD_IN_PERIOD s for a skill of very short steps.
+        lead_dt = max(float(dt), LEAD_IN_PERIOD)
+        lead_q, lead_v, lead_a = point_to_point(theta0, start, lead_dt, plan.scaled(LEAD_IN_MARGIN))
+    else:
+        first = min(math.floor(phase), c.n_steps - 1)
+        path = _table_ii(
+            robot, run, theta0, line_search=line_search, newton=newton, start=first, fused=fused
+        )
+        steps = c.t[first:].copy()
+        steps[0] = min(float(phase), float(c.n_steps - 1))
+        lead_q = lead_v = lead_a = theta0[:0].reshape(0, theta0.shape[0])
+        lead_dt = float(dt)
+    joints, positions, covs, influence, influence_js, limited = path
+    n_lead = lead_q.shape[0] - 1 if lead_q.shape[0] else 0  # its last sample is the path's first
+    lead_q = lead_q[:n_lead]
+    lead = np.zeros(joints.shape[0], dtype=bool)
+    if n_lead:
+        joints = np.concatenate([lead_q, joints])
+        positions = np.concatenate([np.asarray(robot.fk(lead_q), dtype=np.float64), positions])
+        covs, steps = _lead(covs, n_lead), _lead(steps, n_lead)
+        influence = {k: _lead(v, n_lead) for k, v in influence.items()}
+        influence_js = {k: _lead(v, n_lead) for k, v in influence_js.items()}
+        lead = np.concatenate([np.ones(n_lead, dtype=bool), lead])
+    v0 = np.asarray(velocity, dtype=np.float64) if moving else None
+    if joints.shape[0] == 1:  # the last step already: stay
+        joints = np.concatenate([joints, joints])
+        positions, covs, steps, lead = (
+            np.concatenate([a, a]) for a in (positions, covs, steps, lead)
+        )
+        influence = {k: np.concatenate([v, v]) for k, v in influence.items()}
+        influence_js = {k: np.concatenate([v, v]) for k, v in influence_js.items()}
+    nominal = np.full(joints.shape[0] - 1, float(dt))
+    if n_lead:
+        nominal[:n_lead] = lead_dt
+    h = retime(joints, nominal, plan, start_velocity=v0)
+    times = times_from_durations(h)
+    limited = np.concatenate([[False], h > nominal * (1.0 + 1e-9)])
+    velocities, accelerations = spline_derivatives(times, joints, v0)
+    if n_lead and np.all(h[:n_lead] == lead_dt):
+        # The lead-in's own derivatives, at rest where it arrives (a time-optimal move: the
+        # spline through its samples would ask for more jerk than it has).
+        velocities[: n_lead + 1] = lead_v
+        accelerations[: n_lead + 1] = lead_a
+    path = (joints, positions, covs, influence, influence_js, limited)
+    return _result(run, steps, path, times, velocities, accelerations, lead, float(dt))
+
+
+def _result(
+    run: RunSetup,
+    steps: Float,
+    path: tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]],
+    times: Float | None,
+    velocities: Float | None,
+    accelerations: Float | None,
+    lead: NDArray[np.bool_] | None,
+    nominal_dt: float,
+) -> ReproductionResult:
+    """A :class:`ReproductionResult` from a path and the phase of its samples."""
+    c, objs = run.constraints, run.objects
+    joints, positions, covs, influence, influence_js, limited = path
+    index = np.asarray(np.floor(steps + 1e-9), dtype=np.intp)
     task_errors = {
-        k: np.linalg.norm(positions - (o + c.task_mean[k]), axis=1) for k, o in objs.items()
+        k: np.linalg.norm(positions - (o + c.task_mean[k][index]), axis=1) for k, o in objs.items()
     }
-    signal = None if c.gripper is None else c.gripper.copy()
-    closed = np.zeros(c.n_steps, dtype=bool) if signal is None else signal > 0.5
+    signal = None if c.gripper is None else c.gripper[index].copy()
+    closed = np.zeros(index.shape[0], dtype=bool) if signal is None else signal > 0.5
     return ReproductionResult(
-        t=c.t.copy(),
+        t=np.asarray(steps, dtype=np.float64),
         joints=joints,
         positions=positions,
         covariances=covs,
@@ -593,9 +793,118 @@ def reproduce(
         influence=influence,
         influence_joint_space=influence_js,
         task_errors=task_errors,
-        used=tuple(used),
+        used=tuple(run.used),
         limited=limited,
+        times=times,
+        velocities=velocities,
+        accelerations=accelerations,
+        lead_in=np.zeros(joints.shape[0], dtype=bool) if lead is None else lead,
+        nominal_dt=nominal_dt,
     )
+
+
+def _lead(a: NDArray[Any], n_lead: int) -> NDArray[Any]:
+    """``a`` with its first row repeated ``n_lead`` times in front (the lead-in's samples)."""
+    return np.concatenate([np.repeat(a[:1], n_lead, axis=0), a])
+
+
+def _fused_step(robot: KinematicModel, run: RunSetup, line_search: bool, newton: bool) -> FusedStep:
+    """The fused controller's step for ``run``."""
+    return FusedStep(
+        robot,
+        run.constraints,
+        run.objects,
+        run.tasks,
+        run.lower,
+        run.upper,
+        run.max_step,
+        run.step_limit,
+        line_search,
+        newton,
+    )
+
+
+def _table_ii(
+    robot: KinematicModel,
+    run: RunSetup,
+    theta0: Float,
+    *,
+    line_search: bool,
+    newton: bool,
+    start: int = 0,
+    fused: FusedStep | None = None,
+) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+    """The loop of the controller ``run`` asks for, from ``theta0`` at step ``start``: joints,
+    positions, covariances, influence (hand space and joint space) and the mask of scaled
+    steps, for steps ``start`` .. T - 1 (row 0: ``theta0``). ``fused``: the fused controller's
+    step for ``run``, if already built."""
+    c, objs, used, tasks = run.constraints, run.objects, run.used, run.tasks
+    lower, upper, step_cap, bound = run.lower, run.upper, run.max_step, run.step_limit
+    if JOINT in used and tasks:
+        if fused is None:
+            fused = _fused_step(robot, run, line_search, newton)
+        return _fused_loop(c, tasks, theta0, fused, start=start)
+    if JOINT in used:
+        joints, limited = _joint_only(
+            c.joint_mean, theta0, lower, upper, step_cap, bound, start=start
+        )
+        positions = np.asarray(robot.fk(joints), dtype=np.float64)
+        ones = {JOINT: np.ones(c.n_steps - start)}
+        covs = c.joint_cov[start:].copy()
+        return joints, positions, covs, ones, {JOINT: ones[JOINT].copy()}, limited
+    joints, positions, covs, influence, limited = _task_loop(
+        robot, c, objs, tasks, theta0, lower, upper, run.alpha, step_cap, bound, start=start
+    )
+    # Rank-3 covariance: no joint-space precision to compare; the task-space shares.
+    influence_js = {k: v.copy() for k, v in influence.items()}
+    return joints, positions, covs, influence, influence_js, limited
+
+
+#: first_posture: at most this many steps at t_0, and the step length (rad) that counts as still.
+FIRST_POSTURE_STEPS = 500
+FIRST_POSTURE_TOL = 1e-9
+
+
+def first_posture(
+    robot: KinematicModel,
+    run: RunSetup,
+    *,
+    line_search: bool = True,
+    newton: bool = True,
+    fused: FusedStep | None = None,
+) -> Float:
+    """The skill's first posture for the controller of ``run``: Table II's step 0 iterated from
+    theta_hat_0 (clipped to the limits) until it stands still, i.e. the product of the
+    constraints at t_0 (the joint-only controller: theta_hat_0 itself).
+
+    It does not depend on where the arm is: a reproduction from any q0 begins with a lead-in
+    move to it, then the skill runs with its own timing (module docstring, "Motion limits").
+    ``fused``: the fused controller's :class:`FusedStep` for ``run``, if already built.
+    """
+    c = run.constraints
+    theta = np.clip(c.joint_mean[0], run.lower, run.upper)
+    if JOINT in run.used and run.tasks:
+        if fused is None:
+            fused = _fused_step(robot, run, line_search, newton)
+        x, jac, axes = fused.kinematics(theta)
+        for _ in range(FIRST_POSTURE_STEPS):
+            new, x, jac, axes, _limited = fused(0, theta, x, jac, axes)
+            moved = float(np.abs(new - theta).max())
+            theta = new
+            if moved <= FIRST_POSTURE_TOL:
+                break
+    elif run.tasks:
+        task = TaskStep(
+            robot, c, run.objects, run.tasks, run.lower, run.upper, run.alpha, run.max_step, None
+        )
+        x, jac = task.fk_jac(theta)
+        for _ in range(FIRST_POSTURE_STEPS):
+            new, x, jac, _limited = task(0, theta, x, jac, damped_pinv(jac))
+            moved = float(np.abs(new - theta).max())
+            theta = new
+            if moved <= FIRST_POSTURE_TOL:
+                break
+    return np.asarray(theta, dtype=np.float64)
 
 
 def step_limit_from_velocity(
@@ -650,35 +959,15 @@ def step_limit_from_velocity(
                 f"it is unknown (dt = {dt!r}: the skill has no known duration): pass "
                 "velocity_limit=None, or bound the steps in rad with max_step"
             )
-        v = _check_positive_bounds(velocity_limit, n, "velocity_limit", "rad/s")
+        v = positive_bounds(velocity_limit, n, "velocity_limit", "rad/s")
     return _check_step_limit(v * (dt * VELOCITY_SAFETY), n)
-
-
-def _check_positive_bounds(value: npt.ArrayLike, n: int, name: str, unit: str) -> Float:
-    """A number or (n,) values, each > 0 or inf (unbounded) -> ndarray (n,)."""
-    scalar = np.ndim(value) == 0  # check_array makes a scalar (1,)
-    arr = check_array(value, name, ndim=(0, 1), finite=False)
-    if scalar:
-        arr = np.full(n, arr.item())
-    elif arr.shape[0] != n:
-        raise ValueError(
-            f"{name} must be a number or have shape ({n},) (one value per joint), "
-            f"got shape ({arr.shape[0]},)"
-        )
-    bad = np.flatnonzero(~(arr > 0))  # zero, negative or NaN
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{name}[{i}] must be > 0 ({unit}; inf leaves that joint unbounded), got {arr[i]:.6g}"
-        )
-    return arr
 
 
 def _check_step_limit(step_limit: npt.ArrayLike | None, n: int) -> Float | None:
     """step_limit as ndarray (n,), or None when no joint is bounded."""
     if step_limit is None:
         return None
-    arr = _check_positive_bounds(step_limit, n, "step_limit", "rad per step")
+    arr = positive_bounds(step_limit, n, "step_limit", "rad per step")
     return None if bool(np.all(np.isinf(arr))) else arr
 
 
@@ -746,15 +1035,16 @@ def _joint_only(
     upper: Float,
     max_step: float,
     step_limit: Float | None,
+    start: int = 0,
 ) -> tuple[Float, NDArray[np.bool_]]:
-    """Joint-space controller: :class:`JointStep` over every step.
+    """Joint-space controller: :class:`JointStep` over every step (from step ``start``).
 
     That is theta_hat itself (clipped to the limits), except where a step would exceed
     ``step_limit`` or ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those
     steps are scaled. Returns the joints and the mask of the scaled steps.
     """
     step = JointStep(theta_hat, lower, upper, max_step, step_limit)
-    joints = step.target.copy()
+    joints = step.target[start:].copy()
     joints[0] = theta0
     n_steps = joints.shape[0]
     d = np.diff(joints, axis=0)
@@ -767,7 +1057,7 @@ def _joint_only(
     limited: list[int] = []
     theta = theta0
     for j in range(1, n_steps):
-        theta, was_limited = step(j, theta)
+        theta, was_limited = step(start + j, theta)
         if was_limited:
             limited.append(j)
         joints[j] = theta
@@ -810,12 +1100,17 @@ class FusedStep:
         max_step: float,
         step_limit: Float | None,
         line_search: bool,
+        newton: bool = True,
     ) -> None:
         self.c, self.tasks, self.n = c, tasks, c.n_joints
         self.lower, self.upper = lower, upper
         self.max_step, self.step_limit, self.line_search = max_step, step_limit, line_search
         # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
         self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        # The curvature term needs the joints' axes (module docstring, "Stability").
+        axes = getattr(robot, "fk_jacobian_axes_unchecked", None) if newton else None
+        self.fk_axes = axes
+        self.newton = axes is not None
         # A step shorter than this fits every bound: one comparison (module docstring).
         self.free2 = _free_step2(max_step, step_limit)
         # Lists of per-step views are cheaper to index in the loop than the arrays.
@@ -828,6 +1123,7 @@ class FusedStep:
         self.prec, self.p_sum, h = _task_stack(c, objs, self.tasks)
         # [sum_n P_n | h] so that one product gives J^T P and J^T h.
         self.g = list(np.concatenate([self.p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
+        self.p_sum_list, self.h_list = list(self.p_sum), list(h)
         # The fused energy of step j in z = [theta | f(theta)]: E_j = 1/2 z^T Q_j z - z . b_j + c
         # with Q_j = diag(Lambda_theta_j, sum_n P_n), b_j = [eta_j | h_j]; the line search
         # compares E_j(z_new) - E_j(z) = d . (Q_j (z_new + z) / 2 - b_j), d = z_new - z (exact:
@@ -837,12 +1133,21 @@ class FusedStep:
         half_q[:, n:, n:] = 0.5 * self.p_sum
         self.q_list, self.b_list = list(half_q), list(np.concatenate([c.joint_eta, h], axis=1))
 
-    def __call__(
-        self, j: int, theta: Float, x: Float, jac: Float
-    ) -> tuple[Float, Float, Float, bool]:
-        """theta_j from theta_{j-1} = ``theta`` (x = f(theta), jac = J(theta)).
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        """f(theta), J(theta) and the joint axes (n, 3) when the Newton term uses them."""
+        if self.fk_axes is not None:
+            return self.fk_axes(theta)  # type: ignore[no-any-return]
+        x, jac = self.fk_jac(theta)
+        return x, jac, None
 
-        Returns theta_j, f(theta_j), J(theta_j), and whether a bound scaled the step down.
+    def __call__(
+        self, j: int, theta: Float, x: Float, jac: Float, axes: Float | None = None
+    ) -> tuple[Float, Float, Float, Float | None, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x = f(theta), jac = J(theta), ``axes`` its
+        joint axes for the Newton term, see :meth:`kinematics`).
+
+        Returns theta_j, f(theta_j), J(theta_j), its axes (None without the Newton term), and
+        whether a bound scaled the step down.
         """
         # ndarray.dot rather than @: for these tiny operands it has half the call overhead
         # (1 us against 2 us per product, measured).
@@ -851,10 +1156,26 @@ class FusedStep:
         lam_j = self.prec_list[j] + a.dot(jac)  # eq. (1) in information form: precisions add
         # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
         # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
-        _, target, info = dposv(lam_j, self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x))
+        rhs = self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x)
+        _, target, info = dposv(lam_j, rhs)
         if info != 0:
             raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
         step = target - theta
+        if axes is not None:
+            # Newton: the Hessian of E_j adds sum_i w_i d^2 f_i, w = P x - h, with
+            # d^2 x / d theta_a d theta_b = omega_min x J_max, so its (a, b) entry for a <= b is
+            # (w x omega_a) . J_b (module docstring, "Stability"); rows w x omega_a = axes
+            # skew(w)^T, skew(w) = LEVI_CIVITA . w (np.cross costs 20x more on these sizes).
+            skew_t = _LEVI_CIVITA.dot(self.p_sum_list[j].dot(x) - self.h_list[j])
+            # Only its upper triangle is the Hessian's, and only it is read: LAPACK's dposv
+            # factors the upper triangle of the symmetric matrix it is given.
+            _, newton, info2 = dposv(lam_j + axes.dot(skew_t).dot(jac), lam_j.dot(step))
+            # Kept where the curvature stiffens the step (the directions where Gauss-Newton
+            # overshoots into a limit cycle); where it softens it, the Gauss-Newton step is the
+            # safer one.
+            if info2 == 0 and newton.dot(newton) < step.dot(step):
+                step = newton
+                target = theta + newton
         step2 = step.dot(step)
         limited = False
         if step2 > self.free2:  # velocity bound, trust region of the linearization
@@ -863,7 +1184,7 @@ class FusedStep:
                 target = theta + step * scale
                 limited = True
         new = np.minimum(np.maximum(target, self.lower), self.upper)
-        x_new, jac_new = self.fk_jac(new)
+        x_new, jac_new, axes_new = self.kinematics(new)
         if self.line_search:
             # The step must lower the fused energy of step j (module docstring, "Stability").
             z = np.concatenate((theta, x))
@@ -873,9 +1194,9 @@ class FusedStep:
             while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
                 halvings += 1
                 new = theta + 0.5 * (new - theta)
-                x_new, jac_new = self.fk_jac(new)
+                x_new, jac_new, axes_new = self.kinematics(new)
                 z_new = np.concatenate((new, x_new))
-        return new, x_new, jac_new, limited
+        return new, x_new, jac_new, axes_new, limited
 
     def covariance(self, j: int, jac: Float) -> Float:
         """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used."""
@@ -885,34 +1206,29 @@ class FusedStep:
 
 
 def _fused_loop(
-    robot: KinematicModel,
     c: Constraints,
-    objs: Mapping[str, Float],
     tasks: list[str],
     theta0: Float,
-    lower: Float,
-    upper: Float,
-    max_step: float,
-    step_limit: Float | None,
-    line_search: bool,
+    step: FusedStep,
+    start: int = 0,
 ) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
-    """Table II with eq. (1) in information form: :class:`FusedStep` over every step.
+    """Table II with eq. (1) in information form: :class:`FusedStep` over every step (from
+    step ``start``, at ``theta0``).
 
     Returns joints, positions, covariances, influence (hand space), influence in joint space
-    and the mask of the steps scaled down.
+    and the mask of the steps scaled down, for steps ``start`` .. T - 1.
     """
     n_steps, n = c.n_steps, c.n_joints
-    step = FusedStep(robot, c, objs, tasks, lower, upper, max_step, step_limit, line_search)
     limited: list[int] = []
     theta = theta0
-    x, jac = step.fk_jac(theta)
+    x, jac, axes = step.kinematics(theta)
     # Python lists: appending costs less than writing rows into arrays, step by step.
     joints_l, positions_l, jacs_l = [theta], [x], [jac]
-    for j in range(1, n_steps):
+    for j in range(start + 1, n_steps):
         # x, jac are f(theta_{j-1}) and J(theta_{j-1}): Table II linearizes at the current posture.
-        theta, x, jac, was_limited = step(j, theta, x, jac)
+        theta, x, jac, axes, was_limited = step(j, theta, x, jac, axes)
         if was_limited:
-            limited.append(j)
+            limited.append(j - start)
         # Entry j holds the state theta_j and the Jacobian that step j+1 will use.
         joints_l.append(theta)
         positions_l.append(x)
@@ -921,7 +1237,7 @@ def _fused_loop(
     # Step 0 reports the constraints at t_0 with J(theta_0); step j >= 1 used J(theta_{j-1}).
     jac_used = np.concatenate([jacs[:1], jacs[:-1]])
     jt = np.swapaxes(jac_used, -1, -2)
-    prec_j, prec, p_sum = c.joint_prec, step.prec, step.p_sum
+    prec_j, prec, p_sum = c.joint_prec[start:], step.prec[start:], step.p_sum[start:]
     lam = prec_j + jt @ p_sum @ jac_used
     cov = _spd_inverse(lam)
     # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
@@ -933,7 +1249,7 @@ def _fused_loop(
     # Joint space: tr(Sigma Lambda_c) / n, with tr(Sigma J^T P_n J) = tr(S P_n).
     influence_js = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
     influence_js.update({k: tr / n for k, tr in zip(tasks, traces, strict=True)})
-    return joints, positions, cov, influence, influence_js, _limited_mask(n_steps, limited)
+    return joints, positions, cov, influence, influence_js, _limited_mask(n_steps - start, limited)
 
 
 def _task_stack(
@@ -1018,9 +1334,10 @@ def _task_loop(
     alpha: float,
     max_step: float,
     step_limit: Float | None,
+    start: int = 0,
 ) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
-    """Task-only controller of Table II: :class:`TaskStep` over every step."""
-    n_steps, n = c.n_steps, c.n_joints
+    """Task-only controller of Table II: :class:`TaskStep` over every step (from ``start``)."""
+    n_steps, n = c.n_steps - start, c.n_joints
     step = TaskStep(robot, c, objs, tasks, lower, upper, alpha, max_step, step_limit)
     joints = np.empty((n_steps, n))
     positions = np.empty((n_steps, 3))
@@ -1031,14 +1348,14 @@ def _task_loop(
     jp = damped_pinv(jac)
     joints[0], positions[0], pinvs[0] = theta, x, jp
     for j in range(1, n_steps):
-        theta, x, jac_new, was_limited = step(j, theta, x, jac, jp)
+        theta, x, jac_new, was_limited = step(start + j, theta, x, jac, jp)
         if was_limited:
             limited.append(j)
         pinvs[j] = jp
         jac = jac_new
         jp = damped_pinv(jac)
         joints[j], positions[j] = theta, x
-    s_fused, prec = step.s_fused, step.prec
+    s_fused, prec = step.s_fused[start:], step.prec[start:]
     covs = pinvs @ s_fused @ np.swapaxes(pinvs, -1, -2)
     # Already in hand space: share_n = tr(S_fused P_n) / 3, S_fused = (sum_n P_n)^-1.
     influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}

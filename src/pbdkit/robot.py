@@ -791,6 +791,29 @@ link_prefix, tip, velocity, effort
             return x, np.array(jac[:3]).reshape(3, 1)
         return x, np.ascontiguousarray(jac[:3])
 
+    def fk_jacobian_axes_unchecked(
+        self, q: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`fk_jacobian_unchecked` and the joints' axes, for second derivatives of f.
+
+        For a serial chain, d^2 x / (d theta_a d theta_b) = omega_min(a,b) x J_max(a,b), with
+        omega_i the world axis of revolute joint i (0 for a prismatic one) and J_i the column
+        of the position Jacobian: the axes are the angular rows of the frame Jacobian
+        (pinocchio, LOCAL_WORLD_ALIGNED), returned at no extra cost.
+
+        Returns
+        -------
+        x : ndarray, shape (3,)
+        J : ndarray, shape (3, n)
+        axes : ndarray, shape (n, 3)
+        """
+        jac = pin.computeFrameJacobian(self._model, self._data, q, self._tip_id, self._lf)
+        x = self._oMf[self._tip_id].translation.copy()
+        # Views of the fresh (6, n) array pinocchio returns (C order: its first 3 rows are
+        # contiguous); copies would cost a third of the call.
+        full = np.asarray(jac).reshape(6, self.n_joints)
+        return x, full[:3], full[3:].T
+
 
 # --------------------------------------------------------------------------------------------
 # Denavit-Hartenberg -> URDF

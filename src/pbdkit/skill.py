@@ -47,6 +47,7 @@ from ._validation import check_int, check_positive_float
 from .controller import Controller
 from .demos import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .gmm import GMM, MAX_COMPONENTS, ModelSelection
+from .limits import LimitSpec, MotionLimits
 from .reproduce import (
     JOINT,
     Constraints,
@@ -146,13 +147,19 @@ class Skill:
         return {k: g.selection_ for k, g in self.gmms.items()}
 
     def times(self, result: ReproductionResult) -> Float:
-        """Time stamps in seconds for executing a reproduction: its steps spread over
-        :attr:`duration`.
+        """Time stamps in seconds for executing a reproduction.
+
+        A reproduction within motion limits (the default) carries its own timing
+        (:attr:`pbdkit.reproduce.ReproductionResult.times`): the steps at the demonstrations'
+        pace, :attr:`step_seconds` each, stretched where the arm's limits need more time, after
+        the lead-in from ``q0``. Otherwise the steps are spread over :attr:`duration`.
 
         Returns
         -------
         t : ndarray, shape (T,)
         """
+        if result.times is not None:
+            return np.array(result.times, dtype=np.float64)
         if not np.isfinite(self.duration) or self.duration <= 0:
             raise ValueError("this skill has no known duration; scale result.t yourself")
         return np.asarray(result.t / max(result.t[-1], 1.0) * self.duration, dtype=np.float64)
@@ -356,14 +363,21 @@ class Skill:
         max_step: float | None = 0.1,
         on_unreachable: Literal["raise", "warn"] = "raise",
         *,
-        velocity_limit: float | npt.ArrayLike | Literal["robot"] | None = "robot",
+        velocity_limit: LimitSpec = "robot",
+        acceleration_limit: LimitSpec = "robot",
+        jerk_limit: LimitSpec = "robot",
         line_search: bool = True,
+        newton: bool = True,
     ) -> ReproductionResult:
-        """Reproduce the skill for new object positions (paper Table II).
+        """Reproduce the skill for new object positions (paper Table II), within the arm's
+        velocity, acceleration and jerk limits.
 
-        Every step is bounded so that the reproduction, executed over :meth:`times`, never
-        commands a joint faster than ``velocity_limit`` (see :mod:`pbdkit.reproduce`,
-        "Step size").
+        The reproduction starts with a lead-in move from ``q0`` to the skill's first posture
+        (:func:`pbdkit.reproduce.first_posture`), then runs the Table II loop at the
+        demonstrations' pace; played over :meth:`times` it stays within the limits, starting
+        and ending at rest: where the limits need it, the steps get more time (the path and the
+        gripper events stay with their steps; :attr:`ReproductionResult.stretch` says by how
+        much). See :mod:`pbdkit.reproduce`, "Motion limits".
 
         Parameters
         ----------
@@ -380,49 +394,45 @@ class Skill:
             GMR covariance mode.
         max_step : float or None
             Largest joint-space step (Euclidean norm, rad): the trust region of the
-            linearization; longer steps are scaled down, keeping their direction. None: no such
-            bound (with ``velocity_limit=None`` too, the paper's full step). The default stays
-            0.1 rad although the velocity limit is the tighter bound on the paper's grid
-            (1000 steps over ~20 s: at most 0.024 rad per joint, 0.053 rad over the Katana's
-            5 joints, so 0.1 never binds): it is a length in rad, not a speed, and still guards
-            the linearization where no velocity limit applies (unknown :attr:`duration`, a
-            robot without limits, ``velocity_limit=None``) or where the steps are coarse (few
-            steps over a long duration).
+            linearization; longer steps are scaled down, keeping their direction. None: no
+            such bound.
         on_unreachable : {"raise", "warn"}
             What to do when an object's most constrained target o + x_hat is beyond
             :attr:`reach`: raise ValueError, or warn (:class:`pbdkit.reproduce.ReachWarning`)
             and reproduce anyway (the hand stops short; never NaN).
-        velocity_limit : "robot", float, array-like of shape (n,), or None
-            Largest joint speeds (rad/s) when the reproduction is executed over :meth:`times`.
-            ``"robot"`` (default): the robot's ``velocity_limit`` (the URDF's), joints whose
-            limit is 0, negative or inf being unlimited; no limit if the robot has none or the
-            skill's :attr:`duration` is unknown (NaN). A number (every joint) or one value per
-            joint, > 0 (inf: that joint unlimited); it needs a known :attr:`duration`. None: no
-            limit. Converted to a bound per step with dt = duration / (n_steps - 1), the timing
-            of :meth:`times`, times 1 - 1e-6 so that rounding never plays a speed above it; a
-            step that would exceed it is scaled down uniformly (its direction kept).
+        velocity_limit, acceleration_limit, jerk_limit : "robot", float, array-like, or None
+            Joint limits (shape (n,) when an array) in rad/s, rad/s^2, rad/s^3. ``"robot"``
+            (default): the robot's
+            (``robot.velocity_limit`` etc.; a joint whose value is 0, negative or inf is not
+            limited); a number (every joint) or one value per joint, > 0 (inf: not limited);
+            None: not limited. All three None (or a robot with none, or a skill whose
+            :attr:`duration` is unknown): the loop of Table II as written, one sample per
+            step, no lead-in, and :meth:`times` spreads the steps over :attr:`duration`. An
+            explicit limit needs a known :attr:`duration`.
         line_search : bool
-            Fused controller: halve a step that would raise the fused energy of its step, which
-            keeps the loop from oscillating where a tight task constraint and a loose joint
-            constraint disagree (:mod:`pbdkit.reproduce`, "Stability"). False: Table II as
-            written.
+            Fused controller: halve a step that would raise the fused energy of its step
+            (:mod:`pbdkit.reproduce`, "Stability"). False: Table II as written.
+        newton : bool
+            Fused controller: the curvature of the forward kinematics where it stiffens a step,
+            which removes the limit cycle of Gauss-Newton where a tight task constraint meets a
+            loose joint constraint (:mod:`pbdkit.reproduce`, "Stability").
 
         Returns
         -------
         result : ReproductionResult
-            t (T,), joints (T, n), positions (T, 3), covariances (T, n, n), gripper (T,) bool,
-            influence and influence_joint_space dict name -> (T,), task_errors dict
-            name -> (T,), limited (T,) bool (the steps the velocity limit or ``max_step``
-            scaled down).
+            t (T,) the step of each sample, joints (T, n), positions (T, 3), covariances
+            (T, n, n), gripper (T,) bool, influence and influence_joint_space dict name -> (T,),
+            task_errors dict name -> (T,), limited (T,) bool (the steps the limits slowed),
+            times (T,) s, velocities and accelerations (T, n), lead_in (T,) bool. T is
+            n_steps plus the lead-in's samples.
 
         Raises
         ------
         ValueError
             Bad input, an object out of reach (``on_unreachable="raise"``), or an explicit
-            ``velocity_limit`` for a skill whose :attr:`duration` is unknown.
+            limit for a skill whose :attr:`duration` is unknown.
         """
-        dt = self.step_seconds
-        step_limit = step_limit_from_velocity(velocity_limit, self.robot, dt)
+        dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
         return reproduce(
             self.robot,
             self.constraints(covariance),
@@ -431,11 +441,41 @@ class Skill:
             use=use,
             alpha=alpha,
             max_step=max_step,
-            step_limit=step_limit,
             reach=self.reach,
             on_unreachable=on_unreachable,
             line_search=line_search,
+            newton=newton,
+            limits=limits,
+            dt=dt,
         )
+
+    def _motion_limits(
+        self, velocity: LimitSpec, acceleration: LimitSpec, jerk: LimitSpec
+    ) -> tuple[float, MotionLimits | None]:
+        """The step duration and the limits a reproduction or controller runs within (None:
+        none apply)."""
+        dt = self.step_seconds
+        limits = MotionLimits.from_robot(
+            self.robot, self.n_joints, velocity=velocity, acceleration=acceleration, jerk=jerk
+        )
+        if not np.isfinite(dt):
+            explicit = [
+                name
+                for name, spec in (
+                    ("velocity_limit", velocity),
+                    ("acceleration_limit", acceleration),
+                    ("jerk_limit", jerk),
+                )
+                if spec is not None and not (isinstance(spec, str) and spec == "robot")
+            ]
+            if explicit:
+                raise ValueError(
+                    f"{explicit[0]} is per second and needs the duration of a step; it is "
+                    "unknown (the skill has no known duration): pass None, or bound the steps "
+                    "in rad with max_step"
+                )
+            return dt, None
+        return dt, (limits if limits.any else None)
 
     @property
     def step_seconds(self) -> float:
@@ -454,32 +494,42 @@ class Skill:
         max_step: float | None = 0.1,
         on_unreachable: Literal["raise", "warn"] = "raise",
         *,
-        velocity_limit: float | npt.ArrayLike | Literal["robot"] | None = "robot",
+        velocity_limit: LimitSpec = "robot",
+        acceleration_limit: LimitSpec = "robot",
+        jerk_limit: LimitSpec = "robot",
         line_search: bool = True,
+        newton: bool = True,
         max_lag: float = 3.0,
     ) -> Controller:
         """One closed-loop run of the skill, step by step from the measured joint angles.
 
-        ``ctrl.step(q_measured, objects=None)`` returns the next target (:class:`Command`);
+        ``ctrl.step(q_measured, objects=None)`` returns the next command (:class:`Command`);
         ``ctrl.dt`` is the seconds per step (:attr:`step_seconds`), ``ctrl.done`` tells when the
-        last step was targeted. Fed its own targets with constant objects it equals
-        :meth:`reproduce` step for step (one implementation of the loop); see
-        :mod:`pbdkit.controller` for how the phase advances when the arm is held back.
+        run is over; ``ctrl.stream(rate_hz)`` gives setpoints for a faster loop. Within the
+        robot's limits (the default), consecutive commands are within the velocity,
+        acceleration and jerk limits at ``ctrl.dt``, the first one starting from the measured
+        posture at rest; see :mod:`pbdkit.controller` for how the phase follows the arm. Without
+        limits (all three None), fed its own commands with constant objects it equals
+        :meth:`reproduce` with no limits step for step (one implementation of the loop).
 
         Parameters
         ----------
         objects, q0, use, alpha, covariance, max_step, on_unreachable, velocity_limit,
-        line_search
-            As :meth:`reproduce`.
+        acceleration_limit, jerk_limit, line_search, newton
+            As :meth:`reproduce` (``q0``: only without limits, the posture the first step
+            starts from; with limits the first measured posture is).
         max_lag : float
             The phase holds while the measured posture is more than this many steps (at the
-            joints' top speed) behind the last target.
+            joints' top speed) behind the last command.
 
         Returns
         -------
         controller : Controller
         """
-        dt = self.step_seconds
+        dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
+        step_limit = None
+        if limits is None:
+            step_limit = step_limit_from_velocity(velocity_limit, self.robot, dt)
         return Controller(
             self.robot,
             self.constraints(covariance),
@@ -488,12 +538,14 @@ class Skill:
             use=use,
             alpha=alpha,
             max_step=max_step,
-            step_limit=step_limit_from_velocity(velocity_limit, self.robot, dt),
+            step_limit=step_limit,
             dt=dt,
             line_search=line_search,
             reach=self.reach,
             on_unreachable=on_unreachable,
             max_lag=max_lag,
+            limits=limits,
+            newton=newton,
         )
 
     # ------------------------------------------------------------------ I/O

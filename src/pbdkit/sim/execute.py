@@ -1,9 +1,18 @@
 """Play a joint trajectory on the simulated arm under physics, record the run and judge the outcome.
 
-The arm follows interpolated servo targets at the physics rate (500 Hz): linear interpolation of the
-joint samples for the position target and the segment's slope as velocity feed-forward. The gripper
-closes (a force-limited squeeze) while the gripper signal is above 0.5 and opens otherwise. Objects
-move only through contacts: a grasp holds by friction or not at all.
+The arm's servos follow a stream of targets at the physics rate (500 Hz) that a real arm's drives
+would accept: a jerk-limited follower (:class:`pbdkit.otg.KnotFollower`, Ruckig) through the
+trajectory's samples, each aimed for, with its velocity and acceleration, at its time, within the
+arm's velocity, acceleration and jerk limits (:func:`servo_stream`); the follower's velocity is
+the velocity feed-forward. Without limits the targets are the samples interpolated linearly, with
+the segment's slope as feed-forward. The gripper closes (a force-limited squeeze) while the
+gripper signal is above 0.5 and opens otherwise. Objects move only through contacts: a grasp holds
+by friction or not at all.
+
+Every run measures what the servos were sent at every physics step: the peak velocity,
+acceleration and jerk of the target stream over the arm's limits
+(:attr:`ExecutionResult.servo_peaks`: divided differences at the physics rate, as
+:func:`pbdkit.limits.motion_peaks`), from the trajectory's start to the end of the settling time.
 
 Success is the task's: its :attr:`pbdkit.sim.tasks.TaskSpec.judge` reads the state after the run
 (and a settling time) and what was measured during it (:class:`RunStats`); each task's module
@@ -12,6 +21,7 @@ states its criteria (:mod:`pbdkit.sim.taskdefs.coaster`, :mod:`pbdkit.sim.taskde
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -19,6 +29,10 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import check_array
+from ..limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_peaks
+from ..otg import follow_samples
+from ..robots import katana
 from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
 
@@ -85,6 +99,18 @@ class ExecutionResult:
         Camera frames, if a camera was given.
     frame_times : ndarray, shape (F,)
     outcome : Outcome
+    servo_targets : ndarray, shape (K, n)
+        The servos' position targets at every physics step, ``servo_period`` apart, from the
+        trajectory's start (row 0) to the end of the settling time: what the drives were sent.
+    servo_period : float
+        Time between two rows of ``servo_targets`` (s): the physics step.
+    servo_limits : MotionLimits
+        The arm's limits ``servo_peaks`` is measured against.
+    servo_peaks : MotionPeaks
+        Peak velocity, acceleration and jerk of ``servo_targets`` over ``servo_limits``
+        (divided differences at the physics rate, starting and ending at rest), leaving out
+        the steps inside the disturbance's force window when the run knew it
+        (:func:`stream_peaks`).
     """
 
     t: Float
@@ -99,6 +125,29 @@ class ExecutionResult:
     frames: NDArray[np.uint8] | None
     frame_times: Float
     outcome: Outcome
+    servo_targets: Float
+    servo_period: float
+    servo_limits: MotionLimits
+    servo_peaks: MotionPeaks
+
+
+@functools.cache
+def _katana_limits(n: int) -> MotionLimits:
+    return MotionLimits.from_robot(katana(), n)
+
+
+def scene_limits(sim: Simulation) -> MotionLimits:
+    """The motion limits of the simulated arm: the Katana's (:func:`pbdkit.robots.katana`, the
+    robot every scene's arm is built from), velocity, acceleration and jerk per joint."""
+    return _katana_limits(sim.n_joints)
+
+
+def _check_limits(limits: MotionLimits, n: int) -> MotionLimits:
+    if not isinstance(limits, MotionLimits):
+        raise TypeError(f"limits must be a MotionLimits, got {type(limits).__name__}")
+    if limits.n_joints != n:
+        raise ValueError(f"limits must be for the arm's {n} joints, got {limits.n_joints}")
+    return limits
 
 
 def _check_trajectory(
@@ -138,12 +187,16 @@ def execute(
     fps: float = 15.0,
     duration: float | None = None,
     disturbance: Disturbance | None = None,
+    velocities: npt.ArrayLike | None = None,
+    accelerations: npt.ArrayLike | None = None,
+    limits: MotionLimits | None = None,
 ) -> ExecutionResult:
     """Play a joint trajectory under physics and judge the task's outcome.
 
     The arm is first put at ``joints[0]`` (no physics) and the world settles for 0.3 s; then the
-    trajectory plays; then the last targets are held for ``settle`` seconds before the outcome is
-    measured (a released glass must come to rest, the liquid must land).
+    trajectory plays, the servos following the jerk-limited stream of :func:`servo_stream`
+    through the samples; then the last targets are held for ``settle`` seconds before the
+    outcome is measured (a released glass must come to rest, the liquid must land).
 
     Parameters
     ----------
@@ -169,7 +222,18 @@ def execute(
         their mean duration).
     disturbance : Disturbance, optional
         Acts on the world before every physics step (:mod:`pbdkit.sim.perturb`), at the time
-        from the trajectory's start.
+        from the trajectory's start. Its force window
+        (:meth:`~pbdkit.sim.perturb.Disturbance.force_window`) is left out of
+        :attr:`ExecutionResult.servo_peaks`.
+    velocities, accelerations : array-like, shape (T, n), optional
+        Joint velocities and accelerations at the samples (in time units of ``t``, e.g.
+        :attr:`pbdkit.reproduce.ReproductionResult.velocities` and ``accelerations`` with
+        :meth:`pbdkit.Skill.times`), aimed for with the positions. None: those of the cubic
+        spline through the samples, at rest at both ends.
+    limits : MotionLimits, optional
+        The arm's velocity, acceleration and jerk limits, for the servo stream and the
+        measured peaks; default: the simulated arm's (:func:`scene_limits`). Without any finite
+        limit the samples are interpolated linearly.
 
     Returns
     -------
@@ -177,32 +241,40 @@ def execute(
     """
     n = sim.n_joints
     t_, q_, g = _check_trajectory(t, joints, gripper, n)
+    v_ = None if velocities is None else check_array(velocities, "velocities", shape=q_.shape)
+    a_ = (
+        None
+        if accelerations is None
+        else check_array(accelerations, "accelerations", shape=q_.shape)
+    )
     if duration is not None:
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be a positive number of seconds, got {duration}")
-        t_ = (t_ - t_[0]) * (duration / (t_[-1] - t_[0]))
+        scale = duration / (t_[-1] - t_[0])  # new seconds per old time unit
+        t_ = (t_ - t_[0]) * scale
+        v_ = None if v_ is None else v_ / scale
+        a_ = None if a_ is None else a_ / scale**2
     if settle < 0 or record_rate <= 0 or fps <= 0:
         raise ValueError(
             f"settle must be >= 0 and record_rate, fps > 0, got {settle}, {record_rate}, {fps}"
         )
-    recorder = Recorder(sim, record_rate, camera, fps)
+    lim = scene_limits(sim) if limits is None else _check_limits(limits, n)
+    act = NoDisturbance() if disturbance is None else disturbance
+    recorder = Recorder(sim, record_rate, camera, fps, lim, force_window=act.force_window())
 
     start_at(sim, q_[0], bool(g[0]))
 
-    # Servo targets at every physics step: linear interpolation and the segment's slope.
-    n_play = math.ceil((t_[-1] - t_[0]) / TIMESTEP)
+    # Servo targets at every physics step, until they are at rest at the last sample (later
+    # than its time if the limits kept them behind); the settling time holds the last one.
+    q_play, dq_play = servo_stream(t_, q_, lim, velocities=v_, accelerations=a_, period=TIMESTEP)
+    n_play = max(int(_grid_index(t_, TIMESTEP)[-1]), q_play.shape[0] - 1)
     n_settle = round(settle / TIMESTEP)
     s = t_[0] + TIMESTEP * np.arange(n_play + n_settle + 1)
-    seg = np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 2)
-    slope = np.diff(q_, axis=0) / np.diff(t_)[:, None]
-    q_target = np.empty((s.shape[0], n))
-    for j in range(n):
-        q_target[:, j] = np.interp(s, t_, q_[:, j])
-    dq_target = slope[seg]
-    dq_target[s >= t_[-1]] = 0.0
+    hold = s.shape[0] - q_play.shape[0]
+    q_target = np.concatenate([q_play, np.repeat(q_play[-1:], hold, axis=0)])
+    dq_target = np.concatenate([dq_play, np.zeros((hold, n))])
     g_target = g[np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 1)]
 
-    act = NoDisturbance() if disturbance is None else disturbance
     servo = sim.servo_rows(q_target, dq_target)
     for k in range(s.shape[0]):
         sim.set_servo_row(servo[k])
@@ -214,6 +286,138 @@ def execute(
             act.apply(sim, s[k] - t_[0])
             sim.step()
     return recorder.result()
+
+
+def _grid_index(t: Float, period: float) -> NDArray[np.intp]:
+    """For each sample time, the first step of the grid t[0] + k period at or after it."""
+    # A sample within 1e-9 of a period of a grid time is on it (rounding of t or of the period).
+    index: NDArray[np.intp] = np.ceil((t - t[0]) / period - 1e-9).astype(np.intp)
+    return index
+
+
+def servo_stream(
+    t: npt.ArrayLike,
+    joints: npt.ArrayLike,
+    limits: MotionLimits,
+    *,
+    velocities: npt.ArrayLike | None = None,
+    accelerations: npt.ArrayLike | None = None,
+    period: float = TIMESTEP,
+    n_steps: int | None = None,
+) -> tuple[Float, Float]:
+    """Servo targets every ``period`` through timed joint samples, within motion limits.
+
+    :func:`pbdkit.otg.follow_samples` with ``limits`` times :data:`pbdkit.limits.LIMIT_SAFETY`
+    (Ruckig), from rest at ``joints[0]``: each sample is aimed for, with its velocity and
+    acceleration, at its time (moved onto the grid), and the targets come to rest at the last
+    one. Samples that respect the limits are followed closely (reached on time), the others as
+    closely as the limits allow. Consecutive targets are within ``limits`` at this rate (by
+    divided differences, :func:`pbdkit.limits.motion_peaks`).
+
+    Without any finite limit: linear interpolation of the samples, with the segment's slope
+    as velocity.
+
+    Parameters
+    ----------
+    t : array-like, shape (T,)
+        Strictly increasing sample times (s).
+    joints : array-like, shape (T, n)
+    limits : MotionLimits
+        n joints.
+    velocities, accelerations : array-like, shape (T, n), optional
+        At the samples; None: the cubic spline's through the samples, at rest at both ends.
+    period : float
+        Seconds between targets (the physics step).
+    n_steps : int, optional
+        Number of targets; default: until the follower is at rest at the last sample (its
+        grid step, or later if the limits kept it behind). Beyond, the last target is held.
+
+    Returns
+    -------
+    positions : ndarray, shape (n_steps, n)
+        Position target at t[0] + k period, k = 0 .. n_steps - 1.
+    velocities : ndarray, shape (n_steps, n)
+        The follower's velocity there (the velocity feed-forward).
+    """
+    t_ = check_array(t, "t", ndim=1, min_rows=2)
+    q_ = check_array(joints, "joints", shape=(t_.shape[0], None))
+    n = q_.shape[1]
+    if np.any(np.diff(t_) <= 0):
+        raise ValueError("t must be strictly increasing")
+    if not (math.isfinite(period) and period > 0):
+        raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+    _check_limits(limits, n)
+    m = _grid_index(t_, period)
+    if n_steps is not None and n_steps < 1:
+        raise ValueError(f"n_steps must be >= 1, got {n_steps!r}")
+    if not limits.any:
+        total = int(m[-1]) + 1 if n_steps is None else int(n_steps)
+        s = t_[0] + period * np.arange(total)
+        pos = np.empty((total, n))
+        for j in range(n):
+            pos[:, j] = np.interp(s, t_, q_[:, j])
+        seg = np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 2)
+        vel = (np.diff(q_, axis=0) / np.diff(t_)[:, None])[seg]
+        vel[s >= t_[-1]] = 0.0
+        return pos, vel
+
+    v_ = None if velocities is None else check_array(velocities, "velocities", shape=q_.shape)
+    a_ = (
+        None
+        if accelerations is None
+        else check_array(accelerations, "accelerations", shape=q_.shape)
+    )
+    pos, vel, _ = follow_samples(
+        t_,
+        q_,
+        limits.scaled(LIMIT_SAFETY),
+        period,
+        velocities=v_,
+        accelerations=a_,
+        n_steps=None if n_steps is None else int(n_steps),
+    )
+    return pos, vel
+
+
+def stream_peaks(
+    targets: npt.ArrayLike,
+    period: float,
+    limits: MotionLimits,
+    exclude: tuple[float, float] | None = None,
+) -> MotionPeaks:
+    """Peak velocity, acceleration and jerk of a stream of servo targets over ``limits``.
+
+    The numbers of a :class:`pbdkit.limits.StreamMonitor` fed the targets one by one (at rest
+    before the first and after the last), computed at once (:func:`pbdkit.limits.motion_peaks`
+    on the uniform grid): at the physics rate a monitor's update per step would cost a quarter
+    of the playback's time.
+
+    Parameters
+    ----------
+    targets : array-like, shape (K, n)
+        One target per ``period``, the first at run time 0.
+    period : float
+        Seconds between targets.
+    limits : MotionLimits
+    exclude : (float, float), optional
+        A window of run time (s), both ends included, whose targets do not count (every
+        divided difference that includes one is left out, as ``counted=False``): where an
+        external force drives the arm (:meth:`pbdkit.sim.perturb.Disturbance.force_window`).
+
+    Returns
+    -------
+    MotionPeaks
+    """
+    q = np.asarray(targets, dtype=np.float64)
+    if q.ndim != 2 or q.shape[0] == 0:
+        raise ValueError(f"targets must have shape (K, n) with K >= 1, got {q.shape}")
+    if q.shape[0] == 1:
+        q = np.concatenate([q, q])
+    t = period * np.arange(q.shape[0])
+    mask = None
+    if exclude is not None:
+        mask = ~((t >= exclude[0] - 1e-9) & (t <= exclude[1] + 1e-9))
+    return motion_peaks(t, q, limits, mask=mask)
 
 
 def start_at(sim: Simulation, q: Float, gripper: bool) -> None:
@@ -230,15 +434,45 @@ class Recorder:
 
     Shared by the offline playback (:func:`execute`) and the online loop
     (:func:`pbdkit.sim.online.execute_online`): call :meth:`record` at every physics step,
-    :meth:`end_of_trajectory` at the step where the last target is reached, and
-    :meth:`result` after the settling time.
+    from the trajectory's start (k = 0), :meth:`end_of_trajectory` at the step where the last
+    target is reached, and :meth:`result` after the settling time.
+
+    Every servo target is kept, for :attr:`ExecutionResult.servo_targets` and its peaks over
+    ``limits`` (:func:`stream_peaks`; the steps at run time k * TIMESTEP inside
+    ``force_window`` do not count).
+
+    Parameters
+    ----------
+    sim : Simulation
+    record_rate : float
+        Rate (Hz) of the recorded state.
+    camera : str or None
+        Record frames of this camera.
+    fps : float
+        Frame rate of the recorded frames.
+    limits : MotionLimits, optional
+        The arm's limits; default: the simulated arm's (:func:`scene_limits`).
+    force_window : (float, float), optional
+        Run times (s) where an external force drives the arm.
     """
 
-    def __init__(self, sim: Simulation, record_rate: float, camera: str | None, fps: float) -> None:
+    def __init__(
+        self,
+        sim: Simulation,
+        record_rate: float,
+        camera: str | None,
+        fps: float,
+        limits: MotionLimits | None = None,
+        *,
+        force_window: tuple[float, float] | None = None,
+    ) -> None:
         if record_rate <= 0 or fps <= 0:
             raise ValueError(f"record_rate and fps must be > 0, got {record_rate}, {fps}")
         if camera is not None:
             sim.camera_id(camera)
+        self.limits = scene_limits(sim) if limits is None else _check_limits(limits, sim.n_joints)
+        self.force_window = force_window
+        self._servo: list[Float] = []
         self.sim = sim
         self.camera = camera
         self.rec_every = max(1, round(1.0 / (record_rate * TIMESTEP)))
@@ -255,6 +489,7 @@ class Recorder:
     def record(self, k: int, t: float, target: Float, gripper: bool) -> None:
         """At physics step ``k`` (run time ``t``), with the servo target and gripper command."""
         sim = self.sim
+        self._servo.append(np.array(target, dtype=np.float64))
         if k % self.rec_every == 0:
             sim.refresh()
             rec = self.rec
@@ -280,6 +515,12 @@ class Recorder:
         """The record and the task's judgement of the current state."""
         sim, rec = self.sim, self.rec
         outcome = evaluate_outcome(sim, held_at_end=self.held_at_end, max_tilt=self.max_tilt)
+        servo = np.array(self._servo, dtype=np.float64).reshape(-1, sim.n_joints)
+        peaks = (
+            stream_peaks(servo, TIMESTEP, self.limits, self.force_window)
+            if servo.shape[0]
+            else MotionPeaks(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        )
         return ExecutionResult(
             t=np.array(rec["t"], dtype=np.float64),
             joints=np.array(rec["q"], dtype=np.float64),
@@ -293,6 +534,10 @@ class Recorder:
             frames=np.array(self.frames, dtype=np.uint8) if self.camera is not None else None,
             frame_times=np.array(self.frame_times, dtype=np.float64),
             outcome=outcome,
+            servo_targets=servo,
+            servo_period=TIMESTEP,
+            servo_limits=self.limits,
+            servo_peaks=peaks,
         )
 
 

@@ -47,11 +47,12 @@ from numpy.typing import NDArray
 
 from ..demos import Demonstration
 from ..gmm import MAX_COMPONENTS
+from ..limits import MotionPeaks
 from ..reproduce import ReachWarning, ReproductionResult
 from ..robots import katana
 from ..skill import Skill
 from . import tasks as T
-from .execute import ExecutionResult, execute
+from .execute import ExecutionResult, execute, stream_peaks
 from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
 from .parallel import TrialJob, session
 from .perturb import Disturbance, check_perturb, make_disturbance
@@ -86,6 +87,7 @@ __all__ = [
     "run_trial",
     "run_trial_controller",
     "run_trials",
+    "servo_peaks",
     "start_posture",
     "summarize",
     "tracking_errors",
@@ -212,8 +214,11 @@ class ControllerRun:
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready: success, the task's metrics, ``peak_speed_ratio`` and
-        ``following_error_rad``, both outside a push (:func:`peak_speed_ratio`,
-        :func:`following_error`)."""
+        ``following_error_rad`` (:func:`peak_speed_ratio`, :func:`following_error`), and the
+        peaks of the servo targets over the arm's limits, ``peak_velocity_ratio``,
+        ``peak_acceleration_ratio``, ``peak_jerk_ratio`` (<= 1: within the limits) with the
+        absolute ``peak_velocity``, ``peak_acceleration``, ``peak_jerk`` (rad/s, rad/s^2,
+        rad/s^3; :func:`servo_peaks`); all outside a push."""
         return _run_summary(self.execution, self.velocity_limit, self.force_window)
 
 
@@ -281,6 +286,24 @@ def peak_speed_ratio(
     return float(ratio.max()) if ratio.size else 0.0
 
 
+def servo_peaks(
+    execution: ExecutionResult, exclude: tuple[float, float] | None = None
+) -> MotionPeaks:
+    """Peak velocity, acceleration and jerk of what the servos were sent (every physics step,
+    from the trajectory's start to the end of the settling time) over the arm's limits: a real
+    drive refuses a setpoint stream beyond them.
+
+    ``exclude``: a window of run time (s) left out, as :func:`peak_speed_ratio` (the
+    setpoints restart from the arm where a push moved it). Without, the peaks the run
+    recorded (:attr:`pbdkit.sim.execute.ExecutionResult.servo_peaks`).
+    """
+    if exclude is None:
+        return execution.servo_peaks
+    return stream_peaks(
+        execution.servo_targets, execution.servo_period, execution.servo_limits, exclude
+    )
+
+
 def _run_summary(
     execution: ExecutionResult,
     velocity_limit: Float | None,
@@ -292,6 +315,7 @@ def _run_summary(
         ratio = peak_speed_ratio(execution, velocity_limit, exclude)
         out["peak_speed_ratio"] = _finite(ratio)
     out["following_error_rad"] = _finite(following_error(execution, exclude))
+    out.update({k: _finite(v) for k, v in servo_peaks(execution, exclude).as_dict().items()})
     return out
 
 
@@ -355,6 +379,8 @@ def run_controller(
             camera=camera,
             fps=fps,
             disturbance=disturbance,
+            velocities=res.velocities,
+            accelerations=res.accelerations,
         )
     finally:
         sim.close()
@@ -814,8 +840,10 @@ class ControllerStats:
     success_rate : float
     successes : int
     metrics : dict str -> dict or None
-        Per metric of the task's judge, ``{"mean", "median", "max"}`` over the trials where it
-        is defined (None where it never is).
+        Per metric of the runs' summaries (the task's judge's, and ``peak_speed_ratio``,
+        ``following_error_rad``, the servo stream's ``peak_*_ratio`` and ``peak_*``),
+        ``{"mean", "median", "max"}`` over the trials where it is defined (None where it
+        never is): for a peak ratio, ``max`` is the worst trial.
     """
 
     success_rate: float

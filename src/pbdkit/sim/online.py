@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..controller import Controller
+from ..controller import Command, Controller
 from ..vision import TrackFilter
 from .execute import ExecutionResult, Recorder, start_at
 from .perturb import Disturbance, NoDisturbance
@@ -163,7 +163,13 @@ class OnlineRun:
     commands : ndarray, shape (K, n)
         The commanded joint angles.
     limited : ndarray of bool, shape (K,)
-        Commands shortened by a velocity bound.
+        Commands shortened by a velocity bound (with motion limits: slowed by the limits).
+    held : ndarray of bool, shape (K,)
+        Commands that restarted from the measured posture, the arm held back
+        (:attr:`pbdkit.controller.Command.held`).
+    replans : int
+        How many times the controller planned again (moved objects, pushes; 0 without motion
+        limits).
     objects : dict str -> ndarray, shape (K, 3)
         The positions the controller used at each command.
     tracking : dict or None
@@ -179,6 +185,8 @@ class OnlineRun:
     index: NDArray[np.int_]
     commands: Float
     limited: NDArray[np.bool_]
+    held: NDArray[np.bool_]
+    replans: int
     objects: dict[str, Float]
     tracking: dict[str, Any] | None
     disturbance: dict[str, Any]
@@ -186,8 +194,8 @@ class OnlineRun:
 
     @property
     def held_steps(self) -> int:
-        """Commands that re-targeted the previous step (the phase held)."""
-        return int(np.count_nonzero(np.diff(self.index) == 0))
+        """Commands given while the arm was held back (the phase held)."""
+        return int(np.count_nonzero(self.held))
 
 
 def execute_online(
@@ -238,46 +246,72 @@ def execute_online(
     q_prev = controller.target
     grip = controller.gripper
     start_at(sim, q_prev, grip)
+    # With motion limits the servos follow the controller's jerk-limited setpoint stream at the
+    # physics rate; without, the piecewise-linear reference through the commands.
+    stream = controller.stream(1.0 / TIMESTEP) if controller.limits is not None else None
 
     names = list(controller.objects)
     ticks: list[float] = []
     index: list[int] = []
     commands: list[Float] = []
     limited: list[bool] = []
+    held: list[bool] = []
     used: dict[str, list[Float]] = {k: [] for k in names}
     pending: dict[str, Float] = {}
     q_next = q_prev.copy()
+    ref = q_prev.copy()
     seg_start = 0.0
     next_tick = 0
     next_obs = 0.0
     t_end = math.inf
     ended = False
+    last_cmd: Command | None = None
     k = 0
     while True:
         t = k * TIMESTEP
         if observer is not None and t >= next_obs - 1e-9:
             pending.update(observer(sim, t, grip))
             next_obs += 1.0 / observer.rate
-        if t_end == math.inf and t >= next_tick * dt - 1e-9:
-            cmd = controller.step(sim.joints(), pending or None)
-            pending = {}
-            # The reference runs through the commands; a command that re-targets from the
-            # measured posture (the arm was held back: cmd.held) restarts it there.
-            q_prev, q_next = (sim.joints() if cmd.held else q_next), cmd.q
-            seg_start = next_tick * dt
+        cmd: Command | None = None
+        if stream is not None:
+            # Setpoint m of the stream is for time (m + 1) / rate: the first physics step holds
+            # the start posture, so that the servo targets are the stream's motion sampled at
+            # the physics steps, from where it started at rest.
+            if k == 0:
+                vel = np.zeros_like(ref)
+            elif t_end == math.inf:
+                ref = stream.step(sim.joints(), pending or None)
+                pending = {}
+                vel = stream.velocity
+                if stream.command is not last_cmd:
+                    cmd = last_cmd = stream.command
+                if stream.done:
+                    t_end = t
+            else:
+                vel = np.zeros_like(ref)
+        else:
+            if t_end == math.inf and t >= next_tick * dt - 1e-9:
+                cmd = controller.step(sim.joints(), pending or None)
+                pending = {}
+                # The reference runs through the commands; a command that re-targets from the
+                # measured posture (the arm was held back: cmd.held) restarts it there.
+                q_prev, q_next = (sim.joints() if cmd.held else q_next), cmd.q
+                seg_start = next_tick * dt
+                next_tick += 1
+                if controller.done:
+                    t_end = seg_start + dt
+            frac = min(1.0, max(0.0, (t - seg_start) / dt))
+            ref = q_prev + frac * (q_next - q_prev)
+            vel = (q_next - q_prev) / dt if frac < 1.0 else np.zeros_like(ref)
+        if cmd is not None:
             grip = cmd.gripper
             ticks.append(t)
             index.append(cmd.index)
             commands.append(cmd.q)
             limited.append(cmd.limited)
+            held.append(cmd.held)
             for name, p in controller.objects.items():
                 used[name].append(p)
-            next_tick += 1
-            if controller.done:
-                t_end = seg_start + dt
-        frac = min(1.0, max(0.0, (t - seg_start) / dt))
-        ref = q_prev + frac * (q_next - q_prev)
-        vel = (q_next - q_prev) / dt if frac < 1.0 else np.zeros_like(ref)
         sim.set_targets(ref, vel)
         sim.set_gripper(grip)
         recorder.record(k, t, ref, grip)
@@ -295,6 +329,8 @@ def execute_online(
         index=np.array(index, dtype=np.int_),
         commands=np.array(commands, dtype=np.float64),
         limited=np.array(limited, dtype=bool),
+        held=np.array(held, dtype=bool),
+        replans=controller.replans,
         objects={k_: np.array(v, dtype=np.float64) for k_, v in used.items()},
         tracking=None if observer is None else observer.summary(),
         disturbance=act.as_dict(),

@@ -1,0 +1,351 @@
+"""Jerk-limited trajectory generation (Ruckig): commands and setpoints a real arm accepts.
+
+Ruckig (community version, https://github.com/pantor/ruckig, MIT) computes, from a current state
+(position, velocity, acceleration) to a target state, the time-optimal trajectory within
+velocity, acceleration and jerk limits (piecewise-constant jerk); it is what MoveIt 2 and
+Franka's tools use for online motion. pbdkit calls it state to state and chains the
+trajectories, each starting in the state the previous one ended in: the result is one continuous
+motion (position, velocity and acceleration continuous, jerk within the limit), so its samples
+pass the divided-difference check of :mod:`pbdkit.limits` at any rate.
+
+- :func:`point_to_point`: a move between two postures at rest, sampled every ``dt`` (the
+  lead-in of a reproduction from a distant posture).
+- :func:`follow`: the :class:`Motion` through a timed trajectory's samples (a reproduction,
+  played over :meth:`pbdkit.Skill.times`) from a given state: one Ruckig trajectory per
+  sample, planned once; sampled at any rate (:func:`follow_samples`: the simulator's 500 Hz
+  servos, a 1 kHz ``ros2_control`` or Franka loop, the online controller's cycle).
+
+Ruckig is imported when one of them is first used.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from .limits import MotionLimits
+
+__all__ = [
+    "MERGE_SAMPLES",
+    "Motion",
+    "follow",
+    "follow_samples",
+    "point_to_point",
+    "spline_derivatives",
+    "valid_target",
+]
+
+#: A sample :func:`follow_samples` cannot reach in its time is passed by toward one of the next
+#: ones, up to this many samples ahead.
+MERGE_SAMPLES = 8
+
+Float = NDArray[np.float64]
+
+
+def _ruckig() -> Any:
+    import ruckig
+
+    return ruckig
+
+
+def valid_target(velocity: Float, acceleration: Float, limits: MotionLimits) -> tuple[Float, Float]:
+    """A target velocity and acceleration Ruckig accepts: |v| <= V, |a| <= A and
+    |v| + a^2 / (2 J) <= V (a state with an acceleration must have come from, and must go
+    to, velocities within the limit while its acceleration ramps at the jerk limit)."""
+    vmax, amax, jmax = limits.velocity, limits.acceleration, limits.jerk
+    v = np.clip(velocity, -vmax, vmax)
+    a = np.clip(acceleration, -amax, amax)
+    with np.errstate(invalid="ignore"):
+        room = np.sqrt(np.maximum(2.0 * jmax * (vmax - np.abs(v)), 0.0))
+    room = np.where(np.isnan(room), np.inf, room)  # inf - inf where nothing is limited
+    return v, np.clip(a, -room, room)
+
+
+def point_to_point(
+    start: npt.ArrayLike, goal: npt.ArrayLike, dt: float, limits: MotionLimits
+) -> tuple[Float, Float, Float]:
+    """The time-optimal move from ``start`` to ``goal``, at rest at both ends, every ``dt``.
+
+    Phase-synchronized (Ruckig): the joints move together along the straight line in joint
+    space (where Ruckig cannot, it falls back to arriving together).
+
+    Returns
+    -------
+    positions, velocities, accelerations : ndarray, shape (K, n)
+        K >= 1 samples every ``dt`` from the start (sample 0) to the goal at rest (last, the
+        first sample at or after the move's end).
+    """
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    p0 = np.asarray(start, dtype=np.float64)
+    p1 = np.asarray(goal, dtype=np.float64)
+    n = p0.shape[0]
+    if np.array_equal(p0, p1):
+        return p0[None].copy(), np.zeros((1, n)), np.zeros((1, n))
+    rk = _ruckig()
+    inp = rk.InputParameter(n)
+    inp.max_velocity = limits.velocity.tolist()
+    inp.max_acceleration = limits.acceleration.tolist()
+    inp.max_jerk = limits.jerk.tolist()
+    inp.synchronization = rk.Synchronization.Phase
+    inp.current_position = p0.tolist()
+    inp.target_position = p1.tolist()
+    traj = rk.Trajectory(n)
+    result = rk.Ruckig(n).calculate(inp, traj)
+    if result not in (rk.Result.Working, rk.Result.Finished):
+        raise RuntimeError(f"Ruckig could not plan the move: {result}")
+    duration = float(traj.duration)
+    count = max(1, math.ceil(duration / dt - 1e-9))
+    rows = [traj.at_time(min(k * dt, duration)) for k in range(count + 1)]
+    pos = np.array([r[0] for r in rows], dtype=np.float64)
+    vel = np.array([r[1] for r in rows], dtype=np.float64)
+    acc = np.array([r[2] for r in rows], dtype=np.float64)
+    pos[0], pos[-1] = p0, p1  # exactly where it starts and ends, at rest
+    vel[[0, -1]] = 0.0
+    acc[[0, -1]] = 0.0
+    return pos, vel, acc
+
+
+class Motion:
+    """A continuous jerk-limited motion: Ruckig trajectories one after another, each starting in
+    the state the previous one ended in, from a start state at ``t0`` (position, velocity and
+    acceleration continuous, jerk within the limits it was planned with).
+
+    Samples of it at any times pass the divided-difference check of :mod:`pbdkit.limits`
+    against those limits (a divided difference of order k is a weighted average of the k-th
+    derivative); before ``t0`` it is the start state, after :attr:`end` it holds the last
+    position (at rest when it was planned to end so).
+
+    Attributes
+    ----------
+    t0, end : float
+        Start and end times (s).
+    """
+
+    def __init__(self, t0: float, start: tuple[Float, Float, Float]) -> None:
+        self.t0 = float(t0)
+        self.end = self.t0
+        self._start = tuple(np.array(x, dtype=np.float64) for x in start)
+        self._starts: list[float] = []
+        self._segments: list[tuple[float, Any]] = []  # (duration, ruckig.Trajectory)
+
+    def append(self, trajectory: Any) -> None:
+        """The next segment (a ``ruckig.Trajectory`` from the state at :attr:`end`)."""
+        duration = float(trajectory.duration)
+        self._starts.append(self.end)
+        self._segments.append((duration, trajectory))
+        self.end += duration
+
+    def at(self, t: float) -> tuple[Float, Float, Float]:
+        """Position, velocity and acceleration at time ``t`` (s)."""
+        if t <= self.t0 or not self._segments:
+            p, v, a = self._start
+            return p.copy(), v.copy(), a.copy()
+        k = max(0, bisect.bisect_right(self._starts, t) - 1)
+        duration, traj = self._segments[k]
+        local = t - self._starts[k]
+        if local >= duration:
+            p, v, a = traj.at_time(duration)
+            # Beyond the last segment: at rest where it ended (or moving on at its velocity).
+            pv, vv = np.array(p), np.array(v)
+            return pv + vv * (local - duration), vv, np.zeros_like(pv)
+        p, v, a = traj.at_time(local)
+        return np.array(p), np.array(v), np.array(a)
+
+    def sample(self, times: Float) -> tuple[Float, Float, Float]:
+        """:meth:`at` for every time, as arrays (len(times), n)."""
+        rows = [self.at(float(t)) for t in times]
+        return (
+            np.array([r[0] for r in rows], dtype=np.float64),
+            np.array([r[1] for r in rows], dtype=np.float64),
+            np.array([r[2] for r in rows], dtype=np.float64),
+        )
+
+
+def spline_derivatives(
+    t: Float, q: Float, start_velocity: Float | None = None
+) -> tuple[Float, Float]:
+    """Velocity and acceleration at the samples of the cubic spline through them, at rest at
+    the end and at the start (or moving at ``start_velocity`` there)."""
+    from scipy.interpolate import CubicSpline
+
+    n = q.shape[1]
+    start = np.zeros(n) if start_velocity is None else start_velocity
+    spline = CubicSpline(t, q, axis=0, bc_type=((1, start), (1, np.zeros(n))))
+    return np.asarray(spline(t, 1), dtype=np.float64), np.asarray(spline(t, 2), dtype=np.float64)
+
+
+def follow(
+    t: Float,
+    q: Float,
+    limits: MotionLimits,
+    *,
+    velocities: Float | None = None,
+    accelerations: Float | None = None,
+    start: tuple[Float, Float, Float] | None = None,
+) -> Motion:
+    """The jerk-limited motion through timed samples: one Ruckig trajectory per sample.
+
+    From ``start`` (position, velocity, acceleration at t[0]; default: at rest at q[0]), each
+    sample is aimed for with its velocity and acceleration at its time: a trajectory of at
+    least the time left (time-synchronized, so exactly that time when the sample can be reached
+    in it), and the motion comes to rest at the last sample. A sample that cannot be reached in
+    its time (its velocity and acceleration do not fit the limits with the positions around it)
+    is passed by toward one of the next :data:`MERGE_SAMPLES` with the time of both; failing
+    that, it is approached as fast as the limits allow and the next one is aimed for from there.
+    Samples that respect the limits are passed on time.
+
+    Each trajectory is planned once, from the state the previous one ended in, and the motion
+    is sampled afterwards at any rate (:meth:`Motion.at`): re-planned at every setpoint with the
+    time left, a motion through samples at the pace of a timed reproduction (close to
+    time-optimal) falls into one of Ruckig's blocked intervals of duration and turns into a
+    detour (0.2 rad off the samples, measured on a coaster reproduction).
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        Strictly increasing sample times (s), T >= 2.
+    q : ndarray, shape (T, n)
+    limits : MotionLimits
+        Planned with as given (give them a margin: :data:`pbdkit.limits.LIMIT_SAFETY`).
+    velocities, accelerations : ndarray, shape (T, n), optional
+        At the samples; None: the cubic spline's through them, at rest at the end and at the
+        start (or moving at ``start``'s velocity).
+    start : (ndarray (n,), ndarray (n,), ndarray (n,)), optional
+        The state at t[0].
+
+    Returns
+    -------
+    Motion
+        From t[0].
+    """
+    rk = _ruckig()
+    n = q.shape[1]
+    if start is None:
+        start = (q[0].copy(), np.zeros(n), np.zeros(n))
+    p0, v0, a0 = (np.asarray(x, dtype=np.float64) for x in start)
+    if velocities is None or accelerations is None:
+        v_spline, a_spline = spline_derivatives(t, q, v0 if np.any(v0) else None)
+        velocities = v_spline if velocities is None else velocities
+        accelerations = a_spline if accelerations is None else accelerations
+    knot_v, knot_a = valid_target(velocities, accelerations, limits)
+    otg = rk.Ruckig(n)
+    inp = rk.InputParameter(n)
+    inp.max_velocity = limits.velocity.tolist()
+    inp.max_acceleration = limits.acceleration.tolist()
+    inp.max_jerk = limits.jerk.tolist()
+    ok = (rk.Result.Working, rk.Result.Finished)
+    zeros = [0.0] * n
+    last = t.shape[0] - 1
+    motion = Motion(float(t[0]), (p0, v0, a0))
+
+    def plan_to(j: int, now: float, with_acceleration: bool = True) -> tuple[Any, float]:
+        """A trajectory from the current state (at ``now``) to sample j, never before its
+        time; and the time left."""
+        traj = rk.Trajectory(n)
+        inp.target_position = q[j].tolist()
+        inp.target_velocity = zeros if j == last else knot_v[j].tolist()
+        use_a = with_acceleration and j != last
+        inp.target_acceleration = knot_a[j].tolist() if use_a else zeros
+        left = float(t[j]) - now
+        inp.minimum_duration = left if left > 0 else None
+        try:
+            result = otg.calculate(inp, traj)
+        except rk.RuckigError:
+            inp.target_acceleration = zeros
+            result = otg.calculate(inp, traj)
+        if result not in ok:
+            raise RuntimeError(f"Ruckig could not plan the motion to sample {j}: {result}")
+        return traj, left
+
+    def on_time(traj: Any, left: float) -> bool:
+        return float(traj.duration) <= left * (1.0 + 1e-9) + 1e-12
+
+    def beyond(traj: Any, i: int, j: int, p_now: Float, lenient: bool) -> float:
+        """How far (rad) the trajectory to sample j swings beyond the range of the samples on
+        the way from i and of where the motion is, give or take 1e-6 (``lenient``: and one
+        sample's step)."""
+        way = np.vstack([p_now, q[i : j + 1]])
+        tol = 1e-9 + 1e-6 * float(np.abs(way).max())
+        slack = tol + (np.abs(np.diff(way, axis=0)).max(axis=0) if lenient else 0.0)
+        lo, hi = way.min(axis=0) - slack, way.max(axis=0) + slack
+        over = [max(lo[k] - e.min, e.max - hi[k], 0.0) for k, e in enumerate(traj.position_extrema)]
+        return float(max(over))
+
+    state = (p0.tolist(), v0.tolist(), a0.tolist())
+    i = 1
+    while i <= last:
+        now = motion.end
+        inp.current_position, inp.current_velocity, inp.current_acceleration = state
+        window = range(i, min(i + MERGE_SAMPLES, last + 1))
+        p_now = np.asarray(state[0])
+        found = None
+        # On time: with the sample's velocity and acceleration, else its velocity alone (an
+        # acceleration estimate the jerk limit cannot reach in time). Never swinging back
+        # beyond the samples on the way: a sample's velocity that the motion cannot reach in
+        # the distance left makes a time-optimal move back up for a run-up.
+        for with_acceleration in (True, False):
+            for j in window:
+                traj, left = plan_to(j, now, with_acceleration)
+                if on_time(traj, left) and beyond(traj, i, j, p_now, True) == 0.0:
+                    found = j, traj
+                    break
+            if found is not None:
+                break
+        if found is None:
+            # Late: as fast as the limits allow, to the sample of the window it swings the
+            # least beyond the samples on the way for (the first that does not at all).
+            best = math.inf
+            for j in window:
+                traj, _ = plan_to(j, now, False)
+                over = beyond(traj, i, j, p_now, False)
+                if over < best:
+                    best, found = over, (j, traj)
+                if over == 0.0:
+                    break
+        assert found is not None
+        j, traj = found
+        motion.append(traj)
+        end_p, end_v, end_a = traj.at_time(float(traj.duration))
+        state = (list(end_p), list(end_v), list(end_a))
+        i = j + 1
+    return motion
+
+
+def follow_samples(
+    t: Float,
+    q: Float,
+    limits: MotionLimits,
+    period: float,
+    *,
+    velocities: Float | None = None,
+    accelerations: Float | None = None,
+    start: tuple[Float, Float, Float] | None = None,
+    n_steps: int | None = None,
+) -> tuple[Float, Float, Float]:
+    """Setpoints every ``period`` of the motion :func:`follow` makes through timed samples.
+
+    Parameters
+    ----------
+    t, q, limits, velocities, accelerations, start
+        As :func:`follow`.
+    period : float
+        Seconds between setpoints.
+    n_steps : int, optional
+        Number of setpoints; default: until the motion is at rest at the last sample (the
+        first setpoint at or after its end). Beyond the motion, the last setpoint is held.
+
+    Returns
+    -------
+    positions, velocities, accelerations : ndarray, shape (K, n)
+        Row k at t[0] + k period; row 0 is the start state.
+    """
+    motion = follow(t, q, limits, velocities=velocities, accelerations=accelerations, start=start)
+    total = math.ceil((motion.end - motion.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
+    times = motion.t0 + period * np.arange(total, dtype=np.float64)
+    return motion.sample(np.asarray(times, dtype=np.float64))
