@@ -272,15 +272,29 @@ def demo(
     table = Table(title=f"pbdkit demo: {spec.name} task, new situation (seed {seed})")
     table.add_column("controller")
     table.add_column("success")
-    extra = ("success", "peak_speed_ratio", "following_error_rad")  # in metrics.json
+    # In metrics.json and the report: the measured speed and following error, and the servo
+    # stream's peaks (here one column: the worst of the three ratios to the limits).
+    peaks = tuple(
+        f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("", "_ratio")
+    )
+    extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks)
     keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
     for k in keys:
         table.add_column(k, justify="right")
+    table.add_column("limits used", justify="right")
     for name, row in metrics["controllers"].items():
         cells = [("[green]yes" if row["success"] else "[red]no")]
         cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
+        worst = max(
+            (row.get(f"peak_{k}_ratio") or 0.0) for k in ("velocity", "acceleration", "jerk")
+        )
+        cells.append(f"{worst:.3f}")
         table.add_row(name, *cells)
     console.print(table)
+    console.print(
+        "limits used: the largest of the servo stream's peak velocity, acceleration and jerk "
+        "over the arm's limits (<= 1: a real drive accepts it)"
+    )
     if metrics["online"] is not None:
         on = metrics["online"]
         t2 = Table(title=f"the fused controller under perturb {on['perturb']['name']}")

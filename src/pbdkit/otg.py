@@ -43,6 +43,10 @@ __all__ = [
 #: A sample :func:`follow_samples` cannot reach in its time is passed by toward one of the next
 #: ones, up to this many samples ahead.
 MERGE_SAMPLES = 8
+#: :func:`follow` takes a piece of the spline through the samples as it is where the piece is
+#: within this fraction of the limits (the rest is room for joining it from where the motion
+#: is).
+SPLINE_MARGIN = 0.99
 
 Float = NDArray[np.float64]
 
@@ -233,6 +237,10 @@ def follow(
         v_spline, a_spline = spline_derivatives(t, q, v0 if np.any(v0) else None)
         velocities = v_spline if velocities is None else velocities
         accelerations = a_spline if accelerations is None else accelerations
+    # Where the quintic between two samples' states is within the limits and the motion is on
+    # it, it is the motion (with the spline's derivatives: the spline's piece, its jerk
+    # constant); elsewhere Ruckig.
+    on_spline = _KnotPieces(t, q, velocities, accelerations, limits)
     knot_v, knot_a = valid_target(velocities, accelerations, limits)
     otg = rk.Ruckig(n)
     inp = rk.InputParameter(n)
@@ -281,6 +289,14 @@ def follow(
     i = 1
     while i <= last:
         now = motion.end
+        # On the spline, on time, and its piece to the next sample within the limits (not
+        # the last piece: the motion ends at rest, acceleration included): that piece.
+        piece = on_spline.piece(i, now, state) if i < last else None
+        if piece is not None:
+            motion.append(piece)
+            state = piece.end_state()
+            i += 1
+            continue
         inp.current_position, inp.current_velocity, inp.current_acceleration = state
         window = range(i, min(i + MERGE_SAMPLES, last + 1))
         p_now = np.asarray(state[0])
@@ -315,6 +331,127 @@ def follow(
         state = (list(end_p), list(end_v), list(end_a))
         i = j + 1
     return motion
+
+
+class _Quintic:
+    """A motion segment from one state (position, velocity, acceleration) to another in a
+    given time: the quintic polynomial through both (``duration``, ``at_time``)."""
+
+    def __init__(
+        self,
+        start: tuple[Float, Float, Float],
+        end: tuple[Float, Float, Float],
+        duration: float,
+    ) -> None:
+        self.c = _quintic_coefficients(start, end, np.full(1, duration))  # (6, n)
+        self.duration = duration
+        self.end = end
+
+    def at_time(self, t: float) -> tuple[list[float], list[float], list[float]]:
+        c0, c1, c2, c3, c4, c5 = self.c
+        p = ((((c5 * t + c4) * t + c3) * t + c2) * t + c1) * t + c0
+        v = (((5.0 * c5 * t + 4.0 * c4) * t + 3.0 * c3) * t + 2.0 * c2) * t + c1
+        a = ((20.0 * c5 * t + 12.0 * c4) * t + 6.0 * c3) * t + 2.0 * c2
+        return p.tolist(), v.tolist(), a.tolist()
+
+    def end_state(self) -> tuple[list[float], list[float], list[float]]:
+        """Exactly the state it was built to end in."""
+        p, v, a = self.end
+        return p.tolist(), v.tolist(), a.tolist()
+
+
+def _quintic_coefficients(
+    start: tuple[Float, Float, Float], end: tuple[Float, Float, Float], h: Float
+) -> Float:
+    """Coefficients c_0..c_5 (leading axis) of the quintics from ``start`` to ``end`` (each a
+    (position, velocity, acceleration)) in times ``h`` (broadcast against them)."""
+    p0, v0, a0 = start
+    p1, v1, a1 = end
+    d = p1 - (p0 + v0 * h + 0.5 * a0 * h * h)
+    e = v1 - (v0 + a0 * h)
+    f = a1 - a0
+    return np.stack(
+        [
+            p0 + 0.0 * h,
+            v0 + 0.0 * h,
+            0.5 * a0 + 0.0 * h,
+            (10.0 * d - 4.0 * e * h + 0.5 * f * h * h) / h**3,
+            (-15.0 * d + 7.0 * e * h - f * h * h) / h**4,
+            (6.0 * d - 3.0 * e * h + 0.5 * f * h * h) / h**5,
+        ]
+    )
+
+
+class _KnotPieces:
+    """The quintics through consecutive samples' states (position, velocity, acceleration),
+    where they are within motion limits, joined from where the motion is.
+
+    With the cubic spline's velocities and accelerations at the samples, each quintic is the
+    spline's piece itself (the spline is C2). A piece within ``SPLINE_MARGIN`` of the limits is
+    followed when the motion is at its start (within rounding of the sample's state: Ruckig
+    ends a trajectory within about 1e-9 of its target): as the quintic from the motion's state
+    to the next sample's, which is the piece itself when the motion is exactly on it and lands
+    on the next sample exactly otherwise (a jump of 1e-9 rad would be a jerk of 6 rad/s^3 at
+    1 kHz). Jerk and acceleration are checked exactly (their extrema in closed form), velocity
+    at 33 points of each piece, inside the margin.
+    """
+
+    def __init__(self, t: Float, q: Float, v: Float, a: Float, limits: MotionLimits) -> None:
+        self.t = t
+        self.state = (q, v, a)
+        h = np.diff(t)[:, None]
+        c = _quintic_coefficients((q[:-1], v[:-1], a[:-1]), (q[1:], v[1:], a[1:]), h)
+        lim = limits.scaled(SPLINE_MARGIN)
+        c3, c4, c5 = c[3], c[4], c[5]
+        # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
+        # and at the jerk's roots inside the piece.
+        jerk = np.maximum(np.abs(6.0 * c3), np.abs(6.0 * c3 + 24.0 * c4 * h + 60.0 * c5 * h * h))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vertex = np.where(c5 != 0.0, -24.0 * c4 / (120.0 * c5), -1.0)
+            inside = (vertex > 0.0) & (vertex < h)
+            sv = np.where(inside, vertex, 0.0)
+            jerk = np.maximum(jerk, np.abs(6.0 * c3 + 24.0 * c4 * sv + 60.0 * c5 * sv * sv))
+
+            def acc(s_: Float) -> Float:
+                return np.asarray(
+                    2.0 * c[2] + 6.0 * c3 * s_ + 12.0 * c4 * s_ * s_ + 20.0 * c5 * s_**3
+                )
+
+            big = np.maximum(np.abs(acc(np.zeros_like(h))), np.abs(acc(h + 0.0 * c3)))
+            disc = (24.0 * c4) ** 2 - 4.0 * (60.0 * c5) * (6.0 * c3)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            for sign in (1.0, -1.0):
+                s_r = np.where(c5 != 0.0, (-24.0 * c4 + sign * root) / (120.0 * c5), -1.0)
+                ok = (disc >= 0.0) & (s_r > 0.0) & (s_r < h)
+                big = np.maximum(big, np.where(ok, np.abs(acc(np.where(ok, s_r, 0.0))), 0.0))
+        frac = np.linspace(0.0, 1.0, 33)[:, None, None]
+        s_v = frac * h
+        vel = (((5.0 * c5 * s_v + 4.0 * c4) * s_v + 3.0 * c3) * s_v + 2.0 * c[2]) * s_v + c[1]
+        self.feasible = (
+            (jerk <= lim.jerk)
+            & (big <= lim.acceleration)
+            & (np.abs(vel).max(axis=0) <= lim.velocity)
+            & np.isfinite(jerk)
+        ).all(axis=1)
+
+    def piece(
+        self, i: int, now: float, state: tuple[list[float], list[float], list[float]]
+    ) -> _Quintic | None:
+        """The piece to sample i, if it is feasible and the motion is at its start, on time."""
+        k = i - 1
+        if not self.feasible[k] or abs(now - float(self.t[k])) > 1e-9:
+            return None
+        p, v, a = (np.asarray(x, dtype=np.float64) for x in state)
+        q0, v0, a0 = (x[k] for x in self.state)
+        scale = 1.0 + float(np.abs(q0).max())
+        if (
+            np.abs(p - q0).max() > 1e-8 * scale
+            or np.abs(v - v0).max() > 1e-7 * scale
+            or np.abs(a - a0).max() > 1e-6 * scale
+        ):
+            return None
+        end = (self.state[0][i], self.state[1][i], self.state[2][i])
+        return _Quintic((p, v, a), end, float(self.t[i] - self.t[k]))
 
 
 def follow_samples(
