@@ -1111,6 +1111,7 @@ class FusedStep:
         axes = getattr(robot, "fk_jacobian_axes_unchecked", None) if newton else None
         self.fk_axes = axes
         self.newton = axes is not None
+        self._z, self._z_new = np.empty(self.n + 3), np.empty(self.n + 3)  # line search buffers
         # A step shorter than this fits every bound: one comparison (module docstring).
         self.free2 = _free_step2(max_step, step_limit)
         # Lists of per-step views are cheaper to index in the loop than the arrays.
@@ -1173,10 +1174,13 @@ class FusedStep:
             # Kept where the curvature stiffens the step (the directions where Gauss-Newton
             # overshoots into a limit cycle); where it softens it, the Gauss-Newton step is the
             # safer one.
-            if info2 == 0 and newton.dot(newton) < step.dot(step):
-                step = newton
+            step2 = step.dot(step)
+            newton2 = newton.dot(newton)
+            if info2 == 0 and newton2 < step2:
+                step, step2 = newton, newton2
                 target = theta + newton
-        step2 = step.dot(step)
+        else:
+            step2 = step.dot(step)
         limited = False
         if step2 > self.free2:  # velocity bound, trust region of the linearization
             scale = _step_scale(step, step2, self.step_limit, self.max_step)
@@ -1187,15 +1191,17 @@ class FusedStep:
         x_new, jac_new, axes_new = self.kinematics(new)
         if self.line_search:
             # The step must lower the fused energy of step j (module docstring, "Stability").
-            z = np.concatenate((theta, x))
-            z_new = np.concatenate((new, x_new))
+            n = self.n
+            z, z_new = self._z, self._z_new  # [theta | f(theta)], filled in place
+            z[:n], z[n:] = theta, x
+            z_new[:n], z_new[n:] = new, x_new
             q_t, b_t = self.q_list[j], self.b_list[j]
             halvings = 0
             while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
                 halvings += 1
                 new = theta + 0.5 * (new - theta)
                 x_new, jac_new, axes_new = self.kinematics(new)
-                z_new = np.concatenate((new, x_new))
+                z_new[:n], z_new[n:] = new, x_new
         return new, x_new, jac_new, axes_new, limited
 
     def covariance(self, j: int, jac: Float) -> Float:
