@@ -326,6 +326,28 @@ def test_reproductions_stay_within_the_velocity_acceleration_and_jerk_limits(
         assert res.task_errors["glass"][row(res, REACH_STEP)] < 0.005
 
 
+def test_from_any_posture_within_the_joint_limits_a_lead_in_within_the_limits(
+    skill: Skill, demos: list[Demonstration]
+) -> None:
+    robot = skill.robot
+    assert isinstance(robot, Robot)
+    lim = MotionLimits.from_robot(robot, robot.n_joints)
+    glass, _ = unseen_glass(demos)
+    rng = np.random.default_rng(12)
+    own_part = None
+    for q0 in rng.uniform(robot.lower, robot.upper, size=(8, robot.n_joints)):
+        res = skill.reproduce({"glass": glass}, q0=q0)
+        np.testing.assert_array_equal(res.joints[0], q0)
+        assert within_limits(skill, res, lim)
+        assert res.lead_in is not None and res.lead_in.sum() > 1
+        # The skill's own part does not depend on where the arm started: the lead-in is a
+        # separate move to the skill's first posture, then the skill keeps its timing.
+        part = res.joints[own(res)]
+        if own_part is None:
+            own_part = part
+        np.testing.assert_array_equal(part, own_part)
+
+
 def test_limits_that_never_bind_keep_the_demonstrations_pace(
     skill: Skill, demos: list[Demonstration]
 ) -> None:

@@ -69,6 +69,7 @@ loop): the same plans followed at that rate (:class:`CommandStream`).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -469,7 +470,7 @@ class Controller:
             # The first command starts from the measured posture, at rest.
             self._replan(st, now, (q, np.zeros_like(q), np.zeros_like(q)), 0.0)
         else:
-            last = st.motion.at(now)
+            last = st.last  # the last command's state
             lag = float((np.abs(q - last[0]) / self._step_bound).max())
             if lag > self.max_lag:
                 # A push: plan again from the measured state, the phase where it was.
@@ -483,16 +484,22 @@ class Controller:
         st.q_measured = q
         st.cycle += 1
         t = st.cycle * self.dt
-        p, v, a = st.motion.at(t)
+        p, v, a = st.last = st.motion.at(t)
         plan = st.plan
         assert plan is not None
         res = plan.result
-        assert res.times is not None
+        # The phase at the command's time (linear between the plan's samples) and the sample
+        # at or after it.
         local = t - plan.t0
-        st.phase = float(np.interp(local, res.times, res.t))
+        times = plan.times
+        sample = min(bisect.bisect_left(times, local - 1e-9), len(times) - 1)
+        if sample == 0 or local >= times[-1]:
+            st.phase = plan.steps[sample]
+        else:
+            w = (local - times[sample - 1]) / (times[sample] - times[sample - 1])
+            st.phase = plan.steps[sample - 1] + w * (plan.steps[sample] - plan.steps[sample - 1])
         st.done = t >= st.motion.end - 1e-9
         index = min(self._c.n_steps - 1, math.floor(st.phase + 1e-9))
-        sample = min(int(np.searchsorted(res.times, local - 1e-9)), res.times.shape[0] - 1)
         self._last = _Targets(p, index, None, None)
         return Command(
             self,
@@ -537,7 +544,8 @@ class Controller:
         if st.plan is not None:
             st.replans += 1
         objects = {k: o.copy() for k, o in self._objs.items()}
-        st.plan = _Plan(res, now, objects)
+        st.plan = _Plan(res, now, objects, res.times.tolist(), res.t.tolist())
+        st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
 
     def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
         names = self._c.object_names
@@ -603,6 +611,8 @@ class _Plan:
     result: ReproductionResult
     t0: float
     objects: dict[str, Float]
+    times: list[float]  # result.times and result.t, as lists for the per-step look-ups
+    steps: list[float]
 
 
 class _Timed:
@@ -621,6 +631,7 @@ class _Timed:
         n = limits.n_joints
         self.motion = Motion(0.0, (np.zeros(n), np.zeros(n), np.zeros(n)))
         self.cycle = 0
+        self.last = self.motion.at(0.0)  # the last command's state
         self.phase = 0.0
         self.moved = False
         self.replans = 0

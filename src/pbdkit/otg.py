@@ -158,7 +158,7 @@ class Motion:
             # Beyond the last segment: at rest where it ended (or moving on at its velocity).
             pv, vv = np.array(p), np.array(v)
             return pv + vv * (local - duration), vv, np.zeros_like(pv)
-        p, v, a = traj.at_time(local)
+        p, v, a = traj.at_time(local)  # a quintic's rows, or Ruckig's lists
         return np.array(p), np.array(v), np.array(a)
 
     def sample(self, times: Float) -> tuple[Float, Float, Float]:
@@ -339,25 +339,36 @@ class _Quintic:
 
     def __init__(
         self,
-        start: tuple[Float, Float, Float],
+        start: tuple[Float, Float, Float] | None,
         end: tuple[Float, Float, Float],
         duration: float,
+        coefficients: Float | None = None,
     ) -> None:
-        self.c = _quintic_coefficients(start, end, np.full(1, duration))  # (6, n)
+        if coefficients is None:
+            assert start is not None
+            coefficients = _quintic_coefficients(start, end, np.full(1, duration))
+        self.c = coefficients  # (6, n)
         self.duration = duration
         self.end = end
 
-    def at_time(self, t: float) -> tuple[list[float], list[float], list[float]]:
-        c0, c1, c2, c3, c4, c5 = self.c
-        p = ((((c5 * t + c4) * t + c3) * t + c2) * t + c1) * t + c0
-        v = (((5.0 * c5 * t + 4.0 * c4) * t + 3.0 * c3) * t + 2.0 * c2) * t + c1
-        a = ((20.0 * c5 * t + 12.0 * c4) * t + 6.0 * c3) * t + 2.0 * c2
-        return p.tolist(), v.tolist(), a.tolist()
+    def at_time(self, t: float) -> Float:
+        """Position, velocity and acceleration at ``t``: rows of a (3, n) array (one product
+        of the powers of t with the coefficients)."""
+        t2 = t * t
+        t3 = t2 * t
+        powers = np.array(
+            [
+                [1.0, t, t2, t3, t3 * t, t3 * t2],
+                [0.0, 1.0, 2.0 * t, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t],
+                [0.0, 0.0, 2.0, 6.0 * t, 12.0 * t2, 20.0 * t3],
+            ]
+        )
+        return np.asarray(powers.dot(self.c), dtype=np.float64)
 
     def end_state(self) -> tuple[list[float], list[float], list[float]]:
         """Exactly the state it was built to end in."""
         p, v, a = self.end
-        return p.tolist(), v.tolist(), a.tolist()
+        return list(p.tolist()), list(v.tolist()), list(a.tolist())
 
 
 def _quintic_coefficients(
@@ -399,8 +410,10 @@ class _KnotPieces:
     def __init__(self, t: Float, q: Float, v: Float, a: Float, limits: MotionLimits) -> None:
         self.t = t
         self.state = (q, v, a)
+        self.rows = [q.tolist(), v.tolist(), a.tolist()]  # exact, for comparing with a state
         h = np.diff(t)[:, None]
         c = _quintic_coefficients((q[:-1], v[:-1], a[:-1]), (q[1:], v[1:], a[1:]), h)
+        self.c = c  # (6, T - 1, n)
         lim = limits.scaled(SPLINE_MARGIN)
         c3, c4, c5 = c[3], c[4], c[5]
         # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
@@ -441,6 +454,11 @@ class _KnotPieces:
         k = i - 1
         if not self.feasible[k] or abs(now - float(self.t[k])) > 1e-9:
             return None
+        end = (self.state[0][i], self.state[1][i], self.state[2][i])
+        duration = float(self.t[i] - self.t[k])
+        rows = self.rows
+        if state[0] == rows[0][k] and state[1] == rows[1][k] and state[2] == rows[2][k]:
+            return _Quintic(None, end, duration, self.c[:, k])  # exactly on it: the piece
         p, v, a = (np.asarray(x, dtype=np.float64) for x in state)
         q0, v0, a0 = (x[k] for x in self.state)
         scale = 1.0 + float(np.abs(q0).max())
@@ -450,8 +468,7 @@ class _KnotPieces:
             or np.abs(a - a0).max() > 1e-6 * scale
         ):
             return None
-        end = (self.state[0][i], self.state[1][i], self.state[2][i])
-        return _Quintic((p, v, a), end, float(self.t[i] - self.t[k]))
+        return _Quintic((p, v, a), end, duration)
 
 
 def follow_samples(
