@@ -20,7 +20,8 @@ from typer.testing import CliRunner
 from pbdkit.cli import app
 from pbdkit.demos import load_demonstrations
 from pbdkit.gmm import MAX_COMPONENTS
-from pbdkit.limits import MotionLimits, StreamMonitor, motion_peaks
+from pbdkit.limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
+from pbdkit.otg import follow
 from pbdkit.robots import katana
 from pbdkit.sim import (
     Outcome,
@@ -582,12 +583,24 @@ def test_playback_servos_follow_the_samples(
     ex, res = run.execution, run.reproduction
     t = ts.skill.times(res)
     grid = ex.servo_period * np.arange(ex.servo_targets.shape[0])
-    at = np.stack([np.interp(t, grid, ex.servo_targets[:, j]) for j in range(5)], axis=1)
+    # The servo targets are the motion pbdkit.otg.follow makes through the samples; it reaches
+    # each sample at its time, or later where the limits kept it behind.
+    motion = follow(
+        t,
+        res.joints,
+        ex.servo_limits.scaled(LIMIT_SAFETY),
+        velocities=res.velocities,
+        accelerations=res.accelerations,
+    )
+    reached = motion.sample_times
+    assert np.all(reached >= t - 1e-9) and np.all(np.diff(reached) > 0)
+    assert reached[-1] - t[-1] < 0.1  # measured: 56 ms late at the end
+    at = np.stack([np.interp(reached, grid, ex.servo_targets[:, j]) for j in range(5)], axis=1)
     off = np.abs(at - res.joints).max(axis=1)
-    # Measured: 0.021 rad at worst (a sample whose velocity and acceleration do not fit the
-    # limits with its neighbours'), 4e-4 rad on average; a follower re-planned at every tick
-    # was 0.2 rad off.
-    assert off.max() < 0.03
+    # Measured: 0.042 rad at worst (a sample the motion passes by toward a later one, where
+    # the spline through the samples leaves the limits), 4e-4 rad on average; a follower
+    # re-planned at every tick was 0.2 rad off.
+    assert off.max() < 0.06
     assert off.mean() < 2e-3
     # The measured joints follow the targets (a glass may hold a finger back a little).
     assert run.summary()["following_error_rad"] < 0.03

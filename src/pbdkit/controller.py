@@ -544,7 +544,10 @@ class Controller:
         if st.plan is not None:
             st.replans += 1
         objects = {k: o.copy() for k, o in self._objs.items()}
-        st.plan = _Plan(res, now, objects, res.times.tolist(), res.t.tolist())
+        # The phase follows the motion: when it reaches each sample of the plan (later than
+        # the sample's time where the limits kept it behind, pbdkit.otg.follow).
+        reached = (st.motion.sample_times - now).tolist()
+        st.plan = _Plan(res, now, objects, reached, res.t.tolist())
         st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
 
     def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
@@ -611,8 +614,8 @@ class _Plan:
     result: ReproductionResult
     t0: float
     objects: dict[str, Float]
-    times: list[float]  # result.times and result.t, as lists for the per-step look-ups
-    steps: list[float]
+    times: list[float]  # when the motion reaches each sample (from t0), and its step: lists
+    steps: list[float]  # for the per-step look-ups
 
 
 class _Timed:

@@ -134,6 +134,9 @@ class Motion:
     def __init__(self, t0: float, start: tuple[Float, Float, Float]) -> None:
         self.t0 = float(t0)
         self.end = self.t0
+        #: Built by :func:`follow`: when the motion reaches each of the samples it follows
+        #: (their own times, later where the limits kept it behind).
+        self.sample_times: Float = np.array([self.t0])
         self._start = tuple(np.array(x, dtype=np.float64) for x in start)
         self._starts: list[float] = []
         self._segments: list[tuple[float, Any]] = []  # (duration, ruckig.Trajectory)
@@ -260,7 +263,7 @@ def follow(
         inp.target_velocity = zeros if j == last else knot_v[j].tolist()
         use_a = with_acceleration and j != last
         inp.target_acceleration = knot_a[j].tolist() if use_a else zeros
-        left = float(t[j]) - now
+        left = float(t[j]) + delay - now
         inp.minimum_duration = left if left > 0 else None
         try:
             result = otg.calculate(inp, traj)
@@ -285,21 +288,51 @@ def follow(
         over = [max(lo[k] - e.min, e.max - hi[k], 0.0) for k, e in enumerate(traj.position_extrema)]
         return float(max(over))
 
+    # Where the limits kept the motion from a sample's time, the rest of the samples are aimed
+    # for as much later (``delay``): the motion keeps following the path and its timing
+    # instead of chasing a schedule it has fallen behind (which would leave the samples behind
+    # for good). ``reached``: when the motion reaches (or passes) each sample.
+    delay = 0.0
+    reached = np.empty(t.shape[0])
+    reached[0] = t[0]
+
+    def arrived(i: int, j: int, traj: Any) -> tuple[list[float], list[float], list[float]]:
+        """The segment ``traj`` to sample j appended (samples i..j reached); its end state."""
+        nonlocal delay
+        motion.append(traj)
+        end = motion.end
+        # Merged samples: reached in proportion to their times.
+        span = t[i - 1 : j + 1]
+        w = (span[1:] - span[0]) / (span[-1] - span[0]) if span[-1] > span[0] else 1.0
+        reached[i : j + 1] = reached[i - 1] + w * (end - reached[i - 1])
+        delay = max(delay, end - float(t[j]))
+        if isinstance(traj, _Quintic):
+            return traj.end_state()
+        end_p, end_v, end_a = traj.at_time(float(traj.duration))
+        return list(end_p), list(end_v), list(end_a)
+
     state = (p0.tolist(), v0.tolist(), a0.tolist())
     i = 1
     while i <= last:
         now = motion.end
         # On the spline, on time, and its piece to the next sample within the limits (not
         # the last piece: the motion ends at rest, acceleration included): that piece.
-        piece = on_spline.piece(i, now, state) if i < last else None
+        piece = on_spline.piece(i, now - delay, state) if i < last else None
         if piece is not None:
-            motion.append(piece)
-            state = piece.end_state()
+            state = arrived(i, i, piece)
             i += 1
             continue
         inp.current_position, inp.current_velocity, inp.current_acceleration = state
         window = range(i, min(i + MERGE_SAMPLES, last + 1))
         p_now = np.asarray(state[0])
+        # Off the spline's pieces but on time: the quintic from here to a sample's state (the
+        # next, or one of the window's with the time of all), if it is within the limits.
+        bridge = on_spline.bridge(window, now - delay, state, limits) if window[-1] < last else None
+        if bridge is not None:
+            j, piece = bridge
+            state = arrived(i, j, piece)
+            i = j + 1
+            continue
         found = None
         # On time: with the sample's velocity and acceleration, else its velocity alone (an
         # acceleration estimate the jerk limit cannot reach in time). Never swinging back
@@ -326,10 +359,9 @@ def follow(
                     break
         assert found is not None
         j, traj = found
-        motion.append(traj)
-        end_p, end_v, end_a = traj.at_time(float(traj.duration))
-        state = (list(end_p), list(end_v), list(end_a))
+        state = arrived(i, j, traj)
         i = j + 1
+    motion.sample_times = reached
     return motion
 
 
@@ -393,6 +425,49 @@ def _quintic_coefficients(
     )
 
 
+def _quintics_within(c: Float, h: Float, v1: Float, a1: Float, lim: MotionLimits) -> Float:
+    """Which quintics (coefficients ``c`` (6, m, n), durations ``h`` (m, 1), ending at velocity
+    ``v1`` and acceleration ``a1`` (m, n)) stay within ``lim``: (m,) bool.
+
+    Jerk and acceleration exactly (their extrema in closed form), velocity at 33 points of
+    each. And where each ends, the velocity reached if the acceleration were ramped down at the
+    jerk limit (what the next segment must be able to do, whatever it is): else a Ruckig
+    segment after it would overshoot the velocity limit.
+    """
+    c3, c4, c5 = c[3], c[4], c[5]
+    # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
+    # and at the jerk's roots inside the piece.
+    jerk = np.maximum(np.abs(6.0 * c3), np.abs(6.0 * c3 + 24.0 * c4 * h + 60.0 * c5 * h * h))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(c5 != 0.0, -24.0 * c4 / (120.0 * c5), -1.0)
+        inside = (vertex > 0.0) & (vertex < h)
+        sv = np.where(inside, vertex, 0.0)
+        jerk = np.maximum(jerk, np.abs(6.0 * c3 + 24.0 * c4 * sv + 60.0 * c5 * sv * sv))
+
+        def acc(s_: Float) -> Float:
+            return np.asarray(2.0 * c[2] + 6.0 * c3 * s_ + 12.0 * c4 * s_ * s_ + 20.0 * c5 * s_**3)
+
+        big = np.maximum(np.abs(acc(np.zeros_like(h))), np.abs(acc(h + 0.0 * c3)))
+        disc = (24.0 * c4) ** 2 - 4.0 * (60.0 * c5) * (6.0 * c3)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        for sign in (1.0, -1.0):
+            s_r = np.where(c5 != 0.0, (-24.0 * c4 + sign * root) / (120.0 * c5), -1.0)
+            ok = (disc >= 0.0) & (s_r > 0.0) & (s_r < h)
+            big = np.maximum(big, np.where(ok, np.abs(acc(np.where(ok, s_r, 0.0))), 0.0))
+        coast = np.where(np.isinf(lim.jerk), 0.0, a1 * np.abs(a1) / (2.0 * lim.jerk))
+    frac = np.linspace(0.0, 1.0, 33)[:, None, None]
+    s_v = frac * h
+    vel = (((5.0 * c5 * s_v + 4.0 * c4) * s_v + 3.0 * c3) * s_v + 2.0 * c[2]) * s_v + c[1]
+    within = (
+        (jerk <= lim.jerk)
+        & (big <= lim.acceleration)
+        & (np.abs(vel).max(axis=0) <= lim.velocity)
+        & (np.abs(v1 + coast) <= lim.velocity)
+        & np.isfinite(jerk)
+    )
+    return np.asarray(within.all(axis=1))
+
+
 class _KnotPieces:
     """The quintics through consecutive samples' states (position, velocity, acceleration),
     where they are within motion limits, joined from where the motion is.
@@ -414,38 +489,30 @@ class _KnotPieces:
         h = np.diff(t)[:, None]
         c = _quintic_coefficients((q[:-1], v[:-1], a[:-1]), (q[1:], v[1:], a[1:]), h)
         self.c = c  # (6, T - 1, n)
-        lim = limits.scaled(SPLINE_MARGIN)
-        c3, c4, c5 = c[3], c[4], c[5]
-        # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
-        # and at the jerk's roots inside the piece.
-        jerk = np.maximum(np.abs(6.0 * c3), np.abs(6.0 * c3 + 24.0 * c4 * h + 60.0 * c5 * h * h))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vertex = np.where(c5 != 0.0, -24.0 * c4 / (120.0 * c5), -1.0)
-            inside = (vertex > 0.0) & (vertex < h)
-            sv = np.where(inside, vertex, 0.0)
-            jerk = np.maximum(jerk, np.abs(6.0 * c3 + 24.0 * c4 * sv + 60.0 * c5 * sv * sv))
+        self.feasible = _quintics_within(c, h, v[1:], a[1:], limits.scaled(SPLINE_MARGIN))
 
-            def acc(s_: Float) -> Float:
-                return np.asarray(
-                    2.0 * c[2] + 6.0 * c3 * s_ + 12.0 * c4 * s_ * s_ + 20.0 * c5 * s_**3
-                )
-
-            big = np.maximum(np.abs(acc(np.zeros_like(h))), np.abs(acc(h + 0.0 * c3)))
-            disc = (24.0 * c4) ** 2 - 4.0 * (60.0 * c5) * (6.0 * c3)
-            root = np.sqrt(np.maximum(disc, 0.0))
-            for sign in (1.0, -1.0):
-                s_r = np.where(c5 != 0.0, (-24.0 * c4 + sign * root) / (120.0 * c5), -1.0)
-                ok = (disc >= 0.0) & (s_r > 0.0) & (s_r < h)
-                big = np.maximum(big, np.where(ok, np.abs(acc(np.where(ok, s_r, 0.0))), 0.0))
-        frac = np.linspace(0.0, 1.0, 33)[:, None, None]
-        s_v = frac * h
-        vel = (((5.0 * c5 * s_v + 4.0 * c4) * s_v + 3.0 * c3) * s_v + 2.0 * c[2]) * s_v + c[1]
-        self.feasible = (
-            (jerk <= lim.jerk)
-            & (big <= lim.acceleration)
-            & (np.abs(vel).max(axis=0) <= lim.velocity)
-            & np.isfinite(jerk)
-        ).all(axis=1)
+    def bridge(
+        self,
+        window: range,
+        now: float,
+        state: tuple[list[float], list[float], list[float]],
+        limits: MotionLimits,
+    ) -> tuple[int, _Quintic] | None:
+        """The first sample j of ``window`` the quintic from ``state`` (at ``now``) reaches on
+        time within ``limits``: (j, that quintic), or None."""
+        js = np.array([j for j in window if self.t[j] > now + 1e-9], dtype=np.intp)
+        if js.size == 0:
+            return None
+        p, v, a = (np.asarray(x, dtype=np.float64)[None] for x in state)
+        h = (self.t[js] - now)[:, None]
+        end = (self.state[0][js], self.state[1][js], self.state[2][js])
+        c = _quintic_coefficients((p, v, a), end, h)
+        ok = np.flatnonzero(_quintics_within(c, h, end[1], end[2], limits))
+        if ok.size == 0:
+            return None
+        k = int(ok[0])
+        j = int(js[k])
+        return j, _Quintic(None, (end[0][k], end[1][k], end[2][k]), float(h[k, 0]), c[:, k])
 
     def piece(
         self, i: int, now: float, state: tuple[list[float], list[float], list[float]]

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from .._validation import check_array
 from ..limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_peaks
-from ..otg import follow_samples
+from ..otg import follow
 from ..robots import katana
 from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
@@ -266,14 +266,20 @@ def execute(
 
     # Servo targets at every physics step, until they are at rest at the last sample (later
     # than its time if the limits kept them behind); the settling time holds the last one.
-    q_play, dq_play = servo_stream(t_, q_, lim, velocities=v_, accelerations=a_, period=TIMESTEP)
+    if lim.any:
+        q_play, dq_play, reached = _servo_motion(t_, q_, lim, v_, a_, TIMESTEP)
+    else:
+        q_play, dq_play = servo_stream(t_, q_, lim, period=TIMESTEP)
+        reached = t_
     n_play = max(int(_grid_index(t_, TIMESTEP)[-1]), q_play.shape[0] - 1)
     n_settle = round(settle / TIMESTEP)
     s = t_[0] + TIMESTEP * np.arange(n_play + n_settle + 1)
     hold = s.shape[0] - q_play.shape[0]
     q_target = np.concatenate([q_play, np.repeat(q_play[-1:], hold, axis=0)])
     dq_target = np.concatenate([dq_play, np.zeros((hold, n))])
-    g_target = g[np.clip(np.searchsorted(t_, s, side="right") - 1, 0, t_.shape[0] - 1)]
+    # The gripper changes when the motion reaches the sample where it changes (later than the
+    # sample's time where the limits kept the motion behind).
+    g_target = g[np.clip(np.searchsorted(reached, s, side="right") - 1, 0, t_.shape[0] - 1)]
 
     servo = sim.servo_rows(q_target, dq_target)
     for k in range(s.shape[0]):
@@ -367,16 +373,32 @@ def servo_stream(
         if accelerations is None
         else check_array(accelerations, "accelerations", shape=q_.shape)
     )
-    pos, vel, _ = follow_samples(
-        t_,
-        q_,
-        limits.scaled(LIMIT_SAFETY),
-        period,
-        velocities=v_,
-        accelerations=a_,
-        n_steps=None if n_steps is None else int(n_steps),
-    )
+    pos, vel, _ = _servo_motion(t_, q_, limits, v_, a_, period, n_steps)
     return pos, vel
+
+
+def _servo_motion(
+    t: Float,
+    q: Float,
+    limits: MotionLimits,
+    velocities: Float | None,
+    accelerations: Float | None,
+    period: float,
+    n_steps: int | None = None,
+) -> tuple[Float, Float, Float]:
+    """:func:`servo_stream`'s targets (limits given) and when the motion reaches each sample
+    (:attr:`pbdkit.otg.Motion.sample_times`: later than t where the limits kept it behind)."""
+    motion = follow(
+        t,
+        q,
+        limits.scaled(LIMIT_SAFETY),
+        velocities=velocities,
+        accelerations=accelerations,
+    )
+    total = math.ceil((motion.end - motion.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
+    times = np.asarray(motion.t0 + period * np.arange(total), dtype=np.float64)
+    pos, vel, _ = motion.sample(times)
+    return pos, vel, motion.sample_times
 
 
 def stream_peaks(
