@@ -1,10 +1,13 @@
-"""Online control: a skill's Table II loop run step by step from the measured joint angles.
+"""Online control: a skill run step by step from the measured joint angles.
 
 :meth:`pbdkit.Skill.reproduce` computes a whole trajectory from object positions seen once. A
 real arm is controlled step by step: :meth:`pbdkit.Skill.controller` returns a
-:class:`Controller` whose :meth:`Controller.step` closes the loop of Table II on the measured
-posture q and returns the next target. Each call runs the same step as the offline
-reproduction (:class:`pbdkit.reproduce.FusedStep`, :class:`~pbdkit.reproduce.TaskStep`,
+:class:`Controller` whose :meth:`Controller.step` takes the measured posture q (and any new
+object positions) and returns the next command. With motion limits (the default for a robot
+that declares them) the commands follow a plan within the limits, made again when objects move
+or the arm is pushed (section "Motion limits" below). Without (this section), each call closes
+the loop of Table II on q and runs the same step as the offline reproduction
+(:class:`pbdkit.reproduce.FusedStep`, :class:`~pbdkit.reproduce.TaskStep`,
 :class:`~pbdkit.reproduce.JointStep`), linearized at q instead of at the previous target: fed
 its own targets with constant objects, a controller reproduces :meth:`Skill.reproduce` step for
 step. Objects may move: ``step(q, objects={...})`` updates any subset of the positions from

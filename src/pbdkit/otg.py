@@ -3,16 +3,18 @@
 Ruckig (community version, https://github.com/pantor/ruckig, MIT) computes, from a current state
 (position, velocity, acceleration) to a target state, the time-optimal trajectory within
 velocity, acceleration and jerk limits (piecewise-constant jerk); it is what MoveIt 2 and
-Franka's tools use for online motion. pbdkit calls it state to state and chains the
-trajectories, each starting in the state the previous one ended in: the result is one continuous
-motion (position, velocity and acceleration continuous, jerk within the limit), so its samples
-pass the divided-difference check of :mod:`pbdkit.limits` at any rate.
+Franka's tools use for online motion. pbdkit calls it state to state and chains its
+trajectories with polynomial pieces, each starting in the state the previous one ended in: the
+result is one continuous motion (position, velocity and acceleration continuous, jerk within
+the limit), so its samples pass the divided-difference check of :mod:`pbdkit.limits` at any
+rate.
 
 - :func:`point_to_point`: a move between two postures at rest, sampled every ``dt`` (the
   lead-in of a reproduction from a distant posture).
 - :func:`follow`: the :class:`Motion` through a timed trajectory's samples (a reproduction,
-  played over :meth:`pbdkit.Skill.times`) from a given state: one Ruckig trajectory per
-  sample, planned once; sampled at any rate (:func:`follow_samples`: the simulator's 500 Hz
+  played over :meth:`pbdkit.Skill.times`) from a given state: the pieces of the spline through
+  them where those are within the limits, quintic joins and Ruckig trajectories elsewhere,
+  each planned once; sampled at any rate (:func:`follow_samples`: the simulator's 500 Hz
   servos, a 1 kHz ``ros2_control`` or Franka loop, the online controller's cycle).
 
 Ruckig is imported when one of them is first used.
@@ -196,22 +198,36 @@ def follow(
     accelerations: Float | None = None,
     start: tuple[Float, Float, Float] | None = None,
 ) -> Motion:
-    """The jerk-limited motion through timed samples: one Ruckig trajectory per sample.
+    """The jerk-limited motion through timed samples, segment by segment.
 
     From ``start`` (position, velocity, acceleration at t[0]; default: at rest at q[0]), each
-    sample is aimed for with its velocity and acceleration at its time: a trajectory of at
-    least the time left (time-synchronized, so exactly that time when the sample can be reached
-    in it), and the motion comes to rest at the last sample. A sample that cannot be reached in
-    its time (its velocity and acceleration do not fit the limits with the positions around it)
-    is passed by toward one of the next :data:`MERGE_SAMPLES` with the time of both; failing
-    that, it is approached as fast as the limits allow and the next one is aimed for from there.
-    Samples that respect the limits are passed on time.
+    sample is reached with its velocity and acceleration (the cubic spline's by default) at
+    its time, the motion coming to rest at the last one. Segment by segment, from the state
+    the motion is in:
 
-    Each trajectory is planned once, from the state the previous one ended in, and the motion
-    is sampled afterwards at any rate (:meth:`Motion.at`): re-planned at every setpoint with the
-    time left, a motion through samples at the pace of a timed reproduction (close to
-    time-optimal) falls into one of Ruckig's blocked intervals of duration and turns into a
-    detour (0.2 rad off the samples, measured on a coaster reproduction).
+    1. on the samples' states and on time: the quintic to the next sample's state (with the
+       spline's derivatives, the spline's own piece: smooth, its jerk constant), where it is
+       within ``SPLINE_MARGIN`` of the limits and ends in a state the next segment can take
+       over (v + a|a| / 2J within the velocity limit);
+    2. else, on time: the quintic from the motion's state to a sample's of the next
+       :data:`MERGE_SAMPLES` (the next one, or a later one with the time of all), within the
+       limits;
+    3. else Ruckig (time-synchronized, lasting at least the time left: exactly it when it
+       can): to a sample of that window on time, with its velocity and acceleration or its
+       velocity alone, never swinging back beyond the samples on the way; failing that, late,
+       as fast as the limits allow, to the sample it swings the least for.
+
+    Where the limits keep the motion behind a sample's time, the rest of the samples are aimed
+    for as much later (the motion keeps to the path and its pace, instead of chasing a schedule
+    it has fallen behind), and :attr:`Motion.sample_times` says when each sample is reached:
+    what a gripper event or a phase should follow. Samples within the limits whose spline is
+    too are followed exactly, on time.
+
+    Each segment is planned once and the motion is sampled afterwards at any rate
+    (:meth:`Motion.at`): re-planned at every setpoint with the time left, a motion through
+    samples at the pace of a timed reproduction (close to time-optimal) falls into one of
+    Ruckig's blocked intervals of duration and turns into a detour (0.2 rad off the samples,
+    measured on a coaster reproduction).
 
     Parameters
     ----------
