@@ -537,6 +537,25 @@ def test_retime_start_velocity_continues_a_moving_start(duration: float) -> None
         assert rest[0] > 5 * dt
 
 
+def test_retime_from_a_start_velocity_on_the_limit() -> None:
+    """A measured velocity clipped to the limit (the online controller after a push) is on it
+    to the last bit; the padding before the path moves at it whatever the stretch. It used to
+    be one rounding error over the limit at every round, and retime gave up after 200."""
+    lim = MotionLimits(np.array([0.7, 1.19]), np.array([4.0, 6.0]), np.array([40.0, 60.0]))
+    rng = np.random.default_rng(0)
+    v0 = lim.velocity * np.array([1.0, -1.0])
+    for _ in range(40):  # one of these start postures and steps failed
+        dt = rng.uniform(0.005, 0.03)
+        q0 = rng.uniform(-2.0, 2.0, 2)
+        t = np.arange(60) * dt
+        s = t / t[-1]
+        q = q0 + (t[-1] * (s - s**3 + s**4 / 2))[:, None] * v0
+        h = retime(q, dt, lim, start_velocity=v0)
+        assert _continued_check(h, q, v0, lim).worst <= 1.0 + 1e-8
+    with pytest.raises(ValueError, match=r"start_velocity\[0\] is 0.707 rad/s, beyond"):
+        retime(q, 0.01, lim, start_velocity=v0 * 1.01)
+
+
 def test_retime_validates_its_input() -> None:
     q = np.zeros((5, 2))
     with pytest.raises(ValueError, match="dt must be a positive number"):

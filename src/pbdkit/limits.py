@@ -414,7 +414,9 @@ def retime(
     start_velocity : array-like, shape (n,), optional
         The path starts moving at this velocity (rad/s) instead of at rest: the samples
         padded before it continue it backward (a path that takes over from a motion, e.g. the
-        online controller's re-plans). It should itself be within the velocity limits.
+        online controller's re-plans). Within the velocity limits: a speed within
+        :data:`START_VELOCITY_TOLERANCE` of a limit (e.g. a measured velocity clipped to it) is
+        taken as ``1 - 1e-9`` of it.
 
     Returns
     -------
@@ -423,6 +425,9 @@ def retime(
 
     Raises
     ------
+    ValueError
+        If ``start_velocity`` exceeds a velocity limit (by more than
+        :data:`START_VELOCITY_TOLERANCE`).
     RuntimeError
         If the limits are still exceeded after 200 rounds (each round stretches every excess
         by more than it needs, so a finite path never gets there; the loop is bounded anyway).
@@ -444,7 +449,9 @@ def retime(
     v0 = (
         None
         if start_velocity is None
-        else check_array(start_velocity, "start_velocity", shape=(q_.shape[1],))
+        else _start_velocity(
+            check_array(start_velocity, "start_velocity", shape=(q_.shape[1],)), limits.velocity
+        )
     )
     offsets = np.arange(-_TAPER_HALF_WIDTH, _TAPER_HALF_WIDTH + 1)
     taper = np.exp(-0.5 * (offsets / _TAPER_SIGMA) ** 2)
@@ -482,6 +489,26 @@ def retime(
         f"retime: the path is not within the limits after {_MAX_ROUNDS} rounds (largest excess "
         f"{float(f.max()):.6g}x)"
     )
+
+
+#: A start velocity this close to the velocity limit (relative) counts as on it.
+START_VELOCITY_TOLERANCE = 1e-9
+
+
+def _start_velocity(v0: Float, vlim: Float) -> Float:
+    """``retime``'s start velocity, within the limit: the padding before the path moves at
+    it whatever the stretch, so a speed on the limit (a measured velocity clipped to it) would
+    be one rounding error over it at every round. Brought to ``1 - 1e-9`` of the limit;
+    beyond the limit by more than that, refused."""
+    over = np.abs(v0) > vlim * (1.0 + START_VELOCITY_TOLERANCE)
+    if over.any():
+        i = int(np.argmax(over))
+        raise ValueError(
+            f"start_velocity[{i}] is {float(v0[i])!r} rad/s, beyond the velocity limit "
+            f"{float(vlim[i])!r}: no timing of the path can start from it"
+        )
+    cap = vlim * (1.0 - START_VELOCITY_TOLERANCE)
+    return np.clip(v0, -cap, cap)
 
 
 def times_from_durations(h: Float, t0: float = 0.0) -> Float:
