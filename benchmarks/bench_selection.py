@@ -26,8 +26,11 @@ Then the alternatives, on the same data (peers measured in the same run):
   demonstrations' deviations from their pointwise mean (integrated autocorrelation time,
   Geyer's initial positive sequence);
 - ``loo-lik``: held-out-demonstration log-likelihood (exact refits), K of the best mean;
-- ``auto``: leave-one-demonstration-out error of the GMR mean (approximate refits), smallest K
-  within CV_TOLERANCE of the best (the default).
+- ``auto``: leave-one-demonstration-out error of the GMR mean (approximate refits), each
+  moment's error against the demonstrations' spread at that moment, smallest K within
+  CV_TOLERANCE of the best (the default);
+- ``auto-pooled``: the same against their spread pooled over time (the earlier default, which
+  loses a tight phase where the demonstrations differ elsewhere: ``bench_zoo.py``).
 
 and on LASA (26 shapes, 7 demonstrations): K range and the GMR mean's RMSE over the pointwise
 mean's. Last, the accuracy of the approximate leave-one-out against exact refits.
@@ -54,8 +57,10 @@ from pbdkit.demos import Demonstration
 from pbdkit.gmm import (
     CV_TOLERANCE,
     GMM,
+    LOCAL_SPREAD_FLOOR,
     MAX_COMPONENTS,
     MIN_TIME_SPREAD,
+    local_spread,
     pooled_spread,
     sequences_from_time,
 )
@@ -163,8 +168,11 @@ def choose(method: str, x: Float, floor: Float, kmax: int, score_dims: list[int]
     """Fit with the K a method chooses (x: stacked sequences, time in column 0)."""
     groups = sequences_from_time(x[:, 0])
     n_seq = int(groups.max()) + 1
-    if method == "auto":
-        return GMM("auto", max_components=kmax, reg_covar=floor, score_dims=score_dims).fit(x)
+    if method in ("auto", "auto-pooled"):
+        scale = "local" if method == "auto" else "pooled"
+        return GMM(
+            "auto", max_components=kmax, reg_covar=floor, score_dims=score_dims, cv_scale=scale
+        ).fit(x)
     if method == "bic20":
         return GMM("bic", max_components=kmax, reg_covar=floor).fit(x)
     if method == "bic-plain":
@@ -179,7 +187,7 @@ def choose(method: str, x: Float, floor: Float, kmax: int, score_dims: list[int]
     raise ValueError(method)
 
 
-METHODS = ["auto", "bic20", "bic-plain", "bic-acf", "loo-lik"]
+METHODS = ["auto", "auto-pooled", "bic20", "bic-plain", "bic-acf", "loo-lik"]
 
 
 def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
@@ -360,7 +368,9 @@ def run(args: argparse.Namespace) -> None:
             sel = sel.fit(x).selection_
             groups = sequences_from_time(x[:, 0])
             sdims = dims or [1, 2, 3]
-            scale = np.maximum(pooled_spread(x, groups, 0)[sdims], floor[sdims])
+            pooled = pooled_spread(x, groups, 0)[sdims]
+            least = np.maximum(floor[sdims], LOCAL_SPREAD_FLOOR * pooled)
+            scale = np.maximum(local_spread(x, groups, 0)[:, sdims], least)
             for k in (4, 8, sel.chosen):
                 if k not in sel.candidates:
                     continue
@@ -370,7 +380,7 @@ def run(args: argparse.Namespace) -> None:
                     held = x[groups == m]
                     mean, _ = fit.regress(held[:, :1])
                     err = (held[:, sdims] - mean[:, [d - 1 for d in sdims]]) ** 2
-                    exact.append(float(np.mean(err.mean(axis=0) / scale)))
+                    exact.append(float(np.mean(err / scale[groups == m])))
                 approx = float(sel.scores[sel.candidates.index(k)])
                 diffs.append(abs(approx - np.mean(exact)) / np.mean(exact))
     d = np.array(diffs)

@@ -155,8 +155,9 @@ def main(out: Path) -> None:
     new_grasp = GRASP + np.array([0.2, 0.05, 0.0, -0.05, 0.0, 0.05, 0.0])
     glass = robot.fk(new_grasp)
     res = skill.reproduce({"glass": glass}, q0=START)
-    closest = float(res.task_errors["glass"].min())
-    joint_only = float(skill.reproduce({"glass": glass}, use=["joint"]).task_errors["glass"].min())
+    closest = float(np.linalg.norm(res.positions - glass, axis=1).min())
+    joint_res = skill.reproduce({"glass": glass}, use=["joint"])
+    joint_only = float(np.linalg.norm(joint_res.positions - glass, axis=1).min())
 
     # 4. Write the trajectory for a joint trajectory controller, with the velocities and
     #    accelerations of its timing (the controller's splines then follow the timed motion).

@@ -36,6 +36,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
+from copy import deepcopy
 from pathlib import Path
 from typing import Any, Literal
 from xml.sax.saxutils import quoteattr
@@ -141,6 +142,37 @@ def _normalize_joints(root: ET.Element) -> bool:
             limit.set("upper", repr(math.pi))
             changed = True
     return changed
+
+
+def _pinocchio_xml(root: ET.Element) -> tuple[str, dict[str, str]]:
+    """The URDF text given to pinocchio, and its joint names -> the URDF's.
+
+    A joint may share its name with a link (SO-100's ``gripper``); pinocchio then finds two
+    frames of that name and fails to lock the joint off the tip's chain. Such joints are renamed
+    in pinocchio's copy only: the names users see are the URDF's.
+    """
+    links = {link.get("name", "") for link in root.iter("link")}
+    joints = [j for j in root.iter("joint") if j.find("parent") is not None]
+    taken = links | {j.get("name", "") for j in joints}
+    renamed: dict[str, str] = {}
+    for joint in joints:
+        name = joint.get("name", "")
+        if name in links:
+            alias = f"{name}_joint"
+            while alias in taken:
+                alias += "_"
+            taken.add(alias)
+            renamed[name] = alias
+    if not renamed:
+        return ET.tostring(root, encoding="unicode"), {}
+    copy = deepcopy(root)
+    for joint in copy.iter("joint"):
+        if joint.find("parent") is not None and joint.get("name", "") in renamed:
+            joint.set("name", renamed[joint.get("name", "")])
+        mimic = joint.find("mimic")
+        if mimic is not None and mimic.get("joint", "") in renamed:
+            mimic.set("joint", renamed[mimic.get("joint", "")])
+    return ET.tostring(copy, encoding="unicode"), {v: k for k, v in renamed.items()}
 
 
 def _refuse_mimic_joints(root: ET.Element, actuated: Sequence[str]) -> None:
@@ -396,8 +428,9 @@ class Robot:
         if _normalize_joints(root):
             urdf = ET.tostring(root, encoding="unicode")
         base_name, tip_name = _choose_tip(root, tip)
+        pin_xml, urdf_names = _pinocchio_xml(root)
         try:
-            full = pin.buildModelFromXML(urdf)
+            full = pin.buildModelFromXML(pin_xml)
         except (RuntimeError, ValueError) as exc:
             raise ValueError(f"path_or_xml: pinocchio could not build the URDF: {exc}") from exc
         frame_names = list(dict.fromkeys(f.name for f in full.frames if f.name != "universe"))
@@ -418,7 +451,10 @@ class Robot:
             )
         lower = np.array(model.lowerPositionLimit, dtype=np.float64)
         upper = np.array(model.upperPositionLimit, dtype=np.float64)
-        names = [str(model.names[i]) for i in range(1, model.njoints)]
+        names = [
+            urdf_names.get(str(model.names[i]), str(model.names[i]))
+            for i in range(1, model.njoints)
+        ]
         _refuse_mimic_joints(root, names)
         velocity = np.array(model.velocityLimit, dtype=np.float64)
         velocity[~(velocity > 0)] = np.inf  # URDF writes velocity="0" for "not limited"

@@ -209,8 +209,10 @@ class Skill:
             K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
             by leaving one demonstration out at a time (:mod:`pbdkit.gmm`, "Choosing K"): the
             smallest K whose generalized trajectory predicts a left-out demonstration as well
-            as the best K does, within one standard error; ``"bic"``: the effective-sample-
-            size BIC of earlier versions (kept for comparison).
+            as the best K does (within :data:`pbdkit.gmm.CV_TOLERANCE`), its error at every
+            moment measured against the demonstrations' spread at that moment, so that phases
+            where they agree (a grasp) are kept whatever they do elsewhere; ``"bic"``: the
+            effective-sample-size BIC of earlier versions (kept for comparison).
         max_components : int
             Largest K tried.
         reg_covar : float, dict or None
