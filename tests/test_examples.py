@@ -147,11 +147,12 @@ def test_panda_from_bags(runs: dict[str, tuple[Path, str]]) -> None:
     # The printed closest approach is the trajectory's: the hand reaches the new glass.
     closest = np.linalg.norm(robot.fk(traj.q) - glass, axis=1).min()
     assert closest < 0.005
-    assert abs(1000 * closest - _number(r"closest approach to the glass: (\d+\.\d) mm", text)) < 1.5
+    printed = _number(r"closest approach to the glass: (\d+\.\d) mm", text)
+    assert abs(1000 * closest - printed) < 0.06
     assert _number(r"joint space only, the demonstrated postures: (\d+\.\d) mm", text) > 20
 
     # Online at 1 kHz: what a Panda checks, recomputed from the setpoints (the arm at rest at
-    # its start before them and at their last after them). Measured: velocity 0.641,
+    # its start before them and at their last after them). Measured: velocity 0.675,
     # acceleration 0.995, jerk 0.995 (the stream is planned at 0.995 of the limits).
     np.testing.assert_allclose(np.diff(t_set), 0.001, rtol=1e-9)
     # It lasts as long as the offline trajectory (measured: 7 ms longer, the follower's end).
@@ -172,7 +173,7 @@ def test_panda_from_bags(runs: dict[str, tuple[Path, str]]) -> None:
     np.testing.assert_allclose(q_set[-1], res.joints[-1], atol=1e-9)
     assert np.abs(q_set[-1] - q_set[-2]).max() / 0.001 < 0.01  # rad/s, measured 0.0015
     # The gripper closes once, when the offline one does (within a controller step), with the
-    # hand at the glass: measured 0.3 mm.
+    # hand at the glass: measured 0.2 mm.
     assert np.count_nonzero(np.diff(closed.astype(int))) == 1
     grasp = int(np.argmax(closed))
     assert abs(t_set[grasp] - traj.t[np.argmax(res.gripper)]) <= skill.step_seconds

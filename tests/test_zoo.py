@@ -120,3 +120,15 @@ def test_pooled_scoring_loses_the_grasp_the_local_one_keeps() -> None:
     assert pooled.n_components["box"] <= 4 < default.n_components["box"]
     assert grasp_errors(pooled, robot, data, boxes).min() > 10e-3
     assert grasp_errors(default, robot, data, boxes).max() < 2e-3
+
+
+def test_a_box_out_of_reach_is_refused_before_running() -> None:
+    arm = ARMS["xarm7"]
+    robot = arm.robot()
+    data = arm.demos(robot, WIDE, seed=0)
+    skill = Skill.learn(data.demos, robot)
+    far = np.array([1.2, 0.0, 0.05])  # the xArm7 reaches about 0.77 m
+    with pytest.raises(
+        ValueError, match=r"objects\['box'\]: the hand must be at .* beyond the arm's reach"
+    ):
+        skill.reproduce({"box": far})

@@ -666,8 +666,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         ``"auto"`` only: what a left-out demonstration's squared error is divided by. ``"local"``
         (default): the demonstrations' variance at that time (:func:`local_spread`, at least
         :data:`LOCAL_SPREAD_FLOOR` of the pooled one), so a phase where they agree weighs as
-        much as it is tight; ``"pooled"``: their variance pooled
-        over time (:func:`pooled_spread`; pbdkit before 0.2, which lost such phases where the
+        much as it is tight; ``"pooled"``: their variance pooled over time
+        (:func:`pooled_spread`; pbdkit's earlier default, which lost such phases where the
         demonstrations differ elsewhere). Module docstring, "Choosing K".
 
     Attributes
