@@ -59,8 +59,8 @@ demonstrations do elsewhere. Pooled over time (``cv_scale="pooled"``, pbdkit's e
 default, :func:`pooled_spread`) the loose phases dominate: where the demonstrations agree only
 briefly and differ by decimetres elsewhere (objects anywhere on a wide table), no K predicts a
 left-out demonstration's loose phases, the smallest K wins and the tight phase is lost (on
-third-party arms, K = 1-4 for the object's space and a hand that missed the object by 15-85
-mm; ``benchmarks/README.md``, "Your own arm").
+third-party arms, K = 2-6 for the object's space and a hand that missed the object by 16 mm,
+median, up to 94 mm; ``benchmarks/README.md``, "Your own arm").
 
 The left-out model is the fitted one with m's sufficient statistics removed and one EM
 iteration on the rest (:func:`_cv_errors`; close to exact refits at a fraction of their
