@@ -78,7 +78,7 @@ def main() -> None:
         for spread in arm.spreads:
             ks = {m: [] for m in METHODS}
             errs = {m: [] for m in METHODS}
-            limited, secs = [], []
+            stretch, secs = [], []
             for seed in range(args.seeds):
                 data = arm.demos(robot, spread, seed)
                 boxes = data.placements(5, seed=seed)
@@ -91,7 +91,7 @@ def main() -> None:
                             why_rows.append([name, f"{100 * spread:.0f} cm", why(skill)])
                         for box in boxes[:1]:
                             res = skill.reproduce({data.object_name: box})
-                            limited.append(float(res.stretch))
+                            stretch.append(float(res.stretch))
                     ks[method].append(skill.n_components)
                     errs[method].extend(grasp_errors(skill, robot, data, boxes))
             for method in METHODS:
@@ -106,7 +106,7 @@ def main() -> None:
                         f"{np.median(e):.2f}",
                         f"{np.percentile(e, 90):.2f}",
                         f"{e.max():.1f}",
-                        f"{np.median(limited):.2f}" if method == "auto" else "",
+                        f"{np.median(stretch):.2f}" if method == "auto" else "",
                         f"{np.median(secs):.2f} s" if method == "auto" else "",
                     ]
                 )

@@ -116,6 +116,12 @@ def skill(robot: Robot, demos: list[Demonstration]) -> Skill:
     return Skill.learn(demos, robot, n_steps=N_STEPS, random_state=0)
 
 
+@pytest.fixture(scope="module")
+def limits(robot: Robot) -> MotionLimits:
+    """The Katana's declared velocity, acceleration and jerk limits."""
+    return MotionLimits.from_robot(robot, robot.n_joints)
+
+
 def unseen_glass(demos: list[Demonstration]) -> tuple[Float, float]:
     mean = np.mean([d.objects["glass"] for d in demos], axis=0)
     new = mean + np.array([0.05, -0.07, 0.0])
@@ -299,16 +305,17 @@ def within_limits(
 
 @pytest.mark.parametrize("use", [None, ["joint"], ["glass"]])
 def test_reproductions_stay_within_the_velocity_acceleration_and_jerk_limits(
-    skill: Skill, demos: list[Demonstration], use: list[str] | None
+    skill: Skill,
+    demos: list[Demonstration],
+    use: list[str] | None,
+    robot: Robot,
+    limits: MotionLimits,
 ) -> None:
-    robot = skill.robot
-    assert isinstance(robot, Robot)
-    lim = MotionLimits.from_robot(robot, robot.n_joints)
     glass, _ = unseen_glass(demos)
     for q0 in [None, *(d.joints[0] for d in demos)]:
         res = skill.reproduce({"glass": glass}, q0=q0, use=use)
         assert within_limits(skill, res)
-        assert count_reversals(res.joints, np.diff(skill.times(res)), lim.velocity) == 0
+        assert count_reversals(res.joints, np.diff(skill.times(res)), limits.velocity) == 0
         assert np.all(res.joints >= robot.lower) and np.all(res.joints <= robot.upper)
         # Starting at q0 (a lead-in to the skill's first posture) and ending at rest.
         if q0 is not None:
@@ -321,24 +328,21 @@ def test_reproductions_stay_within_the_velocity_acceleration_and_jerk_limits(
         # Katana (Table II as written from the first posture: measured 20-115 rad/s^2).
         free = skill.reproduce({"glass": glass}, q0=q0, use=use, **NO_LIMITS)
         t = np.arange(free.joints.shape[0]) * skill.step_seconds
-        assert motion_peaks(t, free.joints, lim).worst > 1.5
+        assert motion_peaks(t, free.joints, limits).worst > 1.5
     if use != ["joint"]:  # the hand still holds the moved glass
         assert res.task_errors["glass"][row(res, REACH_STEP)] < 0.005
 
 
 def test_from_any_posture_within_the_joint_limits_a_lead_in_within_the_limits(
-    skill: Skill, demos: list[Demonstration]
+    skill: Skill, demos: list[Demonstration], robot: Robot, limits: MotionLimits
 ) -> None:
-    robot = skill.robot
-    assert isinstance(robot, Robot)
-    lim = MotionLimits.from_robot(robot, robot.n_joints)
     glass, _ = unseen_glass(demos)
     rng = np.random.default_rng(12)
     own_part = None
     for q0 in rng.uniform(robot.lower, robot.upper, size=(8, robot.n_joints)):
         res = skill.reproduce({"glass": glass}, q0=q0)
         np.testing.assert_array_equal(res.joints[0], q0)
-        assert within_limits(skill, res, lim)
+        assert within_limits(skill, res, limits)
         assert res.lead_in is not None and res.lead_in.sum() > 1
         # The skill's own part does not depend on where the arm started: the lead-in is a
         # separate move to the skill's first posture, then the skill keeps its timing.
@@ -368,11 +372,8 @@ def test_limits_that_never_bind_keep_the_demonstrations_pace(
 
 
 def test_limited_marks_exactly_the_steps_the_limits_slowed(
-    skill: Skill, demos: list[Demonstration]
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits
 ) -> None:
-    robot = skill.robot
-    assert isinstance(robot, Robot)
-    lim = MotionLimits.from_robot(robot, robot.n_joints)
     objs = {"glass": unseen_glass(demos)[0]}
     q0 = Q_START + np.array([0.6, -0.3, 0.3, 0.4, 0.5])  # far from theta_hat_0
     res = skill.reproduce(objs, q0=q0)
@@ -387,8 +388,8 @@ def test_limited_marks_exactly_the_steps_the_limits_slowed(
     # more than the limits (divided differences at the nominal timing, including the rest
     # padding at the end).
     nominal = np.arange(res.joints.shape[0]) * skill.step_seconds
-    assert motion_peaks(nominal, res.joints, lim).worst > 1.0
-    assert motion_peaks(res.times, res.joints, lim).worst <= 1.0 + 1e-9
+    assert motion_peaks(nominal, res.joints, limits).worst > 1.0
+    assert motion_peaks(res.times, res.joints, limits).worst <= 1.0 + 1e-9
     # A step is never made shorter than the nominal one.
     assert h.min() >= skill.step_seconds * (1 - 1e-12)
 

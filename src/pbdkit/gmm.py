@@ -410,6 +410,28 @@ def _check_covariances(covariances: Float, name: str) -> Float:
 
 
 # ----------------------------------------------------------------------------- choosing K
+def _bin_variances(
+    x: Float, groups: NDArray[np.intp], time_dim: int
+) -> tuple[list[NDArray[np.intp]], Float]:
+    """The rows sorted by time and cut into bins of as many rows as there are sequences, and
+    the variance of every column within each bin: (rows of each bin, (n_bins, D))."""
+    n_groups = int(groups.max()) + 1
+    order = np.argsort(x[:, time_dim], kind="stable")
+    bins = np.array_split(order, max(1, x.shape[0] // n_groups))
+    return bins, np.stack([x[b].var(axis=0) for b in bins])
+
+
+def _pooled(bins: list[NDArray[np.intp]], variances: Float) -> Float:
+    return np.asarray(np.average(variances, axis=0, weights=[len(b) for b in bins]))
+
+
+def _local(bins: list[NDArray[np.intp]], variances: Float, n_rows: int) -> Float:
+    out = np.empty((n_rows, variances.shape[1]))
+    for b, v in zip(bins, variances, strict=True):
+        out[b] = v
+    return out
+
+
 def pooled_spread(x: Float, groups: NDArray[np.intp], time_dim: int) -> Float:
     """Variance of every column across sequences at equal times, pooled over time: (D,).
 
@@ -418,15 +440,7 @@ def pooled_spread(x: Float, groups: NDArray[np.intp], time_dim: int) -> Float:
     within-bin variances are averaged. It is the squared error of the pointwise mean of the
     sequences: the floor no time-indexed model can go below (the demonstrations' variability).
     """
-    n_groups = int(groups.max()) + 1
-    order = np.argsort(x[:, time_dim], kind="stable")
-    n_bins = max(1, x.shape[0] // n_groups)
-    bins = np.array_split(order, n_bins)
-    return np.asarray(
-        np.average(
-            np.stack([x[b].var(axis=0) for b in bins]), axis=0, weights=[len(b) for b in bins]
-        )
-    )
+    return _pooled(*_bin_variances(x, groups, time_dim))
 
 
 def local_spread(x: Float, groups: NDArray[np.intp], time_dim: int) -> Float:
@@ -435,13 +449,7 @@ def local_spread(x: Float, groups: NDArray[np.intp], time_dim: int) -> Float:
     The bins of :func:`pooled_spread` (one per time step on a shared grid), not pooled: each
     row gets the variance of its own bin, the demonstrations' variability at that moment.
     """
-    n_groups = int(groups.max()) + 1
-    order = np.argsort(x[:, time_dim], kind="stable")
-    n_bins = max(1, x.shape[0] // n_groups)
-    out = np.empty_like(x)
-    for b in np.array_split(order, n_bins):
-        out[b] = x[b].var(axis=0)
-    return out
+    return _local(*_bin_variances(x, groups, time_dim), x.shape[0])
 
 
 @dataclass(frozen=True)
@@ -859,11 +867,11 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                 assert self.time_dim is not None
                 td = int(self.time_dim)
                 score_dims = self._check_score_dims(d, td)
-                spread_ = pooled_spread(x, grp, td)[score_dims]
+                bins, variances = _bin_variances(x, grp, td)
+                spread_ = _pooled(bins, variances)[score_dims]
                 if self.cv_scale == "local":
-                    spread_ = np.maximum(
-                        local_spread(x, grp, td)[:, score_dims], LOCAL_SPREAD_FLOOR * spread_
-                    )
+                    local = _local(bins, variances, n)[:, score_dims]
+                    spread_ = np.maximum(local, LOCAL_SPREAD_FLOOR * spread_)
                 scale = np.maximum(spread_, diag[score_dims])
                 scale = np.where(scale > 0, scale, 1.0)
 

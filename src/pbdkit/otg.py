@@ -175,6 +175,12 @@ class Motion:
             np.array([r[2] for r in rows], dtype=np.float64),
         )
 
+    def every(self, period: float, n_steps: int | None = None) -> tuple[Float, Float, Float]:
+        """:meth:`sample` every ``period`` from :attr:`t0`: ``n_steps`` rows, or (default) until
+        the first at or after :attr:`end`."""
+        total = math.ceil((self.end - self.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
+        return self.sample(self.t0 + period * np.arange(total, dtype=np.float64))
+
 
 def spline_derivatives(
     t: Float, q: Float, start_velocity: Float | None = None
@@ -583,6 +589,4 @@ def follow_samples(
         Row k at t[0] + k period; row 0 is the start state.
     """
     motion = follow(t, q, limits, velocities=velocities, accelerations=accelerations, start=start)
-    total = math.ceil((motion.end - motion.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
-    times = motion.t0 + period * np.arange(total, dtype=np.float64)
-    return motion.sample(np.asarray(times, dtype=np.float64))
+    return motion.every(period, n_steps)

@@ -144,8 +144,9 @@ def _normalize_joints(root: ET.Element) -> bool:
     return changed
 
 
-def _pinocchio_xml(root: ET.Element) -> tuple[str, dict[str, str]]:
-    """The URDF text given to pinocchio, and its joint names -> the URDF's.
+def _pinocchio_xml(root: ET.Element, urdf: str) -> tuple[str, dict[str, str]]:
+    """The URDF text given to pinocchio (``urdf``, the text of ``root``, unless a joint is
+    renamed), and its joint names -> the URDF's.
 
     A joint may share its name with a link (SO-100's ``gripper``); pinocchio then finds two
     frames of that name and fails to lock the joint off the tip's chain. Such joints are renamed
@@ -164,7 +165,7 @@ def _pinocchio_xml(root: ET.Element) -> tuple[str, dict[str, str]]:
             taken.add(alias)
             renamed[name] = alias
     if not renamed:
-        return ET.tostring(root, encoding="unicode"), {}
+        return urdf, {}
     copy = deepcopy(root)
     for joint in copy.iter("joint"):
         if joint.find("parent") is not None and joint.get("name", "") in renamed:
@@ -428,7 +429,7 @@ class Robot:
         if _normalize_joints(root):
             urdf = ET.tostring(root, encoding="unicode")
         base_name, tip_name = _choose_tip(root, tip)
-        pin_xml, urdf_names = _pinocchio_xml(root)
+        pin_xml, urdf_names = _pinocchio_xml(root, urdf)
         try:
             full = pin.buildModelFromXML(pin_xml)
         except (RuntimeError, ValueError) as exc:

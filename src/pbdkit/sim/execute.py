@@ -395,9 +395,7 @@ def _servo_motion(
         velocities=velocities,
         accelerations=accelerations,
     )
-    total = math.ceil((motion.end - motion.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
-    times = np.asarray(motion.t0 + period * np.arange(total), dtype=np.float64)
-    pos, vel, _ = motion.sample(times)
+    pos, vel, _ = motion.every(period, n_steps)
     return pos, vel, motion.sample_times
 
 
