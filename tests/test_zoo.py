@@ -132,3 +132,20 @@ def test_a_box_out_of_reach_is_refused_before_running() -> None:
         ValueError, match=r"objects\['box'\]: the hand must be at .* beyond the arm's reach"
     ):
         skill.reproduce({"box": far})
+
+
+def test_reach_grasp_return_refuses_bad_input() -> None:
+    arm = ARMS["ur5"]
+    robot = arm.robot()
+    with pytest.raises(ValueError, match=r"home must have shape \(6,\)"):
+        reach_grasp_return(robot, arm.center, [0.0, 0.0])
+    with pytest.raises(ValueError, match=r"center must have shape \(3,\)"):
+        reach_grasp_return(robot, [0.4, 0.1], arm.home)
+    with pytest.raises(ValueError, match="spread"):
+        reach_grasp_return(robot, arm.center, arm.home, spread=-0.1)
+    with pytest.raises(ValueError, match="n_demos"):
+        reach_grasp_return(robot, arm.center, arm.home, n_demos=1)
+    with pytest.raises(ValueError, match="cv_scale must be 'local' or 'pooled'"):
+        GMM("auto", cv_scale="median").fit(
+            np.column_stack([np.tile(np.arange(10.0), 2), np.arange(20.0)])
+        )  # type: ignore[arg-type]
