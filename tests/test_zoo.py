@@ -145,7 +145,6 @@ def test_reach_grasp_return_refuses_bad_input() -> None:
         reach_grasp_return(robot, arm.center, arm.home, spread=-0.1)
     with pytest.raises(ValueError, match="n_demos"):
         reach_grasp_return(robot, arm.center, arm.home, n_demos=1)
+    x = np.column_stack([np.tile(np.arange(10.0), 2), np.arange(20.0)])
     with pytest.raises(ValueError, match="cv_scale must be 'local' or 'pooled'"):
-        GMM("auto", cv_scale="median").fit(
-            np.column_stack([np.tile(np.arange(10.0), 2), np.arange(20.0)])
-        )  # type: ignore[arg-type]
+        GMM("auto", cv_scale="median").fit(x)  # type: ignore[arg-type]
