@@ -6,9 +6,9 @@ it (80 reproductions). For every reproduction, played over ``skill.times(res)``:
 
 - peak velocity, acceleration and jerk over the Katana's limits (1.19 rad/s, 6 rad/s^2,
   60 rad/s^3): divided differences at the trajectory's own samples, padded with rest at both
-  ends (``pbdkit.limits.motion_peaks``);
+  ends (``pbdkit.motion.limits.motion_peaks``);
 - reversals: a joint reversing between two consecutive steps each faster than 25 % of its
-  velocity limit (``pbdkit.limits.count_reversals``);
+  velocity limit (``pbdkit.motion.limits.count_reversals``);
 - the hand's distance to o + x_hat at each object's tightest step (mm);
 - the cost of ``Skill.reproduce`` per step (BLAS on one thread, median of 5 calls).
 
@@ -43,8 +43,8 @@ from _common import print_table
 from threadpoolctl import threadpool_limits
 
 from pbdkit import Skill
-from pbdkit.demos import save_demonstrations
-from pbdkit.limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.learning.demonstration import save_demonstrations
+from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import teach
@@ -60,7 +60,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 warnings.simplefilter("ignore")
 from pbdkit import Skill
-from pbdkit.demos import load_demonstrations
+from pbdkit.learning.demonstration import load_demonstrations
 from pbdkit.robots import katana
 job = json.loads(sys.argv[1])
 out = {}

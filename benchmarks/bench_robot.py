@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from pbdkit import robots
-from pbdkit.kinematics import damped_pinv
+from pbdkit.robots.kinematics import damped_pinv
 
 PI = math.pi
 

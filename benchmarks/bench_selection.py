@@ -1,7 +1,7 @@
 """Benchmark: how K is chosen, measured on the simulated teacher's tasks and on LASA.
 
-The evidence behind ``n_components="auto"`` (pbdkit.gmm, "Choosing K"). For both tasks and teach
-seeds 0-9 (5 demonstrations each, the paper's configuration: the basin task has no
+The evidence behind ``n_components="auto"`` (pbdkit.prob.gmm, "Choosing K"). For both tasks and
+teach seeds 0-9 (5 demonstrations each, the paper's configuration: the basin task has no
 basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
 
 - the K kept per space (and the cap, ``max_components``);
@@ -13,7 +13,7 @@ basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
   largest over the joints; task spaces in mm, the norm of the 3-D step), and its ratio to the
   demonstrations' own largest one-step change (rescaled to the same grid; for a task space the
   hand position f(theta) minus the object's): a ratio well above 1 is a jump of the
-  generalized trajectory (pbdkit.gmm, "Time floor");
+  generalized trajectory (pbdkit.prob.gmm, "Time floor");
 - the fused reproduction's peak joint speed over the URDF limit, played over ``skill.times()``,
   from q0 = None and from every demonstration's first posture (worst);
 - learning time.
@@ -52,9 +52,10 @@ from _common import print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from pbdkit.datasets import lasa_names, load_lasa
-from pbdkit.demos import Demonstration
-from pbdkit.gmm import (
+from pbdkit.learning.datasets import lasa_names, load_lasa
+from pbdkit.learning.demonstration import Demonstration
+from pbdkit.learning.skill import JOINT, Skill
+from pbdkit.prob.gmm import (
     CV_TOLERANCE,
     GMM,
     LOCAL_SPREAD_FLOOR,
@@ -67,7 +68,6 @@ from pbdkit.gmm import (
 from pbdkit.robots import katana
 from pbdkit.sim.experiment import constrained_objects
 from pbdkit.sim.teacher import teach
-from pbdkit.skill import JOINT, Skill
 
 Float = NDArray[np.float64]
 ROLL = 4  # the Katana's wrist roll
@@ -192,7 +192,7 @@ METHODS = ["auto", "auto-pooled", "bic20", "bic-plain", "bic-acf", "loo-lik"]
 
 def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
     """The rows each GMM of ``skill`` was fitted on (100 steps per demonstration)."""
-    from pbdkit.skill import space_data
+    from pbdkit.learning.skill import space_data
 
     steps = np.unique(np.round(np.linspace(0, skill.n_steps - 1, 100)).astype(int))
     data = space_data(demos, skill.robot, skill.object_names, skill.n_steps, steps)
@@ -392,7 +392,7 @@ def run(args: argparse.Namespace) -> None:
 
 def _floor_of(skill: Skill, name: str) -> Float:
     """Skill.learn's default per-dimension floor of a space."""
-    from pbdkit.skill import TIME_FLOOR, VARIABILITY_FLOOR
+    from pbdkit.learning.skill import TIME_FLOOR, VARIABILITY_FLOOR
 
     if name == JOINT:
         n = skill.n_joints

@@ -22,8 +22,8 @@ controller (remap the topic to /<controller>/joint_trajectory), and the gripper 
 Online, the skill runs in the arm's 1 kHz loop (libfranka, franka_ros2): every millisecond,
 read the joints, send the next setpoint. A Panda checks every setpoint against the last ones and
 stops on one that needs more velocity, acceleration or jerk than its limits; a
-pbdkit.limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for the
-arm (the joints follow the setpoints, the encoders read them with a little noise).
+pbdkit.motion.limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for
+the arm (the joints follow the setpoints, the encoders read them with a little noise).
 
 The output folder gets the demonstration bags, the trajectory bag, the skill (skill.npz) and the
 online run's setpoints (stream.npz: t, q, gripper, and the glass).
@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 
 import pbdkit
-from pbdkit.bags import write_demonstration_bag
-from pbdkit.limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
+from pbdkit.learning.bags import write_demonstration_bag
+from pbdkit.motion.limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
 
 RATE = 100.0  # Hz, the joint state rate of the driver
 LOOP_HZ = 1000.0  # the Panda's control loop: one setpoint per millisecond

@@ -21,8 +21,8 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner, Result
 
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
-from pbdkit.bags import write_demonstration_bag
-from pbdkit.cli import app
+from pbdkit.apps.cli import app
+from pbdkit.learning.bags import write_demonstration_bag
 from pbdkit.robots import katana
 
 TS = get_typestore(Stores.ROS2_HUMBLE)

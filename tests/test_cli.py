@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner, Result
 
-from pbdkit.cli import app
-from pbdkit.demos import Demonstration, save_demonstrations
-from pbdkit.gmm import CV_TOLERANCE
+from pbdkit.apps.cli import app
+from pbdkit.learning.demonstration import Demonstration, save_demonstrations
+from pbdkit.learning.skill import Skill
+from pbdkit.prob.gmm import CV_TOLERANCE
 from pbdkit.robots import katana
-from pbdkit.skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -126,7 +126,7 @@ def no_simulation(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the command started working before checking its output paths")
 
     sim = [f"pbdkit.sim{m}" for m in ("", ".experiment", ".teacher", ".tracking")]
-    names = ["pbdkit.demo", *sim]
+    names = ["pbdkit.apps.demo", *sim]
     for name in names:
         fake = types.ModuleType(name)
         fake.__getattr__ = lambda attr: refuse  # type: ignore[method-assign]

@@ -10,12 +10,12 @@ import pytest
 from test_skill import N_STEPS, REACH_STEP, synthetic_demos, unseen_glass
 
 from pbdkit import Controller, Skill
-from pbdkit.controller import REPLAN_DISTANCE, Command
-from pbdkit.demos import Demonstration
-from pbdkit.limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
-from pbdkit.otg import follow
-from pbdkit.robot import Robot
+from pbdkit.learning.controller import REPLAN_DISTANCE, Command
+from pbdkit.learning.demonstration import Demonstration
+from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
+from pbdkit.motion.otg import follow
 from pbdkit.robots import katana
+from pbdkit.robots.model import Robot
 
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
 
@@ -124,7 +124,7 @@ def test_fed_its_own_commands_it_plays_the_reproduction(
     ctrl = skill.controller({"glass": glass})
     assert ctrl.limits is not None
     joints, cmds = _run(ctrl, q0.copy())
-    # The commands are the reproduction's motion (pbdkit.otg.follow) sampled every dt.
+    # The commands are the reproduction's motion (pbdkit.motion.otg.follow) sampled every dt.
     motion = follow(
         offline.times,
         offline.joints,

@@ -13,12 +13,12 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
-from pbdkit.cli import app
-from pbdkit.gmm import MAX_COMPONENTS
+from pbdkit.apps.cli import app
+from pbdkit.learning.skill import Skill
+from pbdkit.prob.gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import teach
-from pbdkit.skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

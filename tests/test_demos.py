@@ -1,4 +1,4 @@
-"""Tests of pbdkit.demos: validation, time rescaling, .npz and CSV I/O."""
+"""Tests of pbdkit.learning.demonstration: validation, time rescaling, .npz and CSV I/O."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pbdkit.demos import (
+from pbdkit.learning.demonstration import (
     Demonstration,
     check_demonstrations,
     demonstration_from_csv,

@@ -20,8 +20,8 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from pbdkit import Skill, demonstration_from_csv, read_bag
-from pbdkit.limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.reproduce import ReproductionResult
+from pbdkit.learning.probabilistic_ik import ReproductionResult
+from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import panda
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

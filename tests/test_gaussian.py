@@ -1,4 +1,4 @@
-"""Tests of pbdkit.gaussian against the definitions (brute-force densities on a grid)."""
+"""Tests of pbdkit.prob.gaussian against the definitions (brute-force densities on a grid)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from pbdkit import gaussian as G
+from pbdkit.prob import gaussian as G
 
 
 def _random_spd(rng: np.random.Generator, d: int, scale: float = 1.0) -> np.ndarray:

@@ -18,8 +18,8 @@ from sklearn.utils import estimator_checks
 from sklearn.utils.validation import check_is_fitted
 
 from pbdkit import GMM
-from pbdkit.datasets import lasa_names, load_lasa
-from pbdkit.gmm import (
+from pbdkit.learning.datasets import lasa_names, load_lasa
+from pbdkit.prob.gmm import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
     MIN_TIME_SPREAD,

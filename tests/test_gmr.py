@@ -7,8 +7,8 @@ import pytest
 from gmr import GMM as ReferenceGMM
 
 from pbdkit import GMM
-from pbdkit.datasets import lasa_names, load_lasa
-from pbdkit.gmr import gmr_batch, gmr_step
+from pbdkit.learning.datasets import lasa_names, load_lasa
+from pbdkit.prob.gmr import gmr_batch, gmr_step
 
 
 def _random_gmm(rng: np.random.Generator, k: int, d: int) -> tuple[np.ndarray, ...]:

@@ -1,5 +1,5 @@
 """Joint limits as data: the joint_limits.yaml of MoveIt / ros2_control read by Robot.from_urdf
-(pbdkit._joint_limits), limits kept by pickling, by skill files and by `pbdkit learn`."""
+(pbdkit.robots._joint_limits), limits kept by pickling, by skill files and by `pbdkit learn`."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from numpy.typing import NDArray
 from typer.testing import CliRunner
 
 from pbdkit import robots
-from pbdkit.cli import app
-from pbdkit.demos import Demonstration, save_demonstrations
-from pbdkit.robot import Robot, urdf_from_dh
-from pbdkit.skill import Skill
+from pbdkit.apps.cli import app
+from pbdkit.learning.demonstration import Demonstration, save_demonstrations
+from pbdkit.learning.skill import Skill
+from pbdkit.robots.model import Robot, urdf_from_dh
 
 INF = np.inf
 LIMITS = ("velocity_limit", "acceleration_limit", "jerk_limit")

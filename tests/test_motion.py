@@ -16,8 +16,8 @@ import pytest
 pytest.importorskip("mujoco")
 
 from pbdkit import Skill
-from pbdkit.limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.reproduce import ReproductionResult, reproduce, step_limit_from_velocity
+from pbdkit.learning.probabilistic_ik import ReproductionResult, reproduce, step_limit_from_velocity
+from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import teach

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from pbdkit import Skill
-from pbdkit.limits import MotionLimits, motion_peaks
+from pbdkit.motion.limits import MotionLimits, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.online import OnlineRun, TruthObserver, execute_online

@@ -11,8 +11,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from pbdkit.limits import MotionLimits, divided_differences
-from pbdkit.plots import (
+from pbdkit.apps.plots import (
     figure_png,
     plot_constraints,
     plot_demonstrations_3d,
@@ -20,9 +19,10 @@ from pbdkit.plots import (
     plot_reproductions,
     space_data,
 )
+from pbdkit.learning.skill import Skill
+from pbdkit.motion.limits import MotionLimits, divided_differences
 from pbdkit.robots import katana
 from pbdkit.sim.teacher import teach
-from pbdkit.skill import Skill
 
 N_STEPS = 300
 
@@ -164,14 +164,14 @@ def test_figures_leave_the_users_matplotlib_backend_alone() -> None:
 
     code = (
         "import matplotlib; matplotlib.use('svg'); import numpy as np\n"
-        "from pbdkit.plots import figure_png, plot_gmr_tube\n"
+        "from pbdkit.apps.plots import figure_png, plot_gmr_tube\n"
         "from matplotlib.figure import Figure\n"
         "fig = Figure(); ax = fig.subplots()\n"
         "t = np.linspace(0, 1, 5); plot_gmr_tube(ax, t, t, 0.1 + 0 * t)\n"
         "png = figure_png(fig)\n"
         "assert png[:4] == b'\\x89PNG', png[:4]\n"
         "from pbdkit import GMM\n"
-        "from pbdkit.plots import plot_lasa_summary\n"
+        "from pbdkit.apps.plots import plot_lasa_summary\n"
         "x = np.column_stack([t, t, t])\n"
         "gmm = GMM.from_params([1.0], [[0.5, 0.5, 0.5]], [np.eye(3)])\n"
         "m, c = gmm.regress(t[:, None])\n"

@@ -6,7 +6,7 @@ import base64
 import re
 from pathlib import Path
 
-from pbdkit.report import Figure, Section, render_report, write_report
+from pbdkit.apps.report import Figure, Section, render_report, write_report
 
 PNG_1x1 = base64.b64decode(
     "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg=="

@@ -1,4 +1,5 @@
-"""Tests of pbdkit.reproduce: the Table II loop, fusion in information form, controllers.
+"""Tests of pbdkit.learning.probabilistic_ik: the Table II loop, fusion in information form,
+controllers.
 
 A small spatial 4-joint arm with analytic kinematics (base yaw + three pitch joints) satisfies
 the KinematicModel protocol; constraints are built by hand so that every quantity is known.
@@ -13,8 +14,7 @@ import numpy.typing as npt
 import pytest
 from numpy.typing import NDArray
 
-from pbdkit.kinematics import damped_pinv
-from pbdkit.reproduce import (
+from pbdkit.learning.probabilistic_ik import (
     VELOCITY_SAFETY,
     Constraints,
     KinematicModel,
@@ -24,6 +24,7 @@ from pbdkit.reproduce import (
     reproduce,
     step_limit_from_velocity,
 )
+from pbdkit.robots.kinematics import damped_pinv
 
 Float = NDArray[np.float64]
 

@@ -17,11 +17,12 @@ pytest.importorskip("mujoco")
 import mujoco
 from typer.testing import CliRunner
 
-from pbdkit.cli import app
-from pbdkit.demos import load_demonstrations
-from pbdkit.gmm import MAX_COMPONENTS
-from pbdkit.limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
-from pbdkit.otg import follow
+from pbdkit.apps.cli import app
+from pbdkit.learning.demonstration import load_demonstrations
+from pbdkit.learning.skill import Skill
+from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
+from pbdkit.motion.otg import follow
+from pbdkit.prob.gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import (
     Outcome,
@@ -50,7 +51,6 @@ from pbdkit.sim.execute import TIMESTEP, Recorder, servo_stream
 from pbdkit.sim.taskdefs import basin as B
 from pbdkit.sim.teacher import APPROACH, UP, Person, between, grasp_via_points, radial
 from pbdkit.sim.world import CAMERA_POSITIONS, CAMERA_TARGET, add_glass
-from pbdkit.skill import Skill
 
 
 def _red_mask(image: np.ndarray) -> np.ndarray:
@@ -587,8 +587,8 @@ def test_playback_servos_follow_the_samples(
     ex, res = run.execution, run.reproduction
     t = ts.skill.times(res)
     grid = ex.servo_period * np.arange(ex.servo_targets.shape[0])
-    # The servo targets are the motion pbdkit.otg.follow makes through the samples; it reaches
-    # each sample at its time, or later where the limits kept it behind.
+    # The servo targets are the motion pbdkit.motion.otg.follow makes through the samples; it
+    # reaches each sample at its time, or later where the limits kept it behind.
     motion = follow(
         t,
         res.joints,

@@ -14,10 +14,10 @@ pytest.importorskip("mujoco")
 from typer.testing import CliRunner
 
 from pbdkit import Skill
-from pbdkit.cli import app
+from pbdkit.apps import study as S
+from pbdkit.apps.cli import app
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
-from pbdkit.sim import study as S
 from pbdkit.sim.tasks import get_task
 from pbdkit.sim.teacher import teach
 

@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
-from pbdkit.cli import app
+from pbdkit.apps.cli import app
+from pbdkit.learning.skill import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, nominal_objects, sample_objects
 from pbdkit.sim import experiment as E
@@ -25,7 +26,6 @@ from pbdkit.sim.tracking import (
     patch_geom_ids,
     tracked_objects,
 )
-from pbdkit.skill import Skill
 from pbdkit.vision import StereoTracker
 
 # Measured by benchmarks/bench_tracking.py over 100 placements per task: largest corrected error

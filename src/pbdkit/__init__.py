@@ -33,45 +33,48 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from . import _moved
+
 if TYPE_CHECKING:
-    from . import gaussian, robots
-    from .bags import read_bag, write_trajectory_bag
-    from .controller import Command, Controller
-    from .demos import (
+    from . import robots
+    from .learning.bags import read_bag, write_trajectory_bag
+    from .learning.controller import Command, Controller
+    from .learning.demonstration import (
         Demonstration,
         LimitWarning,
         demonstration_from_csv,
         load_demonstrations,
         save_demonstrations,
     )
-    from .gmm import GMM
-    from .kinematics import damped_pinv, nullspace_projector
-    from .reproduce import ReachWarning, ReproductionResult
-    from .robot import Robot
-    from .skill import Skill
+    from .learning.probabilistic_ik import ReachWarning, ReproductionResult
+    from .learning.skill import Skill
+    from .prob import gaussian
+    from .prob.gmm import GMM
+    from .robots.kinematics import damped_pinv, nullspace_projector
+    from .robots.model import Robot
 
 # The public names and the modules they live in. They are imported on first use (PEP 562), so
 # that `import pbdkit` and the command line start in a fraction of a second: scikit-learn,
 # SciPy and pinocchio are loaded when a name that needs them is first used.
 _WHERE = {
-    "GMM": "gmm",
-    "Command": "controller",
-    "Controller": "controller",
-    "Demonstration": "demos",
-    "LimitWarning": "demos",
-    "ReachWarning": "reproduce",
-    "ReproductionResult": "reproduce",
-    "Robot": "robot",
-    "Skill": "skill",
-    "damped_pinv": "kinematics",
-    "demonstration_from_csv": "demos",
-    "load_demonstrations": "demos",
-    "nullspace_projector": "kinematics",
-    "read_bag": "bags",
-    "save_demonstrations": "demos",
-    "write_trajectory_bag": "bags",
+    "GMM": "prob.gmm",
+    "Command": "learning.controller",
+    "Controller": "learning.controller",
+    "Demonstration": "learning.demonstration",
+    "LimitWarning": "learning.demonstration",
+    "ReachWarning": "learning.probabilistic_ik",
+    "ReproductionResult": "learning.probabilistic_ik",
+    "Robot": "robots.model",
+    "Skill": "learning.skill",
+    "damped_pinv": "robots.kinematics",
+    "demonstration_from_csv": "learning.demonstration",
+    "load_demonstrations": "learning.demonstration",
+    "nullspace_projector": "robots.kinematics",
+    "read_bag": "learning.bags",
+    "save_demonstrations": "learning.demonstration",
+    "write_trajectory_bag": "learning.bags",
 }
-_SUBMODULES = ("gaussian", "robots")
+_SUBMODULES = {"gaussian": "prob.gaussian", "robots": "robots"}
 
 __all__ = [
     "GMM",
@@ -95,10 +98,12 @@ __all__ = [
 ]
 __version__ = "0.1.0"
 
+_moved.install()
+
 
 def __getattr__(name: str) -> Any:
     if name in _SUBMODULES:
-        return importlib.import_module(f".{name}", __name__)
+        return importlib.import_module(f".{_SUBMODULES[name]}", __name__)
     where = _WHERE.get(name)
     if where is None:
         raise AttributeError(f"module 'pbdkit' has no attribute {name!r}")

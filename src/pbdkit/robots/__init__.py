@@ -32,7 +32,7 @@ from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 
-from ..robot import Robot, urdf_from_dh
+from .model import Robot, urdf_from_dh
 
 __all__ = [
     "PANDA_DH",

@@ -1,7 +1,7 @@
 """Play a joint trajectory on the simulated arm under physics, record the run and judge the outcome.
 
 The arm's servos follow a stream of targets at the physics rate (500 Hz) that a real arm's drives
-would accept: a jerk-limited follower (:class:`pbdkit.otg.KnotFollower`, Ruckig) through the
+would accept: a jerk-limited follower (:class:`pbdkit.motion.otg.KnotFollower`, Ruckig) through the
 trajectory's samples, each aimed for, with its velocity and acceleration, at its time, within the
 arm's velocity, acceleration and jerk limits (:func:`servo_stream`); the follower's velocity is
 the velocity feed-forward. Without limits the targets are the samples interpolated linearly, with
@@ -12,7 +12,8 @@ by friction or not at all.
 Every run measures what the servos were sent at every physics step: the peak velocity,
 acceleration and jerk of the target stream over the arm's limits
 (:attr:`ExecutionResult.servo_peaks`: divided differences at the physics rate, as
-:func:`pbdkit.limits.motion_peaks`), from the trajectory's start to the end of the settling time.
+:func:`pbdkit.motion.limits.motion_peaks`), from the trajectory's start to the end of the settling
+time.
 
 Success is the task's: its :attr:`pbdkit.sim.tasks.TaskSpec.judge` reads the state after the run
 (and a settling time) and what was measured during it (:class:`RunStats`); each task's module
@@ -30,8 +31,8 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array
-from ..limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_peaks
-from ..otg import follow
+from ..motion.limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_peaks
+from ..motion.otg import follow
 from ..robots import katana
 from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
@@ -227,7 +228,8 @@ def execute(
         :attr:`ExecutionResult.servo_peaks`.
     velocities, accelerations : array-like, shape (T, n), optional
         Joint velocities and accelerations at the samples (in time units of ``t``, e.g.
-        :attr:`pbdkit.reproduce.ReproductionResult.velocities` and ``accelerations`` with
+        :attr:`pbdkit.learning.probabilistic_ik.ReproductionResult.velocities` and
+        ``accelerations`` with
         :meth:`pbdkit.Skill.times`), aimed for with the positions. None: those of the cubic
         spline through the samples, at rest at both ends.
     limits : MotionLimits, optional
@@ -313,12 +315,13 @@ def servo_stream(
 ) -> tuple[Float, Float]:
     """Servo targets every ``period`` through timed joint samples, within motion limits.
 
-    :func:`pbdkit.otg.follow_samples` with ``limits`` times :data:`pbdkit.limits.LIMIT_SAFETY`
+    :func:`pbdkit.motion.otg.follow_samples` with ``limits`` times
+    :data:`pbdkit.motion.limits.LIMIT_SAFETY`
     (Ruckig), from rest at ``joints[0]``: each sample is aimed for, with its velocity and
     acceleration, at its time (moved onto the grid), and the targets come to rest at the last
     one. Samples that respect the limits are followed closely (reached on time), the others as
     closely as the limits allow. Consecutive targets are within ``limits`` at this rate (by
-    divided differences, :func:`pbdkit.limits.motion_peaks`).
+    divided differences, :func:`pbdkit.motion.limits.motion_peaks`).
 
     Without any finite limit: linear interpolation of the samples, with the segment's slope
     as velocity.
@@ -387,7 +390,8 @@ def _servo_motion(
     n_steps: int | None = None,
 ) -> tuple[Float, Float, Float]:
     """:func:`servo_stream`'s targets (limits given) and when the motion reaches each sample
-    (:attr:`pbdkit.otg.Motion.sample_times`: later than t where the limits kept it behind)."""
+    (:attr:`pbdkit.motion.otg.Motion.sample_times`: later than t where the limits kept it
+    behind)."""
     motion = follow(
         t,
         q,
@@ -407,8 +411,9 @@ def stream_peaks(
 ) -> MotionPeaks:
     """Peak velocity, acceleration and jerk of a stream of servo targets over ``limits``.
 
-    The numbers of a :class:`pbdkit.limits.StreamMonitor` fed the targets one by one (at rest
-    before the first and after the last), computed at once (:func:`pbdkit.limits.motion_peaks`
+    The numbers of a :class:`pbdkit.motion.limits.StreamMonitor` fed the targets one by one (at rest
+    before the first and after the last), computed at once
+    (:func:`pbdkit.motion.limits.motion_peaks`
     on the uniform grid): at the physics rate a monitor's update per step would cost a quarter
     of the playback's time.
 

@@ -45,12 +45,12 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ..demos import Demonstration
-from ..gmm import MAX_COMPONENTS
-from ..limits import MotionPeaks
-from ..reproduce import ReachWarning, ReproductionResult
+from ..learning.demonstration import Demonstration
+from ..learning.probabilistic_ik import ReachWarning, ReproductionResult
+from ..learning.skill import Skill
+from ..motion.limits import MotionPeaks
+from ..prob.gmm import MAX_COMPONENTS
 from ..robots import katana
-from ..skill import Skill
 from . import tasks as T
 from .execute import ExecutionResult, execute, stream_peaks
 from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..controller import Command, Controller
+from ..learning.controller import Command, Controller
 from ..vision import TrackFilter
 from .execute import ExecutionResult, Recorder, start_at
 from .perturb import Disturbance, NoDisturbance
@@ -166,7 +166,7 @@ class OnlineRun:
         Commands shortened by a velocity bound (with motion limits: slowed by the limits).
     held : ndarray of bool, shape (K,)
         Commands that restarted from the measured posture, the arm held back
-        (:attr:`pbdkit.controller.Command.held`).
+        (:attr:`pbdkit.learning.controller.Command.held`).
     replans : int
         How many times the controller planned again (moved objects, pushes; 0 without motion
         limits).

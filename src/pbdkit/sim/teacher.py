@@ -43,9 +43,9 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ..demos import Demonstration
-from ..robot import Robot
+from ..learning.demonstration import Demonstration
 from ..robots import katana
+from ..robots.model import Robot
 from . import tasks as T
 from .tasks import TaskSpec
 

@@ -13,7 +13,7 @@ Learning (:meth:`Skill.learn`):
    they do not depend on the new object positions, so they are computed once per skill and
    covariance mode and cached.
 
-Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.reproduce.reproduce`.
+Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.learning.probabilistic_ik.reproduce`.
 
 File format (:meth:`Skill.save` / :meth:`Skill.load`): a NumPy ``.npz`` archive, no pickle,
 written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_steps``
@@ -42,13 +42,13 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._io import load_npz_safe, save_npz_atomic
-from ._validation import check_int, check_positive_float
+from .._io import load_npz_safe, save_npz_atomic
+from .._validation import check_int, check_positive_float
+from ..motion.limits import LimitSpec, MotionLimits
+from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
 from .controller import Controller
-from .demos import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
-from .gmm import GMM, MAX_COMPONENTS, ModelSelection
-from .limits import LimitSpec, MotionLimits
-from .reproduce import (
+from .demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
+from .probabilistic_ik import (
     JOINT,
     Constraints,
     KinematicModel,
@@ -150,7 +150,8 @@ class Skill:
         """Time stamps in seconds for executing a reproduction.
 
         A reproduction within motion limits (the default) carries its own timing
-        (:attr:`pbdkit.reproduce.ReproductionResult.times`): the steps at the demonstrations'
+        (:attr:`pbdkit.learning.probabilistic_ik.ReproductionResult.times`): the steps at the
+        demonstrations'
         pace, :attr:`step_seconds` each, stretched where the arm's limits need more time, after
         the lead-in from ``q0``. Otherwise the steps are spread over :attr:`duration`.
 
@@ -197,8 +198,10 @@ class Skill:
         demos : sequence of Demonstration
             At least 2, with the robot's joint count, the same object names, and a gripper
             signal in all or none. Joint angles outside the robot's limits by more than
-            :data:`pbdkit.demos.LIMIT_TOLERANCE` (1e-6 rad: recorded encoders can graze a
-            limit) give a :class:`pbdkit.demos.LimitWarning` per demonstration, naming the
+            :data:`pbdkit.learning.demonstration.LIMIT_TOLERANCE` (1e-6 rad: recorded encoders can
+            graze a
+            limit) give a :class:`pbdkit.learning.demonstration.LimitWarning` per demonstration,
+            naming the
             joint, the value and the sample; they are learned as recorded, and reproductions
             are clipped to the limits anyway.
         robot : KinematicModel
@@ -207,9 +210,9 @@ class Skill:
             Steps of the time grid (the paper: 1000), 2 .. :data:`MAX_STEPS`.
         n_components : int, "auto" or "bic"
             K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
-            by leaving one demonstration out at a time (:mod:`pbdkit.gmm`, "Choosing K"): the
+            by leaving one demonstration out at a time (:mod:`pbdkit.prob.gmm`, "Choosing K"): the
             smallest K whose generalized trajectory predicts a left-out demonstration as well
-            as the best K does (within :data:`pbdkit.gmm.CV_TOLERANCE`), its error at every
+            as the best K does (within :data:`pbdkit.prob.gmm.CV_TOLERANCE`), its error at every
             moment measured against the demonstrations' spread at that moment, so that phases
             where they agree (a grasp) are kept whatever they do elsewhere; ``"bic"``: the
             effective-sample-size BIC of earlier versions (kept for comparison).
@@ -235,7 +238,7 @@ class Skill:
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
             information (the demonstration, not the sample, is the unit of evidence, see
-            :mod:`pbdkit.gmm`), while EM's cost grows linearly with the points: with 1000
+            :mod:`pbdkit.prob.gmm`), while EM's cost grows linearly with the points: with 1000
             steps, 100 of them learn 5 times faster and reproduce as well
             (``benchmarks/README.md``, "Skill learning and reproduction"). The GMMs still
             model time in steps 0 .. n_steps-1.
@@ -375,11 +378,11 @@ class Skill:
         velocity, acceleration and jerk limits.
 
         The reproduction starts with a lead-in move from ``q0`` to the skill's first posture
-        (:func:`pbdkit.reproduce.first_posture`), then runs the Table II loop at the
+        (:func:`pbdkit.learning.probabilistic_ik.first_posture`), then runs the Table II loop at the
         demonstrations' pace; played over :meth:`times` it stays within the limits, starting
         and ending at rest: where the limits need it, the steps get more time (the path and the
         gripper events stay with their steps; :attr:`ReproductionResult.stretch` says by how
-        much). See :mod:`pbdkit.reproduce`, "Motion limits".
+        much). See :mod:`pbdkit.learning.probabilistic_ik`, "Motion limits".
 
         Parameters
         ----------
@@ -400,7 +403,8 @@ class Skill:
             such bound.
         on_unreachable : {"raise", "warn"}
             What to do when an object's most constrained target o + x_hat is beyond
-            :attr:`reach`: raise ValueError, or warn (:class:`pbdkit.reproduce.ReachWarning`)
+            :attr:`reach`: raise ValueError, or warn
+            (:class:`pbdkit.learning.probabilistic_ik.ReachWarning`)
             and reproduce anyway (the hand stops short; never NaN).
         velocity_limit, acceleration_limit, jerk_limit : "robot", float, array-like, or None
             Joint limits (shape (n,) when an array) in rad/s, rad/s^2, rad/s^3. ``"robot"``
@@ -413,11 +417,11 @@ class Skill:
             explicit limit needs a known :attr:`duration`.
         line_search : bool
             Fused controller: halve a step that would raise the fused energy of its step
-            (:mod:`pbdkit.reproduce`, "Stability"). False: Table II as written.
+            (:mod:`pbdkit.learning.probabilistic_ik`, "Stability"). False: Table II as written.
         newton : bool
             Fused controller: the curvature of the forward kinematics where it stiffens a step,
             which removes the limit cycle of Gauss-Newton where a tight task constraint meets a
-            loose joint constraint (:mod:`pbdkit.reproduce`, "Stability").
+            loose joint constraint (:mod:`pbdkit.learning.probabilistic_ik`, "Stability").
 
         Returns
         -------
@@ -510,8 +514,8 @@ class Skill:
         run is over; ``ctrl.stream(rate_hz)`` gives setpoints for a faster loop. Within the
         robot's limits (the default), consecutive commands are within the velocity,
         acceleration and jerk limits at ``ctrl.dt``, the first one starting from the measured
-        posture at rest; see :mod:`pbdkit.controller` for how the phase follows the arm. Without
-        limits (all three None), fed its own commands with constant objects it equals
+        posture at rest; see :mod:`pbdkit.learning.controller` for how the phase follows the arm.
+        Without limits (all three None), fed its own commands with constant objects it equals
         :meth:`reproduce` with no limits step for step (one implementation of the loop).
 
         Parameters
@@ -627,7 +631,7 @@ class Skill:
         ValueError
             A corrupt or foreign file, another format version, or inconsistent content.
         """
-        from ._joint_limits import check_limit_array, joint_limits_mapping
+        from ..robots._joint_limits import check_limit_array, joint_limits_mapping
 
         p = Path(path)
         data = load_npz_safe(p, what=FORMAT_NAME + " file")
@@ -707,7 +711,7 @@ class Skill:
                     f"{p} holds no URDF (the skill was learned with a robot not built from a "
                     "URDF): pass robot= to Skill.load"
                 )
-            from .robot import Robot
+            from ..robots.model import Robot
 
             try:
                 robot = Robot.from_urdf(urdf, tip=tip or None)
@@ -799,7 +803,8 @@ def space_data(
     Parameters
     ----------
     demos : sequence of Demonstration
-        Validated, with the same structure (:func:`pbdkit.demos.check_demonstrations`).
+        Validated, with the same structure
+        (:func:`pbdkit.learning.demonstration.check_demonstrations`).
     robot : KinematicModel
     object_names : sequence of str
         The objects that get a task space.

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_positive_float
+from .._validation import check_array, check_positive_float
 
 __all__ = ["damped_pinv", "damping_schedule", "nullspace_projector"]
 

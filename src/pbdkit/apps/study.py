@@ -37,9 +37,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
-from . import tasks as T
-from .experiment import controller_names, learn_task, run_trials
-from .tasks import TaskSpec
+from ..sim import tasks as T
+from ..sim.experiment import controller_names, learn_task, run_trials
+from ..sim.tasks import TaskSpec
 
 __all__ = ["FULL", "PAPER_TRACKING_MM", "SMALL", "StudySize", "grid_placements", "run_study"]
 
@@ -166,7 +166,7 @@ def run_study(
     study : dict
         What ``study.json`` holds.
     """
-    from .parallel import session
+    from ..sim.parallel import session
 
     spec = T.get_task(task)
     out.mkdir(parents=True, exist_ok=True)
@@ -187,7 +187,7 @@ def _run(
     client: Any,
     progress: Callable[[str, int, int], None] | None,
 ) -> dict[str, Any]:
-    from ..plots import figure_png
+    from .plots import figure_png
 
     ts = learn_task(spec, seed=seed)
     names = list(size.map_controllers or controller_names(ts.skill.object_names))
@@ -282,7 +282,7 @@ def _plot_map(
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Rectangle
 
-    from ..plots import _new_figure
+    from .plots import _new_figure
 
     fig = _new_figure(figsize=(3.2 * len(success), 3.4))
     axes = fig.subplots(1, len(success), squeeze=False)[0]
@@ -310,7 +310,7 @@ def _plot_map(
 
 
 def _plot_curve(spec: TaskSpec, curve: list[dict[str, Any]], size: StudySize) -> Any:
-    from ..plots import _new_figure
+    from .plots import _new_figure
 
     fig = _new_figure(figsize=(4.8, 3.2))
     ax = fig.subplots()
@@ -330,7 +330,7 @@ def _plot_curve(spec: TaskSpec, curve: list[dict[str, Any]], size: StudySize) ->
 
 
 def _plot_noise(spec: TaskSpec, noise: list[dict[str, Any]], size: StudySize) -> Any:
-    from ..plots import _new_figure
+    from .plots import _new_figure
 
     fig = _new_figure(figsize=(4.8, 3.2))
     ax = fig.subplots()
@@ -350,7 +350,7 @@ def _plot_noise(spec: TaskSpec, noise: list[dict[str, Any]], size: StudySize) ->
 
 
 def _write_report(spec: TaskSpec, out: Path, result: dict[str, Any]) -> None:
-    from ..report import Figure, Section, write_report
+    from .report import Figure, Section, write_report
 
     sections = []
     for obj, m in result["maps"].items():

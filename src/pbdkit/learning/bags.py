@@ -86,8 +86,8 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_positive_float
-from .demos import Demonstration
+from .._validation import check_array, check_positive_float
+from .demonstration import Demonstration
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -95,7 +95,7 @@ if TYPE_CHECKING:
     from rosbags.rosbag2 import Writer
     from rosbags.typesys.store import Typestore
 
-    from .robot import Robot
+    from ..robots.model import Robot
 
 __all__ = [
     "GRIPPER_TYPES",
@@ -727,8 +727,8 @@ def write_trajectory_bag(
         interpolates between points with them: cubic splines with velocities, quintic with
         both; positions only: linear. They should come from the timing, e.g.
         ``res.velocities`` and ``res.accelerations`` (the derivatives of the timing: see
-        :attr:`pbdkit.reproduce.ReproductionResult.velocities`), not from differences of the
-        positions:
+        :attr:`pbdkit.learning.probabilistic_ik.ReproductionResult.velocities`), not from
+        differences of the positions:
         those are not the derivatives of the timed motion (nor at rest at the ends), and the
         controller's splines through them would leave the planned, limited motion.
         ``accelerations`` need ``velocities`` (the controller uses both, or velocities alone).

@@ -18,19 +18,19 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._io import atomic_write_bytes
+from .._io import atomic_write_bytes
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from .demos import Demonstration
-    from .gmm import GMM
-    from .limits import MotionLimits
-    from .reproduce import ReproductionResult
-    from .sim.execute import ExecutionResult
-    from .sim.online import OnlineRun
-    from .skill import Skill
+    from ..learning.demonstration import Demonstration
+    from ..learning.probabilistic_ik import ReproductionResult
+    from ..learning.skill import Skill
+    from ..motion.limits import MotionLimits
+    from ..prob.gmm import GMM
+    from ..sim.execute import ExecutionResult
+    from ..sim.online import OnlineRun
 
 __all__ = [
     "figure_png",
@@ -205,7 +205,7 @@ def space_data(skill: Skill, demos: Sequence[Demonstration]) -> dict[str, Float]
     data : dict str -> ndarray, shape (M, T, D)
         ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of T steps.
     """
-    from .skill import space_data as skill_space_data
+    from ..learning.skill import space_data as skill_space_data
 
     return skill_space_data(list(demos), skill.robot, skill.object_names, skill.n_steps)
 
@@ -354,7 +354,7 @@ def plot_influence(ax: Axes, skill: Skill, result: ReproductionResult) -> None:
     """Stacked shares of each constraint in the fused controller over time.
 
     ``result.influence``: each constraint's share of the information on the hand's position
-    (hand space, summing to 1; see :mod:`pbdkit.reproduce`, "Influence").
+    (hand space, summing to 1; see :mod:`pbdkit.learning.probabilistic_ik`, "Influence").
     """
     names = [n for n in ("joint", *skill.object_names) if n in result.influence]
     shares = np.stack([result.influence[n] for n in names])
@@ -449,11 +449,11 @@ def plot_selection(skill: Skill) -> Figure:
 
     One panel per space: the mean error over the left-out demonstrations (1 = the
     demonstrations' own variability about their mean), the bound within which a K counts as
-    good as the best (:data:`pbdkit.gmm.CV_TOLERANCE`), the best K and the K kept.
+    good as the best (:data:`pbdkit.prob.gmm.CV_TOLERANCE`), the best K and the K kept.
     """
     from matplotlib.ticker import FormatStrFormatter
 
-    from .gmm import CV_TOLERANCE
+    from ..prob.gmm import CV_TOLERANCE
 
     names = [*skill.object_names, "joint"]
     fig = _new_figure(figsize=(3.6 * len(names), 2.8))
@@ -502,7 +502,7 @@ def plot_motion_limits(
     """One joint's position, velocity, acceleration and jerk against its limits.
 
     Four panels over time. The derivatives are the divided differences that check a motion
-    against its limits (:func:`pbdkit.limits.divided_differences`, with the rest before the
+    against its limits (:func:`pbdkit.motion.limits.divided_differences`, with the rest before the
     first sample and after the last), each drawn at the mean time of the samples it spans;
     dashed lines at +- the joint's limits (and at its range with ``position_limits``).
 
@@ -528,7 +528,7 @@ def plot_motion_limits(
     -------
     Figure
     """
-    from .limits import PAD_REST, divided_differences
+    from ..motion.limits import PAD_REST, divided_differences
 
     t_ = np.asarray(t, dtype=np.float64)
     q = np.asarray(joints, dtype=np.float64)

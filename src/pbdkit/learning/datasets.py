@@ -19,9 +19,9 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_int, check_positive_float
-from .demos import Demonstration
-from .reproduce import KinematicModel
+from .._validation import check_array, check_int, check_positive_float
+from .demonstration import Demonstration
+from .probabilistic_ik import KinematicModel
 
 __all__ = [
     "LASA_MULTI_MODEL",

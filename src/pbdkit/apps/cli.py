@@ -20,15 +20,15 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from ._defaults import MAX_COMPONENTS
-from ._io import write_json
+from .._defaults import MAX_COMPONENTS
+from .._io import write_json
 
 if TYPE_CHECKING:
-    from .demos import Demonstration
-    from .reproduce import ReproductionResult
-    from .robot import Robot
-    from .sim.tasks import TaskSpec
-    from .skill import Skill
+    from ..learning.demonstration import Demonstration
+    from ..learning.probabilistic_ik import ReproductionResult
+    from ..learning.skill import Skill
+    from ..robots.model import Robot
+    from ..sim.tasks import TaskSpec
 
 app = typer.Typer(
     add_completion=False,
@@ -119,7 +119,7 @@ def _robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
 
     Imports the simulator (MuJoCo): call it after the cheap checks of a command's options.
     """
-    from .sim.tasks import get_task, task_names
+    from ..sim.tasks import get_task, task_names
 
     try:
         return get_task(task)
@@ -170,7 +170,7 @@ PerturbOption = Annotated[
 
 
 def _check_perturb(perturb: str) -> None:
-    from .sim.perturb import PERTURBATIONS
+    from ..sim.perturb import PERTURBATIONS
 
     if perturb not in PERTURBATIONS:
         raise typer.BadParameter(
@@ -190,7 +190,7 @@ def _start_workers_early(workers: int | None) -> None:
     process imports the simulation itself, so that the two imports overlap (call it after the
     cheap checks of the options)."""
     if workers is not None:
-        from . import _forkserver
+        from .. import _forkserver
 
         _forkserver.start()
 
@@ -250,8 +250,8 @@ def demo(
         console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
         return
     spec = _robot_task(task, also=("lasa",))
+    from ..sim.tracking import ObjectNotSeenError
     from .demo import run_robot_demo
-    from .sim.tracking import ObjectNotSeenError
 
     try:
         with console.status("starting ...") as st:
@@ -340,8 +340,8 @@ def teach(
         )
     _check_output(out, "--out")
     spec = _robot_task(task)
-    from .demos import save_demonstrations
-    from .sim.teacher import teach as sim_teach
+    from ..learning.demonstration import save_demonstrations
+    from ..sim.teacher import teach as sim_teach
 
     with console.status(f"teaching {demos} demonstrations ..."):
         items = sim_teach(spec, demos, seed=seed)
@@ -447,10 +447,10 @@ def learn(
     ] = None,
 ) -> None:
     """Learn a skill (one GMM per space, K chosen by cross-validation) from demonstrations:
-    an .npz file, or ROS bags (see pbdkit.bags for the topics and conventions)."""
-    from . import robots
-    from .robot import Robot
-    from .skill import Skill
+    an .npz file, or ROS bags (see pbdkit.learning.bags for the topics and conventions)."""
+    from .. import robots
+    from ..learning.skill import Skill
+    from ..robots.model import Robot
 
     shipped = robot in robots.available()
     if shipped and tip is not None:
@@ -515,10 +515,10 @@ def _load_demos(
 ) -> list[Demonstration]:
     """The demonstrations of `learn`: an .npz file's, or one per bag (errors name the bag)."""
     if len(paths) == 1 and paths[0].suffix == ".npz":
-        from .demos import load_demonstrations
+        from ..learning.demonstration import load_demonstrations
 
         return load_demonstrations(paths[0])
-    from .bags import read_bag
+    from ..learning.bags import read_bag
 
     items = []
     for path in paths:
@@ -586,8 +586,8 @@ def reproduce(
     ] = None,
 ) -> None:
     """Reproduce a skill for new object positions (paper Table II)."""
-    from ._io import save_npz_atomic
-    from .skill import Skill
+    from .._io import save_npz_atomic
+    from ..learning.skill import Skill
 
     objects = _parse_objects(obj)
     _check_output(out, "--out")
@@ -624,7 +624,7 @@ def reproduce(
     errs = ", ".join(f"{k} {1000 * v.min():.1f} mm" for k, v in res.task_errors.items())
     console.print(f"wrote {out} ({len(res.t)} samples{timed}); closest approach: {errs}")
     if bag is not None and timing is not None:
-        from .bags import write_trajectory_bag
+        from ..learning.bags import write_trajectory_bag
 
         t, names = timing
         grip = res.gripper if skill.has_gripper else None
@@ -706,7 +706,7 @@ def evaluate(
     _start_workers_early(workers)
     _check_perturb(perturb)  # imports the simulation
     spec = _robot_task(task)
-    from .sim.experiment import evaluate as sim_evaluate
+    from ..sim.experiment import evaluate as sim_evaluate
 
     with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)
@@ -770,7 +770,7 @@ def study(
     _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)
-    from .sim.study import FULL, SMALL, run_study
+    from .study import FULL, SMALL, run_study
 
     with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)

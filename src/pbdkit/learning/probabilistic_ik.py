@@ -13,7 +13,7 @@ Corrections to the paper (design.md, "Math notes")
 --------------------------------------------------
 - Pseudo-inverse. The paper's J+ = (J^T J)^-1 J^T is singular for a 3 x n Jacobian with n > 3;
   the task-only controller uses the damped right inverse J^T (J J^T + lambda^2 I)^-1 of
-  :func:`pbdkit.kinematics.damped_pinv` (lambda > 0 only near singularities).
+  :func:`pbdkit.robots.kinematics.damped_pinv` (lambda > 0 only near singularities).
 - Fusion in information form. The paper's Sigma^(n) = J+ Sigma^x(n) J+^T has rank 3 in n-D joint
   space, so eq. (1) cannot invert it. Its Moore-Penrose pseudo-inverse is exactly
   Lambda^(n) = J^T (Sigma^x(n))^-1 J, and the information vector is
@@ -106,13 +106,13 @@ ending at rest; Table II at the demonstrations' pace asks up to 20-115 rad/s^2 o
 (limit 6) and starts from rest at full speed. With ``limits`` (:meth:`pbdkit.Skill.reproduce`
 gives the robot's by default) the result is :func:`timed_path`'s:
 
-1. a lead-in: the time-optimal jerk-limited move (:func:`pbdkit.otg.point_to_point`) from
+1. a lead-in: the time-optimal jerk-limited move (:func:`pbdkit.motion.otg.point_to_point`) from
    ``q0`` to the skill's first posture (:func:`first_posture`: Table II's step 0 iterated until
    still, the product of the constraints at t_0), so that a start away from it is a separate
    move and the skill keeps its own timing;
 2. Table II from that posture, without a velocity bound (``step_limit`` is not used; the
    trust region ``max_step``, the line search, Newton's term and the joint limits apply);
-3. the timing: :func:`pbdkit.limits.retime` gives every step the demonstrations' duration
+3. the timing: :func:`pbdkit.motion.limits.retime` gives every step the demonstrations' duration
    ``dt``, or more where the limits need it (stretching a neighbourhood by f divides
    velocities by f, accelerations by f^2, jerks by f^3), until the samples played at those
    times, padded with rest at both ends, are within the limits by divided differences. The
@@ -123,10 +123,10 @@ gives the robot's by default) the result is :func:`timed_path`'s:
 
 The samples carry velocities and accelerations (:attr:`ReproductionResult.velocities`: the
 clamped cubic spline's through them at their times, the lead-in's own), for a
-``JointTrajectory`` or a follower: :func:`pbdkit.otg.follow` turns them into a continuous
+``JointTrajectory`` or a follower: :func:`pbdkit.motion.otg.follow` turns them into a continuous
 jerk-limited motion sampled at any rate (the simulator's 500 Hz servos, a 1 kHz loop). The
-limits are planned at :data:`pbdkit.limits.LIMIT_SAFETY` of the declared ones so that rounding
-never puts a measured value above them. The online controller plans with :func:`timed_path`
+limits are planned at :data:`pbdkit.motion.limits.LIMIT_SAFETY` of the declared ones so that
+rounding never puts a measured value above them. The online controller plans with :func:`timed_path`
 too, from a state along the way (a moving start, at a phase).
 
 Reach. With ``reach`` given (a :class:`pbdkit.Skill` passes its estimate, see
@@ -191,10 +191,16 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
-from ._validation import check_array, check_positions, check_positive_float
-from .kinematics import damped_pinv
-from .limits import LIMIT_SAFETY, MotionLimits, positive_bounds, retime, times_from_durations
-from .otg import point_to_point, spline_derivatives
+from .._validation import check_array, check_positions, check_positive_float
+from ..motion.limits import (
+    LIMIT_SAFETY,
+    MotionLimits,
+    positive_bounds,
+    retime,
+    times_from_durations,
+)
+from ..motion.otg import point_to_point, spline_derivatives
+from ..robots.kinematics import damped_pinv
 
 __all__ = [
     "Constraints",
@@ -695,8 +701,8 @@ def timed_path(
     ``run.theta0``) to the skill's first posture (:func:`first_posture`), then Table II from
     there. Along the way (what the online controller re-plans from): Table II from ``theta``
     at ``phase`` (steps floor(phase) + 1 .. T - 1 follow), the path starting at ``velocity``
-    (rad/s). Either way the samples are timed by :func:`pbdkit.limits.retime` (within
-    ``limits`` times :data:`pbdkit.limits.LIMIT_SAFETY`, at rest at the end), and their
+    (rad/s). Either way the samples are timed by :func:`pbdkit.motion.limits.retime` (within
+    ``limits`` times :data:`pbdkit.motion.limits.LIMIT_SAFETY`, at rest at the end), and their
     velocities and accelerations are those of the cubic spline through them at those times.
 
     Returns
@@ -1081,8 +1087,8 @@ class FusedStep:
 
     Everything that does not depend on the posture is prepared here for all steps at once;
     :meth:`__call__` takes the posture theta_{j-1} (with f and J there) and returns theta_j.
-    :func:`reproduce` and :class:`pbdkit.controller.Controller` both run this one step, so an
-    online run fed its own targets is the offline reproduction.
+    :func:`reproduce` and :class:`pbdkit.learning.controller.Controller` both run this one step, so
+    an online run fed its own targets is the offline reproduction.
 
     Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
     sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)): per step

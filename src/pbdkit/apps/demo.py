@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._io import atomic_write_bytes, write_json
-from .demos import save_demonstrations
-from .gmm import CV_TOLERANCE, MAX_COMPONENTS
+from .._io import atomic_write_bytes, write_json
+from ..learning.demonstration import save_demonstrations
+from ..prob.gmm import CV_TOLERANCE, MAX_COMPONENTS
 from .plots import (
     figure_png,
     plot_constraints,
@@ -30,7 +30,7 @@ from .plots import (
 from .report import Figure, Section, write_report
 
 if TYPE_CHECKING:
-    from .sim.tasks import TaskSpec
+    from ..sim.tasks import TaskSpec
 
 __all__ = ["run_lasa_demo", "run_robot_demo"]
 
@@ -42,8 +42,8 @@ def run_lasa_demo(
 
     Returns the metrics written.
     """
-    from .datasets import load_lasa
-    from .gmm import GMM
+    from ..learning.datasets import load_lasa
+    from ..prob.gmm import GMM
     from .plots import plot_lasa_summary, save_figure
 
     out.mkdir(parents=True, exist_ok=True)
@@ -131,7 +131,7 @@ def run_robot_demo(
     metrics : dict
         What ``metrics.json`` holds.
     """
-    from .sim.experiment import (
+    from ..sim.experiment import (
         calibrate_tracker,
         controller_names,
         learn_task,
@@ -142,9 +142,9 @@ def run_robot_demo(
         tracking_errors,
         trial_disturbance,
     )
-    from .sim.perturb import check_perturb
-    from .sim.tasks import get_task
-    from .sim.video import save_video
+    from ..sim.perturb import check_perturb
+    from ..sim.tasks import get_task
+    from ..sim.video import save_video
 
     def say(msg: str) -> None:
         if status is not None:

@@ -12,7 +12,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ._io import atomic_write_bytes
+from .._io import atomic_write_bytes
 
 __all__ = ["Figure", "Section", "render_report", "write_report"]
 

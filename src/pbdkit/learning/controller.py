@@ -7,8 +7,10 @@ object positions) and returns the next command. With motion limits (the default 
 that declares them) the commands follow a plan within the limits, made again when objects move
 or the arm is pushed (section "Motion limits" below). Without (this section), each call closes
 the loop of Table II on q and runs the same step as the offline reproduction
-(:class:`pbdkit.reproduce.FusedStep`, :class:`~pbdkit.reproduce.TaskStep`,
-:class:`~pbdkit.reproduce.JointStep`), linearized at q instead of at the previous target: fed
+(:class:`pbdkit.learning.probabilistic_ik.FusedStep`,
+:class:`~pbdkit.learning.probabilistic_ik.TaskStep`,
+:class:`~pbdkit.learning.probabilistic_ik.JointStep`), linearized at q instead of at the previous
+target: fed
 its own targets with constant objects, a controller reproduces :meth:`Skill.reproduce` step for
 step. Objects may move: ``step(q, objects={...})`` updates any subset of the positions from
 that step on (the tracker's 15 Hz updates in between steps keep the last ones).
@@ -39,14 +41,15 @@ a jerk-limited generator chasing each cycle's Table II target oscillated away fr
 measured on the coaster task). So the controller plans and follows:
 
 1. A plan is the reproduction within the limits from where the arm is
-   (:func:`pbdkit.reproduce.timed_path`: Table II's path at the demonstrations' pace, timed by
-   :func:`pbdkit.limits.retime` where the limits need more time; from the start, a lead-in to
+   (:func:`pbdkit.learning.probabilistic_ik.timed_path`: Table II's path at the demonstrations'
+   pace, timed by
+   :func:`pbdkit.motion.limits.retime` where the limits need more time; from the start, a lead-in to
    the skill's first posture first).
 2. The commands are that plan sampled every ``dt`` by a jerk-limited follower
-   (:func:`pbdkit.otg.follow_samples`, Ruckig), from the state the commands are in:
+   (:func:`pbdkit.motion.otg.follow_samples`, Ruckig), from the state the commands are in:
    consecutive commands are within all three limits at ``dt`` (their divided differences,
-   :mod:`pbdkit.limits`), and every command carries its velocity and acceleration. Fed its own
-   commands with constant objects, the commands are :meth:`pbdkit.Skill.reproduce`'s samples
+   :mod:`pbdkit.motion.limits`), and every command carries its velocity and acceleration. Fed its
+   own commands with constant objects, the commands are :meth:`pbdkit.Skill.reproduce`'s samples
    played over :meth:`pbdkit.Skill.times`.
 3. The plan is made again (a re-plan) from the last command's state (position, velocity,
    acceleration) and the skill's phase there, with the positions known then:
@@ -83,11 +86,11 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_positions
-from .kinematics import damped_pinv
-from .limits import LIMIT_SAFETY, MotionLimits
-from .otg import Motion, follow
-from .reproduce import (
+from .._validation import check_array, check_positions
+from ..motion.limits import LIMIT_SAFETY, MotionLimits
+from ..motion.otg import Motion, follow
+from ..robots.kinematics import damped_pinv
+from .probabilistic_ik import (
     JOINT,
     Constraints,
     FusedStep,
@@ -139,7 +142,7 @@ class Command:
         controller, J+ S J+^T for a task-only one).
     influence : dict str -> float
         Share of each constraint in use, in the hand's space (as
-        :attr:`pbdkit.reproduce.ReproductionResult.influence`).
+        :attr:`pbdkit.learning.probabilistic_ik.ReproductionResult.influence`).
     """
 
     def __init__(
@@ -208,13 +211,13 @@ class Controller:
         The posture the run starts from (default theta_hat_0, clipped to the limits); the
         first :meth:`step` targets step 1.
     use, alpha, max_step, reach, on_unreachable
-        As :func:`pbdkit.reproduce.reproduce`.
+        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
     step_limit : array-like, shape (n,), optional
         Largest step of each joint (rad per step): velocity limits times :attr:`dt`.
     dt : float
         Seconds per step (NaN when unknown).
     line_search : bool
-        As :func:`pbdkit.reproduce.reproduce`.
+        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
     max_lag : float
         The phase holds while the measured posture is more than this many steps behind the
         last target (module docstring, "Timing and phase"). ``inf``: it always advances.
@@ -223,7 +226,7 @@ class Controller:
         "Motion limits"); needs a known ``dt``. ``step_limit`` and ``q0`` are then not used
         (the first measured posture is where the run starts).
     newton : bool
-        As :func:`pbdkit.reproduce.reproduce`.
+        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
     replan_distance : float
         With motion limits: an object that moves farther than this (m) from where the plan
         assumed it makes the controller plan again (:data:`REPLAN_DISTANCE`).
@@ -548,7 +551,7 @@ class Controller:
             st.replans += 1
         objects = {k: o.copy() for k, o in self._objs.items()}
         # The phase follows the motion: when it reaches each sample of the plan (later than
-        # the sample's time where the limits kept it behind, pbdkit.otg.follow).
+        # the sample's time where the limits kept it behind, pbdkit.motion.otg.follow).
         reached = (st.motion.sample_times - now).tolist()
         st.plan = _Plan(res, now, objects, reached, res.t.tolist())
         st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
@@ -652,8 +655,8 @@ class CommandStream:
     setpoint. The controller is stepped at its cycles (every ``ctrl.dt``), with the measured
     posture and the object positions given since, before any setpoint after that cycle is
     given. The setpoints are samples of the motion the controller follows (its commands are
-    samples of the same motion every ``ctrl.dt``: :class:`pbdkit.otg.Motion`), so they are one
-    continuous jerk-limited motion, through its re-plans, consecutive ones within the limits at
+    samples of the same motion every ``ctrl.dt``: :class:`pbdkit.motion.otg.Motion`), so they are
+    one continuous jerk-limited motion, through its re-plans, consecutive ones within the limits at
     this rate. A held command (:attr:`Command.held`: a push) restarts them from the measured
     state.
 
@@ -662,7 +665,7 @@ class CommandStream:
     first setpoint. A drive that checks its stream (a Franka Panda at 1 kHz) compares the first
     setpoint with the posture it holds: give the first call that posture (libfranka's desired
     posture ``q_d``, not a noisy encoder reading), and check a recorded stream with that posture
-    prepended (:class:`pbdkit.limits.StreamMonitor` fed it first).
+    prepended (:class:`pbdkit.motion.limits.StreamMonitor` fed it first).
 
     Parameters
     ----------

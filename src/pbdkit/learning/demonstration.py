@@ -59,8 +59,8 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._io import load_npz_safe, save_npz_atomic
-from ._validation import check_array, check_int, check_positions
+from .._io import load_npz_safe, save_npz_atomic
+from .._validation import check_array, check_int, check_positions
 
 __all__ = [
     "FORMAT_NAME",

@@ -97,8 +97,8 @@ from sklearn.base import BaseEstimator, DensityMixin
 from sklearn.exceptions import NotFittedError
 from threadpoolctl import threadpool_limits
 
-from ._defaults import MAX_COMPONENTS as MAX_COMPONENTS  # its documented home: pbdkit.gmm
-from ._validation import check_array, check_int, check_positive_float
+from .._defaults import MAX_COMPONENTS as MAX_COMPONENTS  # its documented home: pbdkit.prob.gmm
+from .._validation import check_array, check_int, check_positive_float
 from .gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 
 __all__ = [
@@ -404,7 +404,7 @@ def _check_covariances(covariances: Float, name: str) -> Float:
             w = np.linalg.eigvalsh(cov)
             raise ValueError(
                 f"{name}[{k}] must be positive definite, got smallest eigenvalue {w.min():.3g}; "
-                "add a small value to its diagonal (pbdkit.gaussian.regularize_covariance)"
+                "add a small value to its diagonal (pbdkit.prob.gaussian.regularize_covariance)"
             ) from None
     return chol
 

@@ -54,7 +54,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array
+from .._validation import check_array
 
 __all__ = [
     "LIMIT_SAFETY",

@@ -6,7 +6,7 @@ velocity, acceleration and jerk limits (piecewise-constant jerk); it is what Mov
 Franka's tools use for online motion. pbdkit calls it state to state and chains its
 trajectories with polynomial pieces, each starting in the state the previous one ended in: the
 result is one continuous motion (position, velocity and acceleration continuous, jerk within
-the limit), so its samples pass the divided-difference check of :mod:`pbdkit.limits` at any
+the limit), so its samples pass the divided-difference check of :mod:`pbdkit.motion.limits` at any
 rate.
 
 - :func:`point_to_point`: a move between two postures at rest, sampled every ``dt`` (the
@@ -122,7 +122,7 @@ class Motion:
     the state the previous one ended in, from a start state at ``t0`` (position, velocity and
     acceleration continuous, jerk within the limits it was planned with).
 
-    Samples of it at any times pass the divided-difference check of :mod:`pbdkit.limits`
+    Samples of it at any times pass the divided-difference check of :mod:`pbdkit.motion.limits`
     against those limits (a divided difference of order k is a weighted average of the k-th
     derivative); before ``t0`` it is the start state, after :attr:`end` it holds the last
     position (at rest when it was planned to end so).
@@ -241,7 +241,7 @@ def follow(
         Strictly increasing sample times (s), T >= 2.
     q : ndarray, shape (T, n)
     limits : MotionLimits
-        Planned with as given (give them a margin: :data:`pbdkit.limits.LIMIT_SAFETY`).
+        Planned with as given (give them a margin: :data:`pbdkit.motion.limits.LIMIT_SAFETY`).
     velocities, accelerations : ndarray, shape (T, n), optional
         At the samples; None: the cubic spline's through them, at rest at the end and at the
         start (or moving at ``start``'s velocity).
