@@ -12,6 +12,7 @@ from test_skill import N_STEPS, REACH_STEP, synthetic_demos, unseen_glass
 from pbdkit import Controller, Skill
 from pbdkit.learning.controller import REPLAN_DISTANCE, Command
 from pbdkit.learning.demonstration import Demonstration
+from pbdkit.learning.probabilistic_ik import RunOptions
 from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
 from pbdkit.motion.otg import follow
 from pbdkit.robots import katana
@@ -99,7 +100,7 @@ def test_without_limits_a_velocity_bound_holds_from_the_measured_posture(
         robot,
         skill.constraints(),
         {"glass": glass},
-        q0=demos[0].joints[0],
+        RunOptions(q0=demos[0].joints[0]),
         step_limit=vmax * skill.step_seconds,
         dt=skill.step_seconds,
         reach=skill.reach,

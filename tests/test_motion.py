@@ -16,7 +16,12 @@ import pytest
 pytest.importorskip("mujoco")
 
 from pbdkit import Skill
-from pbdkit.learning.probabilistic_ik import ReproductionResult, reproduce, step_limit_from_velocity
+from pbdkit.learning.probabilistic_ik import (
+    ReproductionResult,
+    RunOptions,
+    solve,
+    step_limit_from_velocity,
+)
 from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
@@ -128,8 +133,13 @@ def test_the_newton_term_removes_the_limit_cycle_of_gauss_newton() -> None:
     vmax = np.asarray(robot.velocity_limit)
     objects = placements[1]
     runs = {
-        newton: reproduce(
-            robot, skill.constraints(), objects, step_limit=bound, reach=skill.reach, newton=newton
+        newton: solve(
+            robot,
+            skill.constraints(),
+            objects,
+            RunOptions(newton=newton),
+            step_limit=bound,
+            reach=skill.reach,
         )
         for newton in (False, True)
     }

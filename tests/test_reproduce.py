@@ -19,9 +19,11 @@ from pbdkit.learning.probabilistic_ik import (
     Constraints,
     KinematicModel,
     ReachWarning,
+    RunOptions,
     check_objects,
     reach_from_samples,
     reproduce,
+    solve,
     step_limit_from_velocity,
 )
 from pbdkit.robots.kinematics import damped_pinv
@@ -185,7 +187,7 @@ def test_fused_step_is_eq1_with_a_regularized_inverse_in_the_limit() -> None:
     c = make_constraints(rng, n_steps=2)
     objs = objects_near_path(c, arm)
     q0 = c.joint_mean[0] + 0.05 * rng.normal(size=4)
-    res = reproduce(arm, c, objs, q0=q0, max_step=None)
+    res = solve(arm, c, objs, RunOptions(q0=q0, max_step=None))
     step, cov = res.joints[1] - q0, res.covariances[1]
 
     x, jac = arm.fk_jacobian(q0)
@@ -232,7 +234,7 @@ def test_null_space_term_has_no_effect_on_the_fused_controller() -> None:
     np.testing.assert_allclose(ref5, ref0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(cov5, cov0, rtol=0, atol=1e-12 * np.abs(cov0).max())
     for alpha in (0.0, 0.5):
-        res = reproduce(arm, c, objs, alpha=alpha, max_step=None)
+        res = solve(arm, c, objs, RunOptions(alpha=alpha, max_step=None))
         np.testing.assert_allclose(res.joints, ref5, rtol=0, atol=1e-10)
         np.testing.assert_allclose(
             res.covariances[1:], cov5, rtol=0, atol=1e-9 * np.abs(cov5).max()
@@ -248,7 +250,7 @@ def test_task_only_controller_is_table_ii_and_alpha_acts_there() -> None:
     objs = objects_near_path(c, arm)
     runs = {}
     for alpha in (0.0, 0.5):
-        res = reproduce(arm, c, objs, use=["a"], alpha=alpha, max_step=None)
+        res = solve(arm, c, objs, RunOptions(use=["a"], alpha=alpha, max_step=None))
         theta = c.joint_mean[0].copy()
         ref = [theta.copy()]
         for j in range(1, c.n_steps):
@@ -273,7 +275,7 @@ def test_task_subset_is_fused_in_task_space() -> None:
     arm = ToyArm()
     c = make_constraints(rng, n_steps=20)
     objs = objects_near_path(c, arm)
-    res = reproduce(arm, c, objs, use=["b", "a"], max_step=None)
+    res = solve(arm, c, objs, RunOptions(use=["b", "a"], max_step=None))
     assert res.used == ("a", "b")
     # Step 1 from theta_0: J+ (fused target - x_0) + alpha N (theta_hat_1 - theta_0).
     theta0 = c.joint_mean[0]
@@ -295,7 +297,7 @@ def test_joint_only_controller_follows_theta_hat() -> None:
     rng = np.random.default_rng(5)
     arm = ToyArm()
     c = make_constraints(rng)
-    res = reproduce(arm, c, objects_near_path(c, arm), use="joint")
+    res = solve(arm, c, objects_near_path(c, arm), RunOptions(use="joint"))
     np.testing.assert_array_equal(res.joints, c.joint_mean)
     np.testing.assert_array_equal(res.covariances, c.joint_cov)
     np.testing.assert_array_equal(res.influence["joint"], np.ones(c.n_steps))
@@ -307,12 +309,12 @@ def test_joint_only_controller_from_a_distant_q0_is_step_limited() -> None:
     arm = ToyArm()
     c = make_constraints(rng, n_steps=40)
     q0 = c.joint_mean[0] + np.array([0.5, -0.4, 0.3, 0.2])
-    res = reproduce(arm, c, objects_near_path(c, arm), q0=q0, use=["joint"], max_step=0.1)
+    res = solve(arm, c, objects_near_path(c, arm), RunOptions(q0=q0, use=["joint"], max_step=0.1))
     steps = np.linalg.norm(np.diff(res.joints, axis=0), axis=1)
     assert steps.max() <= 0.1 + 1e-12
     np.testing.assert_array_equal(res.joints[0], q0)
     np.testing.assert_allclose(res.joints[-10:], c.joint_mean[-10:], rtol=0, atol=1e-12)
-    full = reproduce(arm, c, objects_near_path(c, arm), q0=q0, use=["joint"], max_step=None)
+    full = solve(arm, c, objects_near_path(c, arm), RunOptions(q0=q0, use=["joint"], max_step=None))
     np.testing.assert_array_equal(full.joints[1:], c.joint_mean[1:])  # the paper's full step
 
 
@@ -325,7 +327,7 @@ def test_influence_shares_sum_to_one_and_follow_the_precisions() -> None:
     cov_a[15:] *= 1e-4
     covs = {"a": cov_a, "b": c.task_cov["b"]}
     c2 = Constraints(c.t, c.joint_mean, c.joint_cov, c.task_mean, covs, gripper=c.gripper)
-    res = reproduce(arm, c2, objects_near_path(c2, arm))
+    res = solve(arm, c2, objects_near_path(c2, arm))
     for influence in (res.influence, res.influence_joint_space):
         assert list(influence) == ["joint", "a", "b"]
         total = sum(influence.values())
@@ -367,7 +369,7 @@ def test_influence_is_the_hand_space_share_computed_the_explicit_way(
     rng = np.random.default_rng(15)
     arm = ToyArm()
     c = make_constraints(rng, n_steps=25, names=names)
-    res = reproduce(arm, c, objects_near_path(c, arm), max_step=None)
+    res = solve(arm, c, objects_near_path(c, arm), RunOptions(max_step=None))
     assert res.used == ("joint", *names)
     for j in range(c.n_steps):
         # Step j was linearized at theta_{j-1} (step 0 reports J(theta_0)).
@@ -391,10 +393,10 @@ def test_influence_of_the_single_space_controllers() -> None:
     arm = ToyArm()
     c = make_constraints(rng, n_steps=20)
     objs = objects_near_path(c, arm)
-    joint = reproduce(arm, c, objs, use="joint")
+    joint = solve(arm, c, objs, RunOptions(use="joint"))
     assert joint.influence.keys() == joint.influence_joint_space.keys() == {"joint"}
     np.testing.assert_array_equal(joint.influence_joint_space["joint"], 1.0)
-    task = reproduce(arm, c, objs, use=["a", "b"])
+    task = solve(arm, c, objs, RunOptions(use=["a", "b"]))
     s_fused = np.linalg.inv(np.linalg.inv(c.task_cov["a"]) + np.linalg.inv(c.task_cov["b"]))
     expected = np.trace(s_fused @ np.linalg.inv(c.task_cov["a"]), axis1=1, axis2=2) / 3
     np.testing.assert_allclose(task.influence["a"], expected, rtol=0, atol=1e-9)
@@ -414,7 +416,7 @@ def test_step_limit_scales_steps_uniformly_exactly_where_a_bound_binds(
     objs = objects_near_path(c, arm)
     q0 = c.joint_mean[0] + np.array([0.4, -0.3, 0.3, 0.25])  # far from theta_hat_0
     limit, max_step = np.array([0.02, 0.03, 0.025, 0.04]), 0.045
-    res = reproduce(arm, c, objs, q0=q0, use=use, step_limit=limit, max_step=max_step)
+    res = solve(arm, c, objs, RunOptions(q0=q0, use=use, max_step=max_step), step_limit=limit)
     steps = np.diff(res.joints, axis=0)
     assert np.all(np.abs(steps) <= limit * (1 + 1e-12))
     assert np.linalg.norm(steps, axis=1).max() <= max_step * (1 + 1e-12)
@@ -454,15 +456,15 @@ def test_a_step_limit_that_never_binds_changes_nothing(use: list[str] | None) ->
     c = make_constraints(rng, n_steps=30)
     objs = objects_near_path(c, arm)
     q0 = c.joint_mean[0] + np.array([0.4, -0.3, 0.3, 0.25])  # max_step binds
-    ref = reproduce(arm, c, objs, q0=q0, use=use)
+    ref = solve(arm, c, objs, RunOptions(q0=q0, use=use))
     for limit in (1e9, np.inf, [np.inf, 1e9, np.inf, np.inf]):
-        res = reproduce(arm, c, objs, q0=q0, use=use, step_limit=limit)
+        res = solve(arm, c, objs, RunOptions(q0=q0, use=use), step_limit=limit)
         for field in ("joints", "positions", "covariances", "limited"):
             np.testing.assert_array_equal(getattr(res, field), getattr(ref, field))
         for k in ref.influence:
             np.testing.assert_array_equal(res.influence[k], ref.influence[k])
     assert ref.limited.any()  # by max_step
-    free = reproduce(arm, c, objs, use="joint", step_limit=1e9)
+    free = solve(arm, c, objs, RunOptions(use="joint"), step_limit=1e9)
     assert not free.limited.any()
 
 
@@ -508,7 +510,7 @@ def test_reproduction_never_leaves_the_joint_limits(
     arm = ToyArm(lower=-0.8, upper=0.8)
     c = make_constraints(rng)  # theta_hat leaves [-0.8, 0.8] (lift to -1.2)
     objs = {k: np.array([0.1, 0.6, 0.1]) for k in c.object_names}  # pulls the arm around
-    res = reproduce(arm, c, objs, use=use, step_limit=step_limit)
+    res = solve(arm, c, objs, RunOptions(use=use), step_limit=step_limit)
     assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
     assert np.all(res.joints >= arm.lower) and np.all(res.joints <= arm.upper)
     assert np.any(np.isclose(res.joints, arm.lower, atol=0, rtol=0) | (res.joints == arm.upper))
@@ -525,9 +527,9 @@ def test_unreachable_target_warns_or_raises_and_never_gives_nan(use: list[str] |
     assert 0.79 <= reach <= 1.02 * 0.8  # the arm reaches 0.7 m from (0, 0, 0.1): <= 0.8
     far = {"a": np.array([1.5, 0.0, 0.2]) - c.task_mean["a"].mean(axis=0)}
     with pytest.raises(ValueError, match=r"objects\['a'\]: the hand must be at .* beyond the arm"):
-        reproduce(arm, c, far, reach=reach, use=use)
+        solve(arm, c, far, RunOptions(use=use), reach=reach)
     with pytest.warns(ReachWarning, match="beyond the arm's reach"):
-        res = reproduce(arm, c, far, reach=reach, use=use, on_unreachable="warn")
+        res = solve(arm, c, far, RunOptions(use=use, on_unreachable="warn"), reach=reach)
     assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.positions))
     assert np.all(np.isfinite(res.covariances))
     # No step is longer than max_step (0.1 rad by default), although the target is 1 m away.
@@ -544,7 +546,7 @@ def test_singular_posture_stays_finite() -> None:
     assert np.linalg.matrix_rank(arm.fk_jacobian(straight)[1]) == 2
     objs = {"a": np.array([0.0, 0.0, 0.0])}
     for use in (None, ["a"]):
-        res = reproduce(arm, c, objs, q0=straight, use=use)
+        res = solve(arm, c, objs, RunOptions(q0=straight, use=use))
         assert np.all(np.isfinite(res.joints)) and np.all(np.isfinite(res.covariances))
         # The hand-space shares need no inverse of the rank-2 J Sigma_theta J^T at step 0.
         np.testing.assert_allclose(sum(res.influence.values()), 1.0, rtol=0, atol=1e-9)
@@ -594,8 +596,20 @@ def test_reproduce_rejects_bad_input(kwargs: dict[str, object], match: str) -> N
     args: dict[str, object] = {"objects": {"a": [0.3, 0, 0.2], "b": [0.3, 0, 0.2]}}
     args.update(kwargs)
     objects = args.pop("objects")
+    step_limit = args.pop("step_limit", None)
     with pytest.raises(ValueError, match=match):
-        reproduce(arm, c, objects, **args)  # type: ignore[arg-type]
+        solve(arm, c, objects, RunOptions(**args), step_limit=step_limit)  # type: ignore[arg-type]
+
+
+def test_the_old_spelling_of_solve_warns_and_gives_the_same_result() -> None:
+    rng = np.random.default_rng(13)
+    arm = ToyArm()
+    c = make_constraints(rng, n_steps=20)
+    objs = objects_near_path(c, arm)
+    with pytest.warns(DeprecationWarning, match="probabilistic_ik.reproduce is now solve"):
+        old = reproduce(arm, c, objs, use=["joint", "a"], max_step=None)
+    new = solve(arm, c, objs, RunOptions(use=["joint", "a"], max_step=None))
+    np.testing.assert_array_equal(old.joints, new.joints)
 
 
 def test_reproduce_rejects_mismatched_robot_and_constraints() -> None:
@@ -604,9 +618,9 @@ def test_reproduce_rejects_mismatched_robot_and_constraints() -> None:
     arm = ToyArm()
     arm.n_joints = 5
     with pytest.raises(ValueError, match="robot has 5 joints, the constraints have 4"):
-        reproduce(arm, c, {"a": [0, 0, 0], "b": [0, 0, 0]})
+        solve(arm, c, {"a": [0, 0, 0], "b": [0, 0, 0]})
     with pytest.raises(ValueError, match="constraints must be a Constraints, got dict"):
-        reproduce(ToyArm(), {}, {})  # type: ignore[arg-type]
+        solve(ToyArm(), {}, {})  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"unknown object name\(s\) \['x'\]; this skill knows"):
         check_objects({"x": [0, 0, 0]}, ["a"])
 

@@ -6,14 +6,13 @@ real arm is controlled step by step: :meth:`pbdkit.Skill.controller` returns a
 object positions) and returns the next command. With motion limits (the default for a robot
 that declares them) the commands follow a plan within the limits, made again when objects move
 or the arm is pushed (section "Motion limits" below). Without (this section), each call closes
-the loop of Table II on q and runs the same step as the offline reproduction
-(:class:`pbdkit.learning.probabilistic_ik.FusedStep`,
-:class:`~pbdkit.learning.probabilistic_ik.TaskStep`,
-:class:`~pbdkit.learning.probabilistic_ik.JointStep`), linearized at q instead of at the previous
-target: fed
-its own targets with constant objects, a controller reproduces :meth:`Skill.reproduce` step for
-step. Objects may move: ``step(q, objects={...})`` updates any subset of the positions from
-that step on (the tracker's 15 Hz updates in between steps keep the last ones).
+the loop of Table II on q and runs the same step as the offline reproduction (a
+:class:`pbdkit.learning.probabilistic_ik.ControllerStep` from
+:func:`~pbdkit.learning.probabilistic_ik.make_step`), linearized at q instead of at the
+previous target: fed its own targets with constant objects, a controller reproduces
+:meth:`Skill.reproduce` step for step. Objects may move: ``step(q, objects={...})`` updates
+any subset of the positions from that step on (the tracker's 15 Hz updates in between steps
+keep the last ones).
 
 Timing and phase. Step j of the skill's time grid is meant to be reached ``dt`` seconds after
 step j - 1 (:attr:`Controller.dt`: the demonstrations' mean duration spread over the steps, as
@@ -78,7 +77,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -89,16 +88,13 @@ from numpy.typing import NDArray
 from .._validation import check_array, check_positions
 from ..motion.limits import LIMIT_SAFETY, MotionLimits
 from ..motion.otg import Motion, follow
-from ..robots.kinematics import damped_pinv
 from .probabilistic_ik import (
-    JOINT,
     Constraints,
-    FusedStep,
-    JointStep,
     KinematicModel,
     ReproductionResult,
-    TaskStep,
+    RunOptions,
     _check_reach,
+    make_step,
     setup_run,
     timed_path,
 )
@@ -207,17 +203,16 @@ class Controller:
         The skill's generalized constraints over its T steps.
     objects : dict str -> array-like, shape (3,)
         Position of every object of the skill (base frame).
-    q0 : array-like, shape (n,), optional
-        The posture the run starts from (default theta_hat_0, clipped to the limits); the
-        first :meth:`step` targets step 1.
-    use, alpha, max_step, reach, on_unreachable
-        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
+    options : RunOptions, optional
+        As :func:`pbdkit.learning.probabilistic_ik.solve`; its ``q0`` is the posture the run
+        starts from (default theta_hat_0, clipped to the limits): the first :meth:`step`
+        targets step 1.
     step_limit : array-like, shape (n,), optional
         Largest step of each joint (rad per step): velocity limits times :attr:`dt`.
     dt : float
         Seconds per step (NaN when unknown).
-    line_search : bool
-        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
+    reach : float, optional
+        As :func:`pbdkit.learning.probabilistic_ik.solve`.
     max_lag : float
         The phase holds while the measured posture is more than this many steps behind the
         last target (module docstring, "Timing and phase"). ``inf``: it always advances.
@@ -225,8 +220,6 @@ class Controller:
         Velocity, acceleration and jerk limits of the command stream (module docstring,
         "Motion limits"); needs a known ``dt``. ``step_limit`` and ``q0`` are then not used
         (the first measured posture is where the run starts).
-    newton : bool
-        As :func:`pbdkit.learning.probabilistic_ik.reproduce`.
     replan_distance : float
         With motion limits: an object that moves farther than this (m) from where the plan
         assumed it makes the controller plan again (:data:`REPLAN_DISTANCE`).
@@ -252,19 +245,13 @@ class Controller:
         robot: KinematicModel,
         constraints: Constraints,
         objects: Mapping[str, npt.ArrayLike],
+        options: RunOptions | None = None,
         *,
-        q0: npt.ArrayLike | None = None,
-        use: Sequence[str] | str | None = None,
-        alpha: float = 0.5,
-        max_step: float | None = 0.1,
         step_limit: npt.ArrayLike | None = None,
         dt: float = float("nan"),
-        line_search: bool = True,
         reach: float | None = None,
-        on_unreachable: str = "raise",
         max_lag: float = 3.0,
         limits: MotionLimits | None = None,
-        newton: bool = True,
         replan_distance: float = REPLAN_DISTANCE,
     ) -> None:
         timed = limits is not None and limits.any
@@ -276,22 +263,17 @@ class Controller:
             robot,
             constraints,
             objects,
-            q0=q0,
-            use=use,
-            alpha=alpha,
-            max_step=max_step,
+            RunOptions() if options is None else options,
             step_limit=step_limit,
             reach=reach,
-            on_unreachable=on_unreachable,
         )
-        self._run, self._line_search, self._newton = run, bool(line_search), bool(newton)
+        self._run = run
         lag = float(max_lag)
         if not (lag > 0):  # NaN too
             raise ValueError(f"max_lag must be > 0 (steps), got {max_lag!r}")
         c, n = run.constraints, run.constraints.n_joints
         self._c, self._robot = c, robot
         self._objs, self._used, self._tasks = run.objects, run.used, run.tasks
-        self._reach, self._on_unreachable = reach, on_unreachable
         self.max_lag = lag
         self.dt = float(dt)
         lower, upper, cap, bound = run.lower, run.upper, run.max_step, run.step_limit
@@ -299,30 +281,7 @@ class Controller:
         theta0 = run.theta0
         # The largest step of each joint, for the phase rule: the velocity bound, else max_step.
         self._step_bound = bound if bound is not None else np.full(n, cap)
-        self._fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-        if JOINT not in self._used:
-            self._mode = "task"
-        else:
-            self._mode = "fused" if self._tasks else "joint"
-        if self._mode == "fused":
-            self._fused = FusedStep(
-                robot,
-                c,
-                self._objs,
-                self._tasks,
-                lower,
-                upper,
-                cap,
-                bound,
-                bool(line_search),
-                bool(newton),
-            )
-        elif self._mode == "task":
-            self._task = TaskStep(
-                robot, c, self._objs, self._tasks, lower, upper, run.alpha, cap, bound
-            )
-        else:
-            self._joint = JointStep(c.joint_mean, lower, upper, cap, bound)
+        self._step = make_step(robot, run)
         self._last = _Targets(theta0.copy(), 0, None, None)
         self._no_jac = np.zeros((3, n))
         self._timed: _Timed | None = None
@@ -436,26 +395,19 @@ class Controller:
         lag = float((np.abs(q - last.q) / self._step_bound).max())
         held = last.index > 0 and lag > self.max_lag
         j = last.index if held else last.index + 1
-        if self._mode == "joint":
+        step = self._step
+        x: Float | None = None
+        axes: Float | None = None
+        if not step.needs_kinematics:
             jac = self._no_jac
-            new, limited = self._joint(j, q)
-            x_new: Float | None = None
-            jac_new: Float | None = None
-            axes_new: Float | None = None
-        else:
+        elif last.x is not None and last.jac is not None and lag == 0.0:
             # The arm at the last target exactly (fed its own commands): its f and J are known.
-            axes: Float | None = None
-            if last.x is not None and last.jac is not None and lag == 0.0:
-                x, jac, axes = last.x, last.jac, last.axes
-            elif self._mode == "fused":
-                x, jac, axes = self._fused.kinematics(q)
-            else:
-                x, jac = self._fk_jac(q)
-            if self._mode == "fused":
-                new, x_new, jac_new, axes_new, limited = self._fused(j, q, x, jac, axes)
-            else:
-                new, x_new, jac_new, limited = self._task(j, q, x, jac, damped_pinv(jac))
-                axes_new = None
+            x, jac, axes = last.x, last.jac, last.axes
+        else:
+            x, jac, axes = step.kinematics(q)
+        new, x_new, jac_new, axes_new, limited = step.advance(
+            j, q, x, jac if step.needs_kinematics else None, axes
+        )
         if lag > 0.0 and not held:
             # The arm follows but is not at the last target: bound the step from the last
             # target too, so that the reference through consecutive commands keeps the bound.
@@ -529,14 +481,7 @@ class Controller:
         run = dataclasses.replace(self._run, objects=dict(self._objs), theta0=q)
         moving = bool(np.any(v))
         res = timed_path(
-            self._robot,
-            run,
-            st.limits,
-            self.dt,
-            line_search=self._line_search,
-            newton=self._newton,
-            phase=phase,
-            velocity=v if moving else None,
+            self._robot, run, st.limits, self.dt, phase=phase, velocity=v if moving else None
         )
         assert res.times is not None
         st.motion = follow(
@@ -563,7 +508,7 @@ class Controller:
         if unknown:
             raise ValueError(f"objects: unknown object name(s) {unknown}; this skill knows {names}")
         updated = {**self._objs, **given}
-        if self._reach is not None:
+        if self._run.reach is not None:
             # Checked before it is kept: a refused update leaves the positions as they were.
             self._check_reach({k: v for k, v in updated.items() if k in given})
         self._objs = updated
@@ -573,15 +518,13 @@ class Controller:
             st.moved = st.moved or any(
                 float(np.linalg.norm(updated[k] - planned[k])) > st.replan_distance for k in given
             )
-        if self._mode == "fused":
-            self._fused.set_objects(self._objs)
-        elif self._mode == "task":
-            self._task.set_objects(self._objs)
+        self._step.set_objects(self._objs)
 
     def _check_reach(self, objs: Mapping[str, Float]) -> None:
-        assert self._reach is not None
+        run = self._run
+        assert run.reach is not None
         used = {k: o for k, o in objs.items() if k in self._used}
-        _check_reach(used, self._c, float(self._reach), self._on_unreachable)
+        _check_reach(used, self._c, run.reach, run.on_unreachable)
 
     # ------------------------------------------------------------------ command details
     def _gripper_at(self, j: int) -> bool:
@@ -589,27 +532,10 @@ class Controller:
         return bool(g is not None and g[j] > 0.5)
 
     def _covariance(self, j: int, jac: Float) -> Float:
-        if self._mode == "fused":
-            return self._fused.covariance(j, jac)
-        if self._mode == "task":
-            jp = damped_pinv(jac)
-            return np.asarray(jp @ self._task.s_fused[j] @ jp.T)
-        return np.array(self._c.joint_cov[j], dtype=np.float64)
+        return self._step.covariance(j, jac)
 
     def _influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
-        if self._mode == "joint":
-            return {JOINT: 1.0}
-        if self._mode == "task":
-            s = self._task.s_fused[j]
-            return {
-                k: float(np.trace(s @ self._task.prec[j, i])) / 3 for i, k in enumerate(self._tasks)
-            }
-        s_hand = jac @ cov @ jac.T
-        shares = {
-            k: float(np.trace(s_hand @ self._fused.prec[j, i])) / 3
-            for i, k in enumerate(self._tasks)
-        }
-        return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
+        return self._step.influence(j, jac, cov)
 
 
 @dataclass

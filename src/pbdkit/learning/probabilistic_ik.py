@@ -180,6 +180,7 @@ computed after the loop, batched.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -204,15 +205,22 @@ from ..robots.kinematics import damped_pinv
 
 __all__ = [
     "Constraints",
+    "ControllerStep",
+    "FusedStep",
+    "JointStep",
     "KinematicModel",
     "ReachWarning",
     "ReproductionResult",
+    "RunOptions",
     "RunSetup",
+    "TaskStep",
     "check_objects",
     "first_posture",
+    "make_step",
     "reach_from_samples",
     "reproduce",
     "setup_run",
+    "solve",
     "step_limit_from_velocity",
     "timed_path",
 ]
@@ -530,6 +538,47 @@ def _check_reach(
             warnings.warn(msg + " (the hand will stop short)", ReachWarning, stacklevel=3)
 
 
+@dataclass(frozen=True, eq=False)
+class RunOptions:
+    """How a reproduction or a controller run goes: the options :meth:`pbdkit.Skill.reproduce`,
+    :meth:`pbdkit.Skill.controller`, :func:`solve` and :class:`pbdkit.Controller` share, in one
+    object (each is described at :meth:`pbdkit.Skill.reproduce`).
+
+    Attributes
+    ----------
+    q0 : array-like, shape (n,), optional
+        Initial posture, within the joint limits. Default: theta_hat_0 (the paper), clipped to
+        the limits.
+    use : sequence of str, optional
+        Constraints to use: None for all (fused); ``["joint"]`` for the joint-space controller;
+        ``["glass"]`` for the task-space controller of one object; several names fuse them.
+    alpha : float
+        Weight of the null-space term of the task-only controllers (paper: 0.5). Without effect
+        when ``"joint"`` is in use (see the module docstring).
+    max_step : float or None
+        Largest joint-space step (Euclidean norm over the joints, rad): a longer step is scaled
+        down, keeping its direction (module docstring, "Step size"). None: no such bound.
+    on_unreachable : {"raise", "warn"}
+        With a reach: raise ValueError for an object out of reach, or warn with
+        :class:`ReachWarning` and reproduce anyway (the hand then stops short).
+    line_search : bool
+        Fused controller: shorten a step that would raise the fused energy of its step (module
+        docstring, "Stability"). False: the paper's loop as written.
+    newton : bool
+        Fused controller: use the curvature of the forward kinematics where it stiffens a step
+        (module docstring, "Stability"; it needs ``robot.fk_jacobian_axes_unchecked``, which a
+        :class:`pbdkit.Robot` has). False: Gauss-Newton steps only.
+    """
+
+    q0: npt.ArrayLike | None = None
+    use: Sequence[str] | str | None = None
+    alpha: float = 0.5
+    max_step: float | None = 0.1
+    on_unreachable: Literal["raise", "warn"] = "raise"
+    line_search: bool = True
+    newton: bool = True
+
+
 @dataclass(frozen=True)
 class RunSetup:
     """The validated inputs of one reproduction or controller run (see :func:`setup_run`)."""
@@ -544,33 +593,37 @@ class RunSetup:
     lower: Float
     upper: Float
     theta0: Float
+    line_search: bool
+    newton: bool
+    reach: float | None
+    on_unreachable: str
 
 
 def setup_run(
     robot: KinematicModel,
     constraints: Constraints,
     objects: Mapping[str, npt.ArrayLike],
+    options: RunOptions,
     *,
-    q0: npt.ArrayLike | None,
-    use: Sequence[str] | str | None,
-    alpha: float,
-    max_step: float | None,
-    step_limit: npt.ArrayLike | None,
-    reach: float | None,
-    on_unreachable: str,
+    step_limit: npt.ArrayLike | None = None,
+    reach: float | None = None,
 ) -> RunSetup:
-    """Validate the inputs shared by :func:`reproduce` and the online controller."""
+    """Validate the inputs shared by :func:`solve` and the online controller."""
     c = constraints
     if not isinstance(c, Constraints):
         raise ValueError(f"constraints must be a Constraints, got {type(c).__name__}")
+    if not isinstance(options, RunOptions):
+        raise ValueError(f"options must be a RunOptions, got {type(options).__name__}")
     n = c.n_joints
     if int(robot.n_joints) != n:
         raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
     objs = check_objects(objects, c.object_names)
-    used = _check_use(use, c.names)
-    alpha = check_positive_float(alpha, "alpha", allow_zero=True)
+    used = _check_use(options.use, c.names)
+    alpha = check_positive_float(options.alpha, "alpha", allow_zero=True)
+    max_step = options.max_step
     step_cap = np.inf if max_step is None else check_positive_float(max_step, "max_step")
     bound = _check_step_limit(step_limit, n)
+    on_unreachable = options.on_unreachable
     if on_unreachable not in ("raise", "warn"):
         raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
     if reach is not None:
@@ -579,29 +632,40 @@ def setup_run(
     lower = np.asarray(robot.lower, dtype=np.float64)
     upper = np.asarray(robot.upper, dtype=np.float64)
     # The paper starts at theta_hat_0; clipped in case the GMR mean grazes a limit.
+    q0 = options.q0
     theta0 = np.clip(c.joint_mean[0], lower, upper) if q0 is None else _check_q0(q0, lower, upper)
     tasks = [u for u in used if u != JOINT]
-    return RunSetup(c, objs, used, tasks, alpha, step_cap, bound, lower, upper, theta0)
+    return RunSetup(
+        c,
+        objs,
+        used,
+        tasks,
+        alpha,
+        step_cap,
+        bound,
+        lower,
+        upper,
+        theta0,
+        bool(options.line_search),
+        bool(options.newton),
+        None if reach is None else float(reach),
+        on_unreachable,
+    )
 
 
-def reproduce(
+def solve(
     robot: KinematicModel,
     constraints: Constraints,
     objects: Mapping[str, npt.ArrayLike],
+    options: RunOptions | None = None,
     *,
-    q0: npt.ArrayLike | None = None,
-    use: Sequence[str] | str | None = None,
-    alpha: float = 0.5,
-    max_step: float | None = 0.1,
     step_limit: npt.ArrayLike | None = None,
     reach: float | None = None,
-    on_unreachable: Literal["raise", "warn"] = "raise",
-    line_search: bool = True,
-    newton: bool = True,
     limits: MotionLimits | None = None,
     dt: float | None = None,
 ) -> ReproductionResult:
-    """Closed-loop reproduction of Table II for new object positions.
+    """Closed-loop reproduction of Table II for new object positions: the probabilistic
+    inverse kinematics over the whole time grid (what :meth:`pbdkit.Skill.reproduce` runs).
 
     Parameters
     ----------
@@ -611,18 +675,9 @@ def reproduce(
         The skill's generalized constraints over T steps.
     objects : dict str -> array-like, shape (3,)
         Position o(n) of every object of the skill, in the robot's base frame.
-    q0 : array-like, shape (n,), optional
-        Initial posture, within the joint limits. Default: theta_hat_0 (the paper), clipped to
-        the limits.
-    use : sequence of str, optional
-        Constraints to use: None for all (fused); ``["joint"]`` for the joint-space controller;
-        ``["glass"]`` for the task-space controller of one object; several names fuse them.
-    alpha : float
-        Weight of the null-space term of the task-only controllers (paper: 0.5). Without effect
-        when ``"joint"`` is in use (see the module docstring).
-    max_step : float or None
-        Largest joint-space step (Euclidean norm over the joints, rad): a longer step is scaled
-        down, keeping its direction (module docstring, "Step size"). None: no such bound.
+    options : RunOptions, optional
+        The start posture, the constraints in use and how the loop steps (default
+        ``RunOptions()``: every constraint fused, from theta_hat_0).
     step_limit : float or array-like, shape (n,), optional
         Largest step of each joint (rad per step; a number applies to every joint, inf leaves a
         joint unbounded): a step with |dtheta_i| > step_limit_i for some joint is scaled down
@@ -631,17 +686,8 @@ def reproduce(
         Not used with ``limits`` (the timing bounds the speed there).
     reach : float, optional
         Reach of the arm (m, from the base origin). If given, the most constrained target
-        o + x_hat of every object in use is checked against it.
-    on_unreachable : {"raise", "warn"}
-        Raise ValueError, or warn with :class:`ReachWarning` and reproduce anyway (the hand then
-        stops short; the result stays finite and within limits).
-    line_search : bool
-        Fused controller: shorten a step that would raise the fused energy of its step (module
-        docstring, "Stability"). False: the paper's loop as written.
-    newton : bool
-        Fused controller: use the curvature of the forward kinematics where it stiffens a step
-        (module docstring, "Stability"; it needs ``robot.fk_jacobian_axes_unchecked``, which a
-        :class:`pbdkit.Robot` has). False: Gauss-Newton steps only.
+        o + x_hat of every object in use is checked against it (``options.on_unreachable``
+        says what then happens; the result stays finite and within limits).
     limits : MotionLimits, optional
         Velocity, acceleration and jerk limits (module docstring, "Motion limits"): the result
         then has :attr:`ReproductionResult.times` within them, a lead-in from ``q0`` and rest at
@@ -665,21 +711,53 @@ def reproduce(
         robot,
         constraints,
         objects,
-        q0=q0,
-        use=use,
-        alpha=alpha,
-        max_step=max_step,
+        RunOptions() if options is None else options,
         step_limit=step_limit,
         reach=reach,
-        on_unreachable=on_unreachable,
     )
     if timed:
         assert limits is not None and dt is not None
-        return timed_path(
-            robot, run, limits, dt, line_search=bool(line_search), newton=bool(newton)
-        )
-    path = _table_ii(robot, run, run.theta0, line_search=bool(line_search), newton=bool(newton))
+        return timed_path(robot, run, limits, dt)
+    path = _table_ii(robot, run, run.theta0)
     return _result(run, run.constraints.t.copy(), path, None, None, None, None, float("nan"))
+
+
+def reproduce(
+    robot: KinematicModel,
+    constraints: Constraints,
+    objects: Mapping[str, npt.ArrayLike],
+    *,
+    q0: npt.ArrayLike | None = None,
+    use: Sequence[str] | str | None = None,
+    alpha: float = 0.5,
+    max_step: float | None = 0.1,
+    step_limit: npt.ArrayLike | None = None,
+    reach: float | None = None,
+    on_unreachable: Literal["raise", "warn"] = "raise",
+    line_search: bool = True,
+    newton: bool = True,
+    limits: MotionLimits | None = None,
+    dt: float | None = None,
+) -> ReproductionResult:
+    """Deprecated spelling of :func:`solve` (its options as keywords); goes in pbdkit 0.3."""
+    warnings.warn(
+        "pbdkit.learning.probabilistic_ik.reproduce is now solve(robot, constraints, objects, "
+        "RunOptions(...), step_limit=..., reach=..., limits=..., dt=...); the old name goes "
+        "in pbdkit 0.3",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    options = RunOptions(q0, use, alpha, max_step, on_unreachable, line_search, newton)
+    return solve(
+        robot,
+        constraints,
+        objects,
+        options,
+        step_limit=step_limit,
+        reach=reach,
+        limits=limits,
+        dt=dt,
+    )
 
 
 def timed_path(
@@ -688,8 +766,6 @@ def timed_path(
     limits: MotionLimits,
     dt: float,
     *,
-    line_search: bool = True,
-    newton: bool = True,
     theta: Float | None = None,
     phase: float = 0.0,
     velocity: Float | None = None,
@@ -715,12 +791,10 @@ def timed_path(
     plan = limits.scaled(LIMIT_SAFETY)
     theta0 = run.theta0 if theta is None else np.asarray(theta, dtype=np.float64)
     moving = velocity is not None and bool(np.any(velocity))
-    fused = (
-        _fused_step(robot, run, line_search, newton) if JOINT in run.used and run.tasks else None
-    )
+    step = make_step(robot, run)
     if phase <= 0.0 and not moving:
-        start = first_posture(robot, run, line_search=line_search, newton=newton, fused=fused)
-        path = _table_ii(robot, run, start, line_search=line_search, newton=newton, fused=fused)
+        start = first_posture(robot, run, step=step)
+        path = _table_ii(robot, run, start, step=step)
         steps = c.t.copy()
         # Planned a little inside `plan`, so that rounding never puts it above what is checked;
         # sampled every step, or every LEAD_IN_PERIOD s for a skill of very short steps.
@@ -728,9 +802,7 @@ def timed_path(
         lead_q, lead_v, lead_a = point_to_point(theta0, start, lead_dt, plan.scaled(LEAD_IN_MARGIN))
     else:
         first = min(math.floor(phase), c.n_steps - 1)
-        path = _table_ii(
-            robot, run, theta0, line_search=line_search, newton=newton, start=first, fused=fused
-        )
+        path = _table_ii(robot, run, theta0, start=first, step=step)
         steps = c.t[first:].copy()
         steps[0] = min(float(phase), float(c.n_steps - 1))
         lead_q = lead_v = lead_a = theta0[:0].reshape(0, theta0.shape[0])
@@ -814,20 +886,14 @@ def _lead(a: NDArray[Any], n_lead: int) -> NDArray[Any]:
     return np.concatenate([np.repeat(a[:1], n_lead, axis=0), a])
 
 
-def _fused_step(robot: KinematicModel, run: RunSetup, line_search: bool, newton: bool) -> FusedStep:
-    """The fused controller's step for ``run``."""
-    return FusedStep(
-        robot,
-        run.constraints,
-        run.objects,
-        run.tasks,
-        run.lower,
-        run.upper,
-        run.max_step,
-        run.step_limit,
-        line_search,
-        newton,
-    )
+def make_step(robot: KinematicModel, run: RunSetup) -> ControllerStep:
+    """The step of the controller ``run`` asks for (its constraints in use): the one place
+    the offline loop (:func:`solve`) and the online controller get it from."""
+    if JOINT not in run.used:
+        return TaskStep(robot, run)
+    if run.tasks:
+        return FusedStep(robot, run)
+    return JointStep(run)
 
 
 def _table_ii(
@@ -835,32 +901,25 @@ def _table_ii(
     run: RunSetup,
     theta0: Float,
     *,
-    line_search: bool,
-    newton: bool,
     start: int = 0,
-    fused: FusedStep | None = None,
+    step: ControllerStep | None = None,
 ) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
     """The loop of the controller ``run`` asks for, from ``theta0`` at step ``start``: joints,
     positions, covariances, influence (hand space and joint space) and the mask of scaled
-    steps, for steps ``start`` .. T - 1 (row 0: ``theta0``). ``fused``: the fused controller's
-    step for ``run``, if already built."""
-    c, objs, used, tasks = run.constraints, run.objects, run.used, run.tasks
-    lower, upper, step_cap, bound = run.lower, run.upper, run.max_step, run.step_limit
-    if JOINT in used and tasks:
-        if fused is None:
-            fused = _fused_step(robot, run, line_search, newton)
-        return _fused_loop(c, tasks, theta0, fused, start=start)
-    if JOINT in used:
-        joints, limited = _joint_only(
-            c.joint_mean, theta0, lower, upper, step_cap, bound, start=start
-        )
+    steps, for steps ``start`` .. T - 1 (row 0: ``theta0``). ``step``: the controller's step
+    (:func:`make_step`), if already built."""
+    c = run.constraints
+    step = make_step(robot, run) if step is None else step
+    if isinstance(step, FusedStep):
+        return _fused_loop(c, run.tasks, theta0, step, start=start)
+    if isinstance(step, JointStep):
+        joints, limited = _joint_only(step, theta0, start=start)
         positions = np.asarray(robot.fk(joints), dtype=np.float64)
         ones = {JOINT: np.ones(c.n_steps - start)}
         covs = c.joint_cov[start:].copy()
         return joints, positions, covs, ones, {JOINT: ones[JOINT].copy()}, limited
-    joints, positions, covs, influence, limited = _task_loop(
-        robot, c, objs, tasks, theta0, lower, upper, run.alpha, step_cap, bound, start=start
-    )
+    assert isinstance(step, TaskStep)
+    joints, positions, covs, influence, limited = _task_loop(step, theta0, start=start)
     # Rank-3 covariance: no joint-space precision to compare; the task-space shares.
     influence_js = {k: v.copy() for k, v in influence.items()}
     return joints, positions, covs, influence, influence_js, limited
@@ -875,9 +934,7 @@ def first_posture(
     robot: KinematicModel,
     run: RunSetup,
     *,
-    line_search: bool = True,
-    newton: bool = True,
-    fused: FusedStep | None = None,
+    step: ControllerStep | None = None,
 ) -> Float:
     """The skill's first posture for the controller of ``run``: Table II's step 0 iterated from
     theta_hat_0 (clipped to the limits) until it stands still, i.e. the product of the
@@ -885,31 +942,26 @@ def first_posture(
 
     It does not depend on where the arm is: a reproduction from any q0 begins with a lead-in
     move to it, then the skill runs with its own timing (module docstring, "Motion limits").
-    ``fused``: the fused controller's :class:`FusedStep` for ``run``, if already built.
+    ``step``: the controller's step for ``run`` (:func:`make_step`), if already built.
     """
     c = run.constraints
     theta = np.clip(c.joint_mean[0], run.lower, run.upper)
-    if JOINT in run.used and run.tasks:
-        if fused is None:
-            fused = _fused_step(robot, run, line_search, newton)
-        x, jac, axes = fused.kinematics(theta)
-        for _ in range(FIRST_POSTURE_STEPS):
-            new, x, jac, axes, _limited = fused(0, theta, x, jac, axes)
-            moved = float(np.abs(new - theta).max())
-            theta = new
-            if moved <= FIRST_POSTURE_TOL:
-                break
-    elif run.tasks:
-        task = TaskStep(
-            robot, c, run.objects, run.tasks, run.lower, run.upper, run.alpha, run.max_step, None
-        )
-        x, jac = task.fk_jac(theta)
-        for _ in range(FIRST_POSTURE_STEPS):
-            new, x, jac, _limited = task(0, theta, x, jac, damped_pinv(jac))
-            moved = float(np.abs(new - theta).max())
-            theta = new
-            if moved <= FIRST_POSTURE_TOL:
-                break
+    if not run.tasks:
+        return np.asarray(theta, dtype=np.float64)
+    if step is None:
+        step = make_step(robot, run)
+    if isinstance(step, TaskStep) and step.step_limit is not None:
+        # Standing still at t_0 is not bounded by a speed: the step without its velocity bound.
+        step = TaskStep(robot, dataclasses.replace(run, step_limit=None))
+    x: Float | None
+    jac: Float | None
+    x, jac, axes = step.kinematics(theta)
+    for _ in range(FIRST_POSTURE_STEPS):
+        new, x, jac, axes, _limited = step.advance(0, theta, x, jac, axes)
+        moved = float(np.abs(new - theta).max())
+        theta = new
+        if moved <= FIRST_POSTURE_TOL:
+            break
     return np.asarray(theta, dtype=np.float64)
 
 
@@ -918,7 +970,7 @@ def step_limit_from_velocity(
     robot: KinematicModel,
     dt: float,
 ) -> Float | None:
-    """Per-joint step bound for :func:`reproduce` from joint velocity limits.
+    """Per-joint step bound for :func:`solve` from joint velocity limits.
 
     Parameters
     ----------
@@ -1005,21 +1057,70 @@ def _limited_mask(n_steps: int, steps: list[int]) -> NDArray[np.bool_]:
     return mask
 
 
-class JointStep:
-    """One step of the joint-space controller: theta_j = theta + (theta_hat_j - theta) within the
-    bounds (Table II); shared by :func:`reproduce` and the online controller."""
+class ControllerStep:
+    """One step of a controller of Table II: theta_j from the posture theta_{j-1}.
 
-    def __init__(
-        self,
-        theta_hat: Float,
-        lower: Float,
-        upper: Float,
-        max_step: float,
-        step_limit: Float | None,
-    ) -> None:
-        self.target = np.clip(theta_hat, lower, upper)
-        self.max_step, self.step_limit = max_step, step_limit
-        self.free2 = _free_step2(max_step, step_limit)
+    The interface :func:`solve`'s loops and :class:`pbdkit.Controller` run every controller
+    through (:func:`make_step` builds the one a run asks for): :class:`FusedStep`,
+    :class:`TaskStep` or :class:`JointStep`.
+    """
+
+    #: "fused", "task" or "joint".
+    mode: str
+    #: Whether :meth:`advance` uses f(theta) and J(theta) (the joint-space controller does not).
+    needs_kinematics: bool = True
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        """f(theta), J(theta) and the joint axes (n, 3) where the step uses them (else None)."""
+        raise NotImplementedError
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x, jac and axes from :meth:`kinematics` at
+        it, None where :attr:`needs_kinematics` is False).
+
+        Returns theta_j, f(theta_j), J(theta_j) and its axes where the step computed them
+        (else None), and whether a bound scaled the step down.
+        """
+        raise NotImplementedError
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """The covariance of step j in joint space, (n, n), with the Jacobian ``jac`` used."""
+        raise NotImplementedError
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """The share of each constraint in use at step j (hand space), summing to 1."""
+        raise NotImplementedError
+
+
+class JointStep(ControllerStep):
+    """One step of the joint-space controller: theta_j = theta + (theta_hat_j - theta) within the
+    bounds (Table II); shared by :func:`solve` and the online controller."""
+
+    mode = "joint"
+    needs_kinematics = False
+
+    def __init__(self, run: RunSetup) -> None:
+        self.c = run.constraints
+        self.target = np.clip(self.c.joint_mean, run.lower, run.upper)
+        self.max_step, self.step_limit = run.max_step, run.step_limit
+        self.free2 = _free_step2(run.max_step, run.step_limit)
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        new, limited = self(j, theta)
+        return new, None, None, None, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        return np.array(self.c.joint_cov[j], dtype=np.float64)
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        return {JOINT: 1.0}
 
     def __call__(self, j: int, theta: Float) -> tuple[Float, bool]:
         """theta_j from theta_{j-1} = ``theta``, and whether a bound scaled the step down."""
@@ -1034,22 +1135,14 @@ class JointStep:
         return theta + step, limited  # stays in the box: between theta and target[j]
 
 
-def _joint_only(
-    theta_hat: Float,
-    theta0: Float,
-    lower: Float,
-    upper: Float,
-    max_step: float,
-    step_limit: Float | None,
-    start: int = 0,
-) -> tuple[Float, NDArray[np.bool_]]:
+def _joint_only(step: JointStep, theta0: Float, start: int = 0) -> tuple[Float, NDArray[np.bool_]]:
     """Joint-space controller: :class:`JointStep` over every step (from step ``start``).
 
     That is theta_hat itself (clipped to the limits), except where a step would exceed
     ``step_limit`` or ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those
     steps are scaled. Returns the joints and the mask of the scaled steps.
     """
-    step = JointStep(theta_hat, lower, upper, max_step, step_limit)
+    max_step, step_limit = step.max_step, step.step_limit
     joints = step.target[start:].copy()
     joints[0] = theta0
     n_steps = joints.shape[0]
@@ -1082,12 +1175,12 @@ def _check_q0(q0: npt.ArrayLike, lower: Float, upper: Float) -> Float:
     return q
 
 
-class FusedStep:
+class FusedStep(ControllerStep):
     """One step of the fused controller (Table II with eq. (1) in information form).
 
     Everything that does not depend on the posture is prepared here for all steps at once;
     :meth:`__call__` takes the posture theta_{j-1} (with f and J there) and returns theta_j.
-    :func:`reproduce` and :class:`pbdkit.learning.controller.Controller` both run this one step, so
+    :func:`solve` and :class:`pbdkit.learning.controller.Controller` both run this one step, so
     an online run fed its own targets is the offline reproduction.
 
     Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
@@ -1095,19 +1188,12 @@ class FusedStep:
     the cost does not grow with the number of objects (P_n = (Sigma^x(n))^-1).
     """
 
-    def __init__(
-        self,
-        robot: KinematicModel,
-        c: Constraints,
-        objs: Mapping[str, Float],
-        tasks: list[str],
-        lower: Float,
-        upper: Float,
-        max_step: float,
-        step_limit: Float | None,
-        line_search: bool,
-        newton: bool = True,
-    ) -> None:
+    mode = "fused"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c, tasks = run.constraints, run.tasks
+        lower, upper, max_step, step_limit = run.lower, run.upper, run.max_step, run.step_limit
+        line_search, newton = run.line_search, run.newton
         self.c, self.tasks, self.n = c, tasks, c.n_joints
         self.lower, self.upper = lower, upper
         self.max_step, self.step_limit, self.line_search = max_step, step_limit, line_search
@@ -1122,7 +1208,7 @@ class FusedStep:
         self.free2 = _free_step2(max_step, step_limit)
         # Lists of per-step views are cheaper to index in the loop than the arrays.
         self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
-        self.set_objects(objs)
+        self.set_objects(run.objects)
 
     def set_objects(self, objs: Mapping[str, Float]) -> None:
         """New object positions (every object in use), for every step from now on."""
@@ -1210,11 +1296,22 @@ class FusedStep:
                 z_new[:n], z_new[n:] = new, x_new
         return new, x_new, jac_new, axes_new, limited
 
+    # The step itself, under the interface's name: no wrapper, one call less per step.
+    advance = __call__  # type: ignore[assignment]
+
     def covariance(self, j: int, jac: Float) -> Float:
         """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used."""
         lam = self.prec_list[j] + jac.T.dot(self.p_sum[j]).dot(jac)
         inv = np.linalg.inv(lam)
         return np.asarray(0.5 * (inv + inv.T))
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Hand space: share_n = tr(J Sigma J^T P_n) / 3, the joint constraint the rest."""
+        s_hand = jac @ cov @ jac.T
+        shares = {
+            k: float(np.trace(s_hand @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)
+        }
+        return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
 
 
 def _fused_loop(
@@ -1284,30 +1381,43 @@ def _spd_inverse(a: Float) -> Float:
     return np.asarray(0.5 * (inv + np.swapaxes(inv, -1, -2)))
 
 
-class TaskStep:
+class TaskStep(ControllerStep):
     """One step of a task-only controller (Table II): the task constraints in use fused in task
     space, dtheta = J+ dx + alpha (I - J+ J)(theta_hat_j - theta), J+ the damped right inverse
-    at the current posture. Shared by :func:`reproduce` and the online controller."""
+    at the current posture. Shared by :func:`solve` and the online controller."""
 
-    def __init__(
-        self,
-        robot: KinematicModel,
-        c: Constraints,
-        objs: Mapping[str, Float],
-        tasks: list[str],
-        lower: Float,
-        upper: Float,
-        alpha: float,
-        max_step: float,
-        step_limit: Float | None,
-    ) -> None:
-        self.c, self.tasks, self.alpha = c, tasks, alpha
-        self.lower, self.upper = lower, upper
-        self.max_step, self.step_limit = max_step, step_limit
+    mode = "task"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c = run.constraints
+        self.c, self.tasks, self.alpha = c, run.tasks, run.alpha
+        self.lower, self.upper = run.lower, run.upper
+        self.max_step, self.step_limit = run.max_step, run.step_limit
         self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-        self.free2 = _free_step2(max_step, step_limit)
+        self.free2 = _free_step2(run.max_step, run.step_limit)
         self.eye = np.eye(c.n_joints)
-        self.set_objects(objs)
+        self.set_objects(run.objects)
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        x, jac = self.fk_jac(theta)
+        return x, jac, None
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        assert x is not None and jac is not None
+        new, x_new, jac_new, limited = self(j, theta, x, jac, damped_pinv(jac))
+        return new, x_new, jac_new, None, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """The paper's J+ Sigma^x J+^T (rank 3), J+ at the Jacobian ``jac`` used."""
+        jp = damped_pinv(jac)
+        return np.asarray(jp @ self.s_fused[j] @ jp.T)
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Already in hand space: share_n = tr(S_fused P_n) / 3."""
+        s = self.s_fused[j]
+        return {k: float(np.trace(s @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)}
 
     def set_objects(self, objs: Mapping[str, Float]) -> None:
         """New object positions (every object in use), for every step from now on."""
@@ -1336,21 +1446,11 @@ class TaskStep:
 
 
 def _task_loop(
-    robot: KinematicModel,
-    c: Constraints,
-    objs: Mapping[str, Float],
-    tasks: list[str],
-    theta0: Float,
-    lower: Float,
-    upper: Float,
-    alpha: float,
-    max_step: float,
-    step_limit: Float | None,
-    start: int = 0,
+    step: TaskStep, theta0: Float, start: int = 0
 ) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
     """Task-only controller of Table II: :class:`TaskStep` over every step (from ``start``)."""
+    c, tasks = step.c, step.tasks
     n_steps, n = c.n_steps - start, c.n_joints
-    step = TaskStep(robot, c, objs, tasks, lower, upper, alpha, max_step, step_limit)
     joints = np.empty((n_steps, n))
     positions = np.empty((n_steps, 3))
     pinvs = np.empty((n_steps, n, 3))

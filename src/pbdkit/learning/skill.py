@@ -13,7 +13,7 @@ Learning (:meth:`Skill.learn`):
    they do not depend on the new object positions, so they are computed once per skill and
    covariance mode and cached.
 
-Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.learning.probabilistic_ik.reproduce`.
+Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.learning.probabilistic_ik.solve`.
 
 File format (:meth:`Skill.save` / :meth:`Skill.load`): a NumPy ``.npz`` archive, no pickle,
 written atomically. Keys: ``format`` = ``"pbdkit-skill"``, ``version`` = 1, ``n_steps``
@@ -53,8 +53,9 @@ from .probabilistic_ik import (
     Constraints,
     KinematicModel,
     ReproductionResult,
+    RunOptions,
     reach_from_samples,
-    reproduce,
+    solve,
     step_limit_from_velocity,
 )
 
@@ -438,19 +439,14 @@ class Skill:
             Bad input, an object out of reach (``on_unreachable="raise"``), or an explicit
             limit for a skill whose :attr:`duration` is unknown.
         """
+        options = RunOptions(q0, use, alpha, max_step, on_unreachable, line_search, newton)
         dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
-        return reproduce(
+        return solve(
             self.robot,
             self.constraints(covariance),
             objects,
-            q0=q0,
-            use=use,
-            alpha=alpha,
-            max_step=max_step,
+            options,
             reach=self.reach,
-            on_unreachable=on_unreachable,
-            line_search=line_search,
-            newton=newton,
             limits=limits,
             dt=dt,
         )
@@ -532,6 +528,7 @@ class Skill:
         -------
         controller : Controller
         """
+        options = RunOptions(q0, use, alpha, max_step, on_unreachable, line_search, newton)
         dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
         step_limit = None
         if limits is None:
@@ -540,18 +537,12 @@ class Skill:
             self.robot,
             self.constraints(covariance),
             objects,
-            q0=q0,
-            use=use,
-            alpha=alpha,
-            max_step=max_step,
+            options,
             step_limit=step_limit,
             dt=dt,
-            line_search=line_search,
             reach=self.reach,
-            on_unreachable=on_unreachable,
             max_lag=max_lag,
             limits=limits,
-            newton=newton,
         )
 
     # ------------------------------------------------------------------ I/O
