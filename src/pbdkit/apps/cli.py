@@ -770,8 +770,10 @@ def study(
     _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)
-    from .study import FULL, SMALL, run_study
+    from .study import FULL, SMALL, check_study, run_study
 
+    size = FULL if full else SMALL
+    check_study(spec, size=size, seed=seed)  # before the progress bar shows
     with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)
 
@@ -781,7 +783,7 @@ def study(
         result = run_study(
             spec,
             out,
-            size=FULL if full else SMALL,
+            size=size,
             seed=seed,
             workers=workers,
             scheduler=scheduler,
