@@ -208,6 +208,17 @@ def _progress() -> Any:
     )
 
 
+def _check_lasa_shape(shape: str) -> None:
+    from ..learning.datasets import lasa_names
+
+    try:
+        names = lasa_names()
+    except (ModuleNotFoundError, FileNotFoundError) as exc:  # the data are an optional extra
+        _fail(f"--task lasa: {exc}")
+    if shape not in names:
+        _fail(f"--shape must be a LASA shape, one of {', '.join(names)}; got {shape!r}")
+
+
 @app.command()
 @_reports_errors
 def demo(
@@ -235,6 +246,7 @@ def demo(
     _check_output(out, "--out", folder=True)
     _check_perturb(perturb)
     if task == "lasa":
+        _check_lasa_shape(shape)
         from .demo import run_lasa_demo
 
         with console.status(f"learning LASA shape {shape} ..."):

@@ -26,11 +26,6 @@ cluster (``--scheduler``).
 
 from __future__ import annotations
 
-import math
-import numbers
-import os
-import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -41,9 +36,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
+from .._validation import check_int, check_positive_float
 from ..sim import tasks as T
 from ..sim.experiment import controller_names, learn_task, run_trials
 from ..sim.tasks import TaskSpec
+from ._staging import staged_output
 
 if TYPE_CHECKING:
     from ..sim.experiment import TaskSkill
@@ -62,14 +59,6 @@ Float = NDArray[np.float64]
 
 #: The paper's tracking error (Sec. III), mean +- standard deviation (mm).
 PAPER_TRACKING_MM = (5.9, 2.8)
-
-
-def _check_int(name: str, value: object, low: int, *, among: tuple[Any, ...] | None = None) -> None:
-    """Refuse ``value`` unless it is an integer >= ``low`` (a bool is not: True is no count)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
-        if among is None:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-        raise ValueError(f"{name} must hold integers >= {low}, got {value!r} in {among!r}")
 
 
 def _as_tuple(name: str, value: object, *, empty: str = "") -> tuple[Any, ...]:
@@ -126,21 +115,17 @@ class StudySize:
     map_controllers: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
-        _check_int("StudySize.grid", self.grid, 2)
-        _check_int("StudySize.curve_trials", self.curve_trials, 1)
-        _check_int("StudySize.noise_trials", self.noise_trials, 1)
+        check_int(self.grid, "StudySize.grid", minimum=2)  # a map needs two points per axis
+        check_int(self.curve_trials, "StudySize.curve_trials", minimum=1)
+        check_int(self.noise_trials, "StudySize.noise_trials", minimum=1)
         # Sequences are kept as tuples: the size stays frozen and hashable.
         demos = _as_tuple("StudySize.demos", self.demos)
-        for n in demos:
-            _check_int("StudySize.demos", n, 2, among=demos)
+        for i, n in enumerate(demos):
+            check_int(n, f"StudySize.demos[{i}]", minimum=2)  # a skill needs two
         _check_unique("StudySize.demos", demos)
         noise = _as_tuple("StudySize.noise_mm", self.noise_mm)
-        for v in noise:
-            real = isinstance(v, numbers.Real) and not isinstance(v, bool)
-            if not (real and math.isfinite(v) and v >= 0.0):
-                raise ValueError(
-                    f"StudySize.noise_mm must hold finite numbers >= 0 (mm), got {v!r} in {noise!r}"
-                )
+        for i, v in enumerate(noise):
+            check_positive_float(v, f"StudySize.noise_mm[{i}]", allow_zero=True)
         _check_unique("StudySize.noise_mm", noise)
         object.__setattr__(self, "demos", demos)
         object.__setattr__(self, "noise_mm", noise)
@@ -268,30 +253,13 @@ def run_study(
     spec = check_study(task, size=size, seed=seed, learn=learn)
     out = Path(out)
     learn = learn_task if learn is None else learn
-    created = _missing_folders(out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        stage = Path(tempfile.mkdtemp(prefix=".study-", dir=out))
-        try:
-            start = time.perf_counter()
-            with session(workers, scheduler) as client:
-                result = _run(spec, stage, size, seed, client, progress, learn)
-            result["seconds"] = time.perf_counter() - start
-            write_json(stage / "study.json", result)
-            _write_report(spec, stage, result)
-            # study.json last: its presence says the study is complete.
-            names = sorted(os.listdir(stage), key=lambda n: n == "study.json")
-            for name in names:
-                os.replace(stage / name, out / name)
-        finally:
-            shutil.rmtree(stage, ignore_errors=True)
-    except BaseException:
-        for folder in reversed(created):
-            try:
-                folder.rmdir()  # only if empty: never what someone else put there
-            except OSError:
-                break
-        raise
+    start = time.perf_counter()
+    with staged_output(out, last="study.json") as stage:
+        with session(workers, scheduler) as client:
+            result = _run(spec, stage, size, seed, client, progress, learn)
+        result["seconds"] = time.perf_counter() - start
+        write_json(stage / "study.json", result)
+        _write_report(spec, stage, result)
     return result
 
 
@@ -320,7 +288,7 @@ def check_study(
     spec = T.get_task(task)
     if not isinstance(size, StudySize):
         raise ValueError(f"size must be a StudySize (SMALL, FULL or your own), got {size!r}")
-    _check_int("seed", seed, 0)
+    check_int(seed, "seed", minimum=0)
     # An injected learner may constrain any object of the task (the fixed basin too).
     objects = constrained_objects(spec) if learn is None else list(spec.ranges)
     known = controller_names(objects)
@@ -330,19 +298,6 @@ def check_study(
                 f"StudySize.map_controllers must name controllers of {known}, got {name!r}"
             )
     return spec
-
-
-def _missing_folders(out: Path) -> list[Path]:
-    """The folders that creating ``out`` creates (``out`` and its missing parents), outermost
-    first: a failed study removes them again."""
-    missing = []
-    folder = out
-    while not folder.exists() and folder != folder.parent:
-        missing.append(folder)
-        folder = folder.parent
-    if folder.exists() and not folder.is_dir():
-        raise ValueError(f"out must be a directory, got {str(out)!r}: {str(folder)!r} is a file")
-    return missing[::-1]
 
 
 def _run(
