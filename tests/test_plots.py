@@ -13,6 +13,7 @@ pytest.importorskip("mujoco")
 
 from pbdkit.apps.plots import (
     figure_png,
+    new_figure,
     plot_constraints,
     plot_demonstrations_3d,
     plot_motion_limits,
@@ -180,3 +181,12 @@ def test_figures_leave_the_users_matplotlib_backend_alone() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "svg"
+
+
+def test_new_figure_is_outside_pyplot() -> None:
+    # The study draws its figures with it: public, sized as asked, not in pyplot's registry.
+    fig = new_figure(figsize=(2.0, 1.0))
+    assert tuple(fig.get_size_inches()) == (2.0, 1.0)
+    assert fig.canvas.manager is None  # pyplot's figures have a manager
+    fig.subplots().plot([0, 1], [0, 1])
+    assert figure_png(fig, dpi=50).startswith(b"\x89PNG")

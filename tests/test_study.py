@@ -24,6 +24,11 @@ from pbdkit.sim.teacher import teach
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
+def _not_json(name: str) -> object:
+    """json.loads accepts NaN and Infinity, which strict JSON (RFC 8259) does not."""
+    raise ValueError(f"{name} is not JSON")
+
+
 def test_grid_spans_twice_the_range_with_the_others_nominal() -> None:
     spec = get_task("coaster")
     xs, ys, places = S.grid_placements(spec, "coaster", 5)
@@ -55,25 +60,38 @@ def test_observation_noise_has_the_asked_mean_error_on_moving_objects_only() -> 
         E.observation_noise(spec, truth, -1.0, seed=0, index=0)
 
 
-@pytest.fixture
-def fast_learning(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """learn_task on fast demonstrations and a coarse grid; records the numbers of demos."""
-    asked: list[int] = []
-    taught = teach("coaster", 5, seed=1, speed=2.0)
+@pytest.fixture(scope="module")
+def taught() -> list:
+    """Five fast demonstrations of the coaster task (durations halved)."""
+    return teach("coaster", 5, seed=1, speed=2.0)
 
-    def learn_task(task: object, *, n_demos: int = 5, seed: int = 0, **_: object) -> E.TaskSkill:
-        asked.append(n_demos)
+
+class FastLearning:
+    """A learner injected into run_study: the first n of :func:`taught` on a coarse grid.
+    Records the numbers of demonstrations asked; fails on the call number ``fail_at``."""
+
+    def __init__(self, taught: list, fail_at: int | None = None) -> None:
+        self.taught = taught
+        self.fail_at = fail_at
+        self.asked: list[int] = []
+
+    def __call__(self, task: object, *, n_demos: int, seed: int) -> E.TaskSkill:
+        self.asked.append(n_demos)
+        if len(self.asked) == self.fail_at:
+            raise RuntimeError("the teacher dropped the glass")
         spec = get_task(task)  # type: ignore[arg-type]
-        demos = taught[:n_demos]
+        demos = self.taught[:n_demos]
         objects = E.constrained_objects(spec)
         skill = Skill.learn(demos, katana(), n_steps=100, max_components=3, objects=objects)
         return E.TaskSkill(spec, demos, skill, 0.0, 0.0)
 
-    monkeypatch.setattr(S, "learn_task", learn_task)
-    return asked
+
+@pytest.fixture
+def fast_learning(taught: list) -> FastLearning:
+    return FastLearning(taught)
 
 
-def test_a_tiny_study_writes_its_report(fast_learning: list[int], tmp_path: Path) -> None:
+def test_a_tiny_study_writes_its_report(fast_learning: FastLearning, tmp_path: Path) -> None:
     size = S.StudySize(
         grid=2,
         demos=(2, 3),
@@ -84,9 +102,13 @@ def test_a_tiny_study_writes_its_report(fast_learning: list[int], tmp_path: Path
     )
     stages: list[str] = []
     result = S.run_study(
-        "coaster", tmp_path, size=size, progress=lambda s, d, t: stages.append(f"{s} {d}/{t}")
+        "coaster",
+        tmp_path,
+        size=size,
+        progress=lambda s, d, t: stages.append(f"{s} {d}/{t}"),
+        learn=fast_learning,
     )
-    assert fast_learning == [5, 2, 3]  # the study's skill, then the curve's
+    assert fast_learning.asked == [5, 2, 3]  # the study's skill, then the curve's
     total = size.runs(2, 4)
     assert total == 2 * (2 * 2 * 2) + 2 + 2 and stages[-1].endswith(f"{total}/{total}")
     assert set(result["maps"]) == {"glass", "coaster"}
@@ -95,9 +117,12 @@ def test_a_tiny_study_writes_its_report(fast_learning: list[int], tmp_path: Path
     assert np.array(m["success"]["fused"]).shape == (2, 2)
     # Inside the demonstrated range is a subset of the grid: its rate is defined only there.
     assert m["range"][0] == get_task("coaster").ranges["coaster"].low[:2].tolist()
+    # A 2 x 2 grid spanning twice the range has no point inside it: no rate (null, not NaN).
+    assert m["inside_range"] == {"fused": None, "joint": None}
     assert [c["n_demos"] for c in result["learning_curve"]] == [2, 3]
     assert [c["noise_mm"] for c in result["noise"]] == [0.0, 10.0]
-    saved = json.loads((tmp_path / "study.json").read_text())
+    saved = json.loads((tmp_path / "study.json").read_text(), parse_constant=_not_json)
+    assert not list(tmp_path.glob(".partial-*"))  # the staging folder is gone
     assert saved["maps"]["coaster"]["success"] == m["success"]
     for name in ("map_glass.png", "map_coaster.png", "learning_curve.png", "noise.png"):
         assert (tmp_path / name).read_bytes().startswith(PNG_MAGIC)
@@ -113,3 +138,120 @@ def test_study_command_line_errors(tmp_path: Path) -> None:
         app, ["study", "--out", str(tmp_path), "--workers", "2", "--scheduler", "tcp://x:1"]
     )
     assert r.exit_code != 0 and "not both" in r.output
+
+
+SIZE = {
+    "grid": 2,
+    "demos": (2, 3),
+    "curve_trials": 1,
+    "noise_mm": (0.0, 10.0),
+    "noise_trials": 1,
+}
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"noise_mm": (0.0, -5.0)}, r"StudySize.noise_mm\[1\] must be finite and >= 0, got -5.0"),
+        ({"noise_mm": (math.nan,)}, r"StudySize.noise_mm\[0\] must be finite and >= 0, got nan"),
+        ({"noise_mm": (2.0, math.inf)}, r"StudySize.noise_mm\[1\] must be finite .* got inf"),
+        ({"noise_mm": (True,)}, r"StudySize.noise_mm\[0\] must be a number, got True"),
+        ({"noise_mm": ()}, r"StudySize.noise_mm must not be empty, got \(\)"),
+        ({"grid": 0}, r"StudySize.grid must be >= 2, got 0"),
+        ({"grid": 1}, r"StudySize.grid must be >= 2, got 1"),
+        ({"grid": 2.5}, r"StudySize.grid must be an integer, got 2.5"),
+        ({"grid": True}, r"StudySize.grid must be an integer, got True"),
+        ({"demos": (1,)}, r"StudySize.demos\[0\] must be >= 2, got 1"),
+        ({"demos": (2, 2)}, r"StudySize.demos must not repeat a value, got \(2, 2\)"),
+        ({"demos": 5}, r"StudySize.demos must be a tuple, got 5"),
+        ({"curve_trials": 0}, r"StudySize.curve_trials must be >= 1, got 0"),
+        ({"noise_trials": -1}, r"StudySize.noise_trials must be >= 1, got -1"),
+        ({"map_controllers": ()}, r"StudySize.map_controllers must not be empty "
+         r"\(None: every controller\), got \(\)"),
+        ({"map_controllers": ("fused", "fused")}, r"map_controllers must not repeat a value"),
+        ({"map_controllers": "fused"}, r"StudySize.map_controllers must be a tuple, got 'fused'"),
+    ],
+)  # fmt: skip
+def test_a_size_no_study_can_run_is_refused_on_construction(
+    change: dict[str, object], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        S.StudySize(**{**SIZE, **change})  # type: ignore[arg-type]
+
+
+def test_sizes_are_kept_as_tuples() -> None:
+    lists = {"demos": [2, np.int64(3)], "map_controllers": ["fused"]}
+    size = S.StudySize(**{**SIZE, **lists})  # type: ignore[arg-type]
+    assert size.demos == (2, 3) and size.map_controllers == ("fused",)
+    assert size.runs(2, 4) == 2 * 4 * 1 + 2 + 2
+    assert S.SMALL.runs(1, 3) == 25 * 3 + 5 * 6 + 6 * 6  # the shipped sizes are valid
+
+
+def _never(*args: object, **kwargs: object) -> E.TaskSkill:
+    raise AssertionError("the study taught or learned before checking its arguments")
+
+
+@pytest.mark.parametrize(
+    ("task", "kwargs", "message"),
+    [
+        # The basin is fixed: the paper's skill (the default learner) has no constraint on it.
+        ("basin", {"size": S.StudySize(**SIZE, map_controllers=("task:basin",))},
+         r"StudySize.map_controllers must name controllers of \['fused', 'joint', "
+         r"'task:glass'\], got 'task:basin'"),
+        ("coaster", {"size": S.StudySize(**SIZE, map_controllers=("fused", "task:cup")),
+                     "learn": _never}, r"got 'task:cup'"),
+        ("coaster", {"seed": -1, "learn": _never}, r"seed must be >= 0, got -1"),
+        ("coaster", {"size": SIZE, "learn": _never}, r"size must be a StudySize"),
+        ("juggle", {"learn": _never}, r"task must be one of"),
+    ],
+)  # fmt: skip
+def test_run_study_checks_its_arguments_before_any_physics(
+    tmp_path: Path, task: str, kwargs: dict[str, object], message: str
+) -> None:
+    out = tmp_path / "study"
+    with pytest.raises(ValueError, match=message):
+        S.run_study(task, out, **kwargs)  # type: ignore[arg-type]
+    assert not out.exists()
+
+
+def test_a_failed_study_leaves_the_output_as_it_found_it(tmp_path: Path) -> None:
+    size = S.StudySize(**SIZE)
+    # A folder the study creates (and its missing parent) is removed again.
+    out = tmp_path / "new" / "study"
+    with pytest.raises(RuntimeError, match="dropped the glass"):
+        S.run_study("coaster", out, size=size, learn=FastLearning([], fail_at=1))
+    assert not (tmp_path / "new").exists()
+    # A folder the user made is kept, with what it held and nothing more.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep me")
+    with pytest.raises(RuntimeError, match="dropped the glass"):
+        S.run_study("coaster", mine, size=size, learn=FastLearning([], fail_at=1))
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+    # Not a folder: refused before anything is created.
+    with pytest.raises(ValueError, match=r"out must be a directory, got .*notes.txt"):
+        S.run_study("coaster", mine / "notes.txt" / "x", size=size, learn=_never)
+
+
+@pytest.mark.slow
+def test_a_study_failing_after_its_maps_writes_nothing(taught: list, tmp_path: Path) -> None:
+    # The maps run and are drawn, then learning the curve's first skill fails: the map's
+    # figure was written to the staging folder only.
+    size = S.StudySize(**SIZE, map_controllers=("joint",))
+    (tmp_path / "study.json").write_text("{}")  # an earlier study's, kept as it was
+    learn = FastLearning(taught, fail_at=2)
+    with pytest.raises(RuntimeError, match="dropped the glass"):
+        S.run_study("coaster", tmp_path, size=size, learn=learn)
+    assert learn.asked == [5, 2]
+    assert [p.name for p in tmp_path.iterdir()] == ["study.json"]
+    assert (tmp_path / "study.json").read_text() == "{}"
+
+
+def test_study_command_line_reports_bad_input_without_creating_the_folder(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "study"
+    r = CliRunner().invoke(app, ["study", "--out", str(out), "--seed", "-1"])
+    assert r.exit_code == 2 and "seed" in r.output and ">= 0" in r.output, r.output
+    assert "Traceback" not in r.output and len(r.output.strip().splitlines()) == 1
+    assert not out.exists()

@@ -208,6 +208,17 @@ def _progress() -> Any:
     )
 
 
+def _check_lasa_shape(shape: str) -> None:
+    from ..learning.datasets import lasa_names
+
+    try:
+        names = lasa_names()
+    except (ModuleNotFoundError, FileNotFoundError) as exc:  # the data are an optional extra
+        _fail(f"--task lasa: {exc}")
+    if shape not in names:
+        _fail(f"--shape must be a LASA shape, one of {', '.join(names)}; got {shape!r}")
+
+
 @app.command()
 @_reports_errors
 def demo(
@@ -235,6 +246,7 @@ def demo(
     _check_output(out, "--out", folder=True)
     _check_perturb(perturb)
     if task == "lasa":
+        _check_lasa_shape(shape)
         from .demo import run_lasa_demo
 
         with console.status(f"learning LASA shape {shape} ..."):
@@ -770,8 +782,10 @@ def study(
     _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)
-    from .study import FULL, SMALL, run_study
+    from .study import FULL, SMALL, check_study, run_study
 
+    size = FULL if full else SMALL
+    check_study(spec, size=size, seed=seed)  # before the progress bar shows
     with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)
 
@@ -781,7 +795,7 @@ def study(
         result = run_study(
             spec,
             out,
-            size=FULL if full else SMALL,
+            size=size,
             seed=seed,
             workers=workers,
             scheduler=scheduler,

@@ -16,8 +16,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._io import atomic_write_bytes, write_json
+from .._validation import check_int
 from ..learning.demonstration import save_demonstrations
 from ..prob.gmm import CV_TOLERANCE, MAX_COMPONENTS
+from ._staging import staged_output
 from .plots import (
     figure_png,
     plot_constraints,
@@ -30,6 +32,7 @@ from .plots import (
 from .report import Figure, Section, write_report
 
 if TYPE_CHECKING:
+    from ..sim.experiment import TaskSkill
     from ..sim.tasks import TaskSpec
 
 __all__ = ["run_lasa_demo", "run_robot_demo"]
@@ -40,14 +43,14 @@ def run_lasa_demo(
 ) -> dict[str, object]:
     """Learn a LASA handwriting shape with GMM/GMR and write a figure and metrics.json.
 
-    Returns the metrics written.
+    Returns the metrics written. An unknown ``shape`` is refused (ValueError) before ``out``
+    is created; the files are written at once at the end.
     """
     from ..learning.datasets import load_lasa
     from ..prob.gmm import GMM
     from .plots import plot_lasa_summary, save_figure
 
-    out.mkdir(parents=True, exist_ok=True)
-    demos = load_lasa(shape)
+    demos = load_lasa(shape)  # an unknown shape is refused before the folder is made
     n_steps = demos[0].pos.shape[0]
     t = np.linspace(0.0, 1.0, n_steps)
     # EM sees 100 evenly spaced steps per demonstration, as Skill.learn (fit_samples).
@@ -80,8 +83,9 @@ def run_lasa_demo(
         "regress_seconds": regress_s,
     }
     fig = plot_lasa_summary(shape, t, list(positions), gmm, mean, cov)
-    save_figure(fig, out / f"lasa_{shape}.png")
-    write_json(out / "metrics.json", metrics, sort_keys=True)
+    with staged_output(out, last="metrics.json") as stage:
+        save_figure(fig, stage / f"lasa_{shape}.png")
+        write_json(stage / "metrics.json", metrics, sort_keys=True)
     return metrics
 
 
@@ -96,9 +100,14 @@ def run_robot_demo(
     constrain_fixed: bool = False,
     online: bool = False,
     perturb: str = "none",
+    learn: Callable[..., TaskSkill] | None = None,
 ) -> dict[str, Any]:
     """Run the paper's experiment for one task (a registered name or a spec) and write its
     results to ``out``.
+
+    ``learn(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)`` teaches and
+    learns the skill, a ``TaskSkill`` (default: ``pbdkit.sim.experiment.learn_task``, the
+    simulated teacher and the full time grid); inject a faster or a different learner.
 
     With ``online``, the fused controller also runs online, in the physics loop (told the
     cameras' positions at 15 Hz, or the true ones with ``ground_truth``), under the
@@ -121,8 +130,16 @@ def run_robot_demo(
     (:func:`pbdkit.sim.experiment.learn_task`). ``metrics.json`` records ``"constraints"`` and
     ``"constrain_fixed"``.
 
+    The arguments are checked before any physics runs. The files are written to a hidden
+    folder inside ``out`` and moved into ``out`` at the end, so that a demo that fails leaves
+    ``out`` as it found it: without new files, and removed if the demo created it.
+
     Raises
     ------
+    ValueError
+        Before any physics: an unknown task or perturbation, ``perturb`` without ``online``,
+        ``n_demos`` not an integer >= 2, ``seed`` not an integer >= 0, ``out`` not a
+        directory.
     pbdkit.sim.tracking.ObjectNotSeenError
         With vision, if the cameras cannot locate an object of the new situation.
 
@@ -131,20 +148,9 @@ def run_robot_demo(
     metrics : dict
         What ``metrics.json`` holds.
     """
-    from ..sim.experiment import (
-        calibrate_tracker,
-        controller_names,
-        learn_task,
-        observe,
-        run_controller,
-        run_online,
-        start_posture,
-        tracking_errors,
-        trial_disturbance,
-    )
+    from ..sim.experiment import learn_task
     from ..sim.perturb import check_perturb
     from ..sim.tasks import get_task
-    from ..sim.video import save_video
 
     def say(msg: str) -> None:
         if status is not None:
@@ -154,10 +160,46 @@ def run_robot_demo(
     check_perturb(perturb, spec)
     if perturb != "none" and not online:
         raise ValueError("perturb applies to the online run: give online=True (--online) too")
+    check_int(n_demos, "n_demos", minimum=2)  # a skill needs two demonstrations
+    check_int(seed, "seed", minimum=0)
+    if learn is None:
+        learn = learn_task
     t_start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
+    with staged_output(Path(out), last="metrics.json") as stage:
+        return _run_robot_demo(
+            spec, stage, seed, n_demos, say, ground_truth, constrain_fixed, online, perturb,
+            learn, t_start,
+        )  # fmt: skip
+
+
+def _run_robot_demo(
+    spec: TaskSpec,
+    out: Path,
+    seed: int,
+    n_demos: int,
+    say: Callable[[str], None],
+    ground_truth: bool,
+    constrain_fixed: bool,
+    online: bool,
+    perturb: str,
+    learn: Callable[..., TaskSkill],
+    t_start: float,
+) -> dict[str, Any]:
+    """:func:`run_robot_demo` once its arguments are checked, writing to ``out``."""
+    from ..sim.experiment import (
+        calibrate_tracker,
+        controller_names,
+        observe,
+        run_controller,
+        run_online,
+        start_posture,
+        tracking_errors,
+        trial_disturbance,
+    )
+    from ..sim.video import save_video
+
     say(f"teaching {n_demos} demonstrations of the {spec.name} task ...")
-    ts = learn_task(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
+    ts = learn(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
     save_demonstrations(ts.demos, out / "demos.npz")
     ts.skill.save(out / "skill.npz")
     rng = np.random.default_rng([seed, 2])

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "figure_png",
+    "new_figure",
     "plot_constraints",
     "plot_demonstrations_3d",
     "plot_gmm_ellipses",
@@ -58,8 +59,19 @@ UNCONSTRAINED_COLOR = "0.3"  # an object the skill has no constraint on (the fix
 Float = NDArray[np.float64]
 
 
-def _new_figure(**kwargs: Any) -> Figure:
-    """A figure outside pyplot's registry: no backend is chosen or switched, nothing to close."""
+def new_figure(**kwargs: Any) -> Figure:
+    """A figure outside pyplot's registry: no backend is chosen or switched, nothing to close.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to :class:`matplotlib.figure.Figure` (``figsize``, ``dpi``, ...).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+        Render it with :func:`figure_png` or :func:`save_figure`.
+    """
     from matplotlib.figure import Figure
 
     return Figure(**kwargs)
@@ -164,7 +176,7 @@ def plot_lasa_summary(
     mean : ndarray, shape (T, 2)
     cov : ndarray, shape (T, 2, 2)
     """
-    fig = _new_figure(figsize=(13, 4.2))
+    fig = new_figure(figsize=(13, 4.2))
     axes = fig.subplots(1, 3)
     ax = axes[0]
     for k, d in enumerate(demos):
@@ -236,7 +248,7 @@ def plot_constraints(
     data = space_data(skill, demos)
     names = [*skill.object_names, "joint"]
     n_rows = max(d.shape[2] - 1 for d in data.values())
-    fig = _new_figure(figsize=(4.2 * len(names), 1.9 * n_rows))
+    fig = new_figure(figsize=(4.2 * len(names), 1.9 * n_rows))
     axes = fig.subplots(n_rows, len(names), sharex=True, squeeze=False)
     t = np.arange(skill.n_steps, dtype=np.float64)
     for col, name in enumerate(names):
@@ -294,7 +306,7 @@ def plot_demonstrations_3d(
         return name if name in skill.object_names else f"{name} (no constraint)"
 
     ncols = 2 if reproduction is not None else 1
-    fig = _new_figure(figsize=(6.0 * ncols, 5.2))
+    fig = new_figure(figsize=(6.0 * ncols, 5.2))
     ax = fig.add_subplot(1, ncols, 1, projection="3d")
     for k, demo in enumerate(demos):
         x = np.asarray(skill.robot.fk(demo.joints), dtype=np.float64)
@@ -381,7 +393,7 @@ def plot_reproductions(
     """
     n = skill.robot.n_joints
     rows = max(n, 3) + 1
-    fig = _new_figure(figsize=(11, 1.7 * rows))
+    fig = new_figure(figsize=(11, 1.7 * rows))
     axes = fig.subplots(rows, 2, squeeze=False)
 
     def style(name: str) -> Any:
@@ -456,7 +468,7 @@ def plot_selection(skill: Skill) -> Figure:
     from ..prob.gmm import CV_TOLERANCE
 
     names = [*skill.object_names, "joint"]
-    fig = _new_figure(figsize=(3.6 * len(names), 2.8))
+    fig = new_figure(figsize=(3.6 * len(names), 2.8))
     axes = fig.subplots(1, len(names), squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         sel = skill.selection_[name]
@@ -549,7 +561,7 @@ def plot_motion_limits(
     tp = np.concatenate([t_[0] - h0 * pad[::-1], t_, t_[-1] + h1 * pad])
     windows = np.lib.stride_tricks.sliding_window_view
 
-    fig = _new_figure(figsize=(9.0, 7.2))
+    fig = new_figure(figsize=(9.0, 7.2))
     axes = fig.subplots(4, 1, sharex=True)
     series = [
         ("position", "rad", t_, q[:, joint], None),
@@ -616,7 +628,7 @@ def plot_online_run(
     controller was told and in truth; the tracker's status per object over time (with vision).
     The disturbance's window is shaded.
     """
-    fig = _new_figure(figsize=(10.0, 6.4))
+    fig = new_figure(figsize=(10.0, 6.4))
     (a_phase, a_speed), (a_obj, a_track) = fig.subplots(2, 2)
     dist = run.disturbance
     window = None

@@ -26,27 +26,56 @@ cluster (``--scheduler``).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
+from .._validation import check_int, check_positive_float
 from ..sim import tasks as T
 from ..sim.experiment import controller_names, learn_task, run_trials
 from ..sim.tasks import TaskSpec
+from ._staging import staged_output
 
-__all__ = ["FULL", "PAPER_TRACKING_MM", "SMALL", "StudySize", "grid_placements", "run_study"]
+if TYPE_CHECKING:
+    from ..sim.experiment import TaskSkill
+
+__all__ = [
+    "FULL",
+    "PAPER_TRACKING_MM",
+    "SMALL",
+    "StudySize",
+    "check_study",
+    "grid_placements",
+    "run_study",
+]
 
 Float = NDArray[np.float64]
 
 #: The paper's tracking error (Sec. III), mean +- standard deviation (mm).
 PAPER_TRACKING_MM = (5.9, 2.8)
+
+
+def _as_tuple(name: str, value: object, *, empty: str = "") -> tuple[Any, ...]:
+    """``value`` as a non-empty tuple, or a ValueError naming ``name`` (``empty``: what to give
+    instead of an empty one)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise ValueError(f"{name} must be a tuple, got {value!r}")
+    items = tuple(value)
+    if not items:
+        hint = f" ({empty})" if empty else ""
+        raise ValueError(f"{name} must not be empty{hint}, got ()")
+    return items
+
+
+def _check_unique(name: str, items: tuple[Any, ...]) -> None:
+    if len(set(items)) != len(items):
+        raise ValueError(f"{name} must not repeat a value, got {items!r}")
 
 
 @dataclass(frozen=True)
@@ -66,7 +95,16 @@ class StudySize:
     noise_trials : int
         Random placements per noise level (fused controller).
     map_controllers : tuple of str, optional
-        The controllers of the maps (default: every one of the skill).
+        The controllers of the maps (default, None: every one of the skill).
+
+    Raises
+    ------
+    ValueError
+        On construction, for a size no study can run: ``grid`` < 2 (a map needs two points per
+        axis), a number of demonstrations < 2 (a skill needs two), trials < 1, a noise level
+        that is negative or not finite, an empty or repeated list, an empty
+        ``map_controllers`` (give None for every controller). The controllers' names are
+        checked against the task by :func:`run_study`, before any physics.
     """
 
     grid: int
@@ -75,6 +113,32 @@ class StudySize:
     noise_mm: tuple[float, ...]
     noise_trials: int
     map_controllers: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        check_int(self.grid, "StudySize.grid", minimum=2)  # a map needs two points per axis
+        check_int(self.curve_trials, "StudySize.curve_trials", minimum=1)
+        check_int(self.noise_trials, "StudySize.noise_trials", minimum=1)
+        # Sequences are kept as tuples: the size stays frozen and hashable.
+        demos = _as_tuple("StudySize.demos", self.demos)
+        for i, n in enumerate(demos):
+            check_int(n, f"StudySize.demos[{i}]", minimum=2)  # a skill needs two
+        _check_unique("StudySize.demos", demos)
+        noise = _as_tuple("StudySize.noise_mm", self.noise_mm)
+        for i, v in enumerate(noise):
+            check_positive_float(v, f"StudySize.noise_mm[{i}]", allow_zero=True)
+        _check_unique("StudySize.noise_mm", noise)
+        object.__setattr__(self, "demos", demos)
+        object.__setattr__(self, "noise_mm", noise)
+        if self.map_controllers is not None:
+            names = _as_tuple(
+                "StudySize.map_controllers", self.map_controllers, empty="None: every controller"
+            )
+            if not all(isinstance(k, str) for k in names):
+                raise ValueError(
+                    f"StudySize.map_controllers must hold controller names, got {names!r}"
+                )
+            _check_unique("StudySize.map_controllers", names)
+            object.__setattr__(self, "map_controllers", names)
 
     def runs(self, n_maps: int, n_controllers: int) -> int:
         """Physics runs of a study with ``n_maps`` maps of ``n_controllers`` controllers (or
@@ -139,44 +203,101 @@ def run_study(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    learn: Callable[..., TaskSkill] | None = None,
 ) -> dict[str, Any]:
     """Run the three studies of the module docstring for ``task`` and write their report.
 
     Writes ``study.json`` (every success rate, the sizes, the timings), one
     ``map_OBJECT.png`` per moving object, ``learning_curve.png``, ``noise.png`` and
-    ``report.html`` to ``out``.
+    ``report.html`` to ``out``. ``study.json`` is strict JSON: a rate with nothing to count
+    is ``null`` (``inside_range`` when no grid point lies inside the demonstrated range, as
+    with ``grid=2``, whose points are all outside it).
+
+    The arguments are checked before any physics runs. The files are written to a hidden
+    folder inside ``out`` and moved into ``out`` once the study has succeeded, so that a
+    study that fails leaves ``out`` as it found it: without new files, and removed if the
+    study created it.
 
     Parameters
     ----------
     task : str or TaskSpec
     out : Path
-        Output folder (created).
+        Output folder (created, with its missing parents).
     size : StudySize
         :data:`SMALL` or :data:`FULL`, or your own.
     seed : int
-        Teaches the demonstrations and draws the placements.
+        Teaches the demonstrations and draws the placements (>= 0).
     workers, scheduler
         Run the trials on Dask workers (as ``pbdkit evaluate``): ``workers`` local processes
         or the cluster at ``scheduler``; one cluster serves the whole study.
     progress : callable, optional
         ``progress(stage, done, total)`` after every batch of runs.
+    learn : callable, optional
+        ``learn(spec, n_demos=n, seed=seed)`` returns the ``TaskSkill`` learned from ``n``
+        demonstrations of the task (the skill of the maps and the noise, ``n = 5``, then one
+        per number of the learning curve). Default: ``pbdkit.sim.experiment.learn_task``
+        (the simulated teacher, the full time grid); inject a faster or a different learner.
 
     Returns
     -------
     study : dict
         What ``study.json`` holds.
+
+    Raises
+    ------
+    ValueError
+        Before any physics: the checks of :func:`check_study`, and ``out`` not a directory.
     """
     from ..sim.parallel import session
 
-    spec = T.get_task(task)
-    out.mkdir(parents=True, exist_ok=True)
+    spec = check_study(task, size=size, seed=seed, learn=learn)
+    out = Path(out)
+    learn = learn_task if learn is None else learn
     start = time.perf_counter()
-    with session(workers, scheduler) as client:
-        result = _run(spec, out, size, seed, client, progress)
-    result["seconds"] = time.perf_counter() - start
-    write_json(out / "study.json", result)
-    _write_report(spec, out, result)
+    with staged_output(out, last="study.json") as stage:
+        with session(workers, scheduler) as client:
+            result = _run(spec, stage, size, seed, client, progress, learn)
+        result["seconds"] = time.perf_counter() - start
+        write_json(stage / "study.json", result)
+        _write_report(spec, stage, result)
     return result
+
+
+def check_study(
+    task: str | TaskSpec,
+    *,
+    size: StudySize = SMALL,
+    seed: int = 0,
+    learn: Callable[..., TaskSkill] | None = None,
+) -> TaskSpec:
+    """Check the arguments of :func:`run_study` (it calls this first; a command line calls it
+    before it shows progress) and return the task's spec.
+
+    The controllers of ``size.map_controllers`` must be those of the skill the default
+    learner gives (fused, joint and one per moving object); with an injected ``learn``, one
+    per object of the task, then those of the skill learned (checked before its runs).
+
+    Raises
+    ------
+    ValueError
+        An unknown task, ``size`` not a :class:`StudySize`, an unknown controller, ``seed``
+        not an integer >= 0.
+    """
+    from ..sim.experiment import constrained_objects
+
+    spec = T.get_task(task)
+    if not isinstance(size, StudySize):
+        raise ValueError(f"size must be a StudySize (SMALL, FULL or your own), got {size!r}")
+    check_int(seed, "seed", minimum=0)
+    # An injected learner may constrain any object of the task (the fixed basin too).
+    objects = constrained_objects(spec) if learn is None else list(spec.ranges)
+    known = controller_names(objects)
+    for name in size.map_controllers or ():
+        if name not in known:
+            raise ValueError(
+                f"StudySize.map_controllers must name controllers of {known}, got {name!r}"
+            )
+    return spec
 
 
 def _run(
@@ -186,10 +307,11 @@ def _run(
     seed: int,
     client: Any,
     progress: Callable[[str, int, int], None] | None,
+    learn: Callable[..., TaskSkill],
 ) -> dict[str, Any]:
     from .plots import figure_png
 
-    ts = learn_task(spec, seed=seed)
+    ts = learn(spec, n_demos=5, seed=seed)
     names = list(size.map_controllers or controller_names(ts.skill.object_names))
     maps_of = list(spec.tracked_objects)
     total = size.runs(len(maps_of), len(names))
@@ -235,7 +357,7 @@ def _run(
     curve_places = [spec.sample_objects(rng) for _ in range(size.curve_trials)]
     curve = []
     for n in size.demos:
-        ts_n = ts if n == len(ts.demos) else learn_task(spec, n_demos=n, seed=seed)
+        ts_n = ts if n == len(ts.demos) else learn(spec, n_demos=n, seed=seed)
         trials = run_trials(ts_n, curve_places, ["fused"], client=client, seed=seed)
         tick(f"learning curve, {n} demonstrations", len(curve_places))
         curve.append({"n_demos": n, "success_rate": _rate(trials, "fused"),
@@ -259,14 +381,16 @@ def _run(
 
 def _inside_rate(
     success: NDArray[np.bool_], xs: Float, ys: Float, low: Float, high: Float
-) -> float:
+) -> float | None:
+    """The success rate over the grid points inside the range; None if there are none (JSON
+    null: NaN is not JSON)."""
     inside = (
         (xs[None, :] >= low[0] - 1e-9)
         & (xs[None, :] <= high[0] + 1e-9)
         & (ys[:, None] >= low[1] - 1e-9)
         & (ys[:, None] <= high[1] + 1e-9)
     )
-    return float(success[inside].mean()) if inside.any() else math.nan
+    return float(success[inside].mean()) if inside.any() else None
 
 
 def _plot_map(
@@ -282,9 +406,9 @@ def _plot_map(
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Rectangle
 
-    from .plots import _new_figure
+    from .plots import new_figure
 
-    fig = _new_figure(figsize=(3.2 * len(success), 3.4))
+    fig = new_figure(figsize=(3.2 * len(success), 3.4))
     axes = fig.subplots(1, len(success), squeeze=False)[0]
     dx, dy = (xs[1] - xs[0]) / 2, (ys[1] - ys[0]) / 2
     cmap = ListedColormap(["#d9534f", "#5cb85c"])
@@ -310,9 +434,9 @@ def _plot_map(
 
 
 def _plot_curve(spec: TaskSpec, curve: list[dict[str, Any]], size: StudySize) -> Any:
-    from .plots import _new_figure
+    from .plots import new_figure
 
-    fig = _new_figure(figsize=(4.8, 3.2))
+    fig = new_figure(figsize=(4.8, 3.2))
     ax = fig.subplots()
     n = [c["n_demos"] for c in curve]
     rate = [100 * c["success_rate"] for c in curve]
@@ -330,9 +454,9 @@ def _plot_curve(spec: TaskSpec, curve: list[dict[str, Any]], size: StudySize) ->
 
 
 def _plot_noise(spec: TaskSpec, noise: list[dict[str, Any]], size: StudySize) -> Any:
-    from .plots import _new_figure
+    from .plots import new_figure
 
-    fig = _new_figure(figsize=(4.8, 3.2))
+    fig = new_figure(figsize=(4.8, 3.2))
     ax = fig.subplots()
     mean, sd = PAPER_TRACKING_MM
     ax.axvspan(mean - sd, mean + sd, color="0.9", label=f"paper's cameras: {mean} +- {sd} mm")
@@ -349,13 +473,18 @@ def _plot_noise(spec: TaskSpec, noise: list[dict[str, Any]], size: StudySize) ->
     return fig
 
 
+def _percent(rate: float | None) -> str:
+    """A rate for the report's tables; "-" where there was nothing to count."""
+    return "-" if rate is None else f"{100 * rate:.0f} %"
+
+
 def _write_report(spec: TaskSpec, out: Path, result: dict[str, Any]) -> None:
     from .report import Figure, Section, write_report
 
     sections = []
     for obj, m in result["maps"].items():
         rows = [
-            [k, f"{100 * m['inside_range'][k]:.0f} %", f"{100 * m['overall'][k]:.0f} %"]
+            [k, _percent(m["inside_range"][k]), _percent(m["overall"][k])]
             for k in result["controllers"]
         ]
         sections.append(
