@@ -1036,3 +1036,88 @@ def test_errors_about_the_content_name_the_bag(tmp_path: Path, robot: Robot) -> 
     garbage.write_bytes(b"#ROSBAG V2.0\n" + b"\xff" * 4096)
     with pytest.raises(ValueError, match=rf"^{re.escape(str(garbage))} is not a readable ROS bag"):
         read_bag(garbage, robot=robot)
+
+
+def test_trajectory_times_a_bag_cannot_hold(tmp_path: Path, robot: Robot) -> None:
+    # 3e9 s gave a struct.error (int32 seconds); times up to 1e12 "must increase strictly".
+    q, names = np.zeros((3, 5)), robot.joint_names
+    with pytest.raises(
+        ValueError,
+        match=r"t must be < 2147483648 s \(2\*\*31: time_from_start holds int32 seconds\), got "
+        r"t\[2\]=3000000000\.0",
+    ):
+        write_trajectory_bag(tmp_path / "a", [0.0, 1.5e9, 3e9], q, names)
+    with pytest.raises(ValueError, match=r"t must be < 2147483648 s .*got t\[1\]=500000000000\.0"):
+        write_trajectory_bag(tmp_path / "a", [0.0, 5e11, 1e12], q, names)
+    with pytest.raises(
+        ValueError,
+        match=r"t must increase by at least 1 ns \(the resolution of time_from_start\), got "
+        r"t\[1\]=1\.0 and t\[2\]=1\.0000000001, 1e-10 s apart",
+    ):
+        write_trajectory_bag(tmp_path / "a", [0.0, 1.0, 1.0 + 1e-10], q, names)
+    demo = Demonstration(t=[0.0, 1.0], joints=np.zeros((2, 5)))
+    with pytest.raises(ValueError, match=r"start_time \+ the demonstration's duration \(1 s\)"):
+        write_demonstration_bag(tmp_path / "a", demo, names, start_time=1e12)
+    assert list(tmp_path.iterdir()) == []
+    write_trajectory_bag(tmp_path / "last", [0.0, 2.0**31 - 0.5], q[:2], names)
+    ((_, msg),) = _raw(tmp_path / "last", "/joint_trajectory")
+    assert (msg.points[1].time_from_start.sec, msg.points[1].time_from_start.nanosec) == (
+        2**31 - 1,
+        500_000_000,
+    )
+
+
+def test_trajectory_topics_and_joints_are_checked(tmp_path: Path, robot: Robot) -> None:
+    t, q, names = [0.0, 1.0], np.zeros((2, 5)), robot.joint_names
+    grip = [0.0, 1.0]
+    with pytest.raises(ValueError, match=r"topic must be a ROS topic name \('/' then .*got ''"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, topic="")
+    with pytest.raises(ValueError, match=r"gripper_topic must be a ROS topic name .*got 'grip'"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, grip, gripper_topic="grip")
+    with pytest.raises(
+        ValueError,
+        match=r"gripper_topic must differ from topic \('/joint_trajectory'\): a topic carries "
+        "one message type",
+    ):
+        write_trajectory_bag(tmp_path / "a", t, q, names, grip, gripper_topic="/joint_trajectory")
+    with pytest.raises(
+        ValueError, match=r"joints must have one column per joint, at least 1, got shape \(2, 0\)"
+    ):
+        write_trajectory_bag(tmp_path / "a", t, np.zeros((2, 0)), [])
+    demo = Demonstration(t=[0.0, 1.0], joints=np.zeros((2, 5)), objects={"glass": [0, 0, 0]})
+    with pytest.raises(ValueError, match=r"object_topics\['glass'\] must differ from joint_topic"):
+        write_demonstration_bag(
+            tmp_path / "a", demo, names, object_topics={"glass": "/joint_states"}
+        )
+    assert list(tmp_path.iterdir()) == []
+    # Without a gripper, gripper_topic is not used.
+    write_trajectory_bag(tmp_path / "b", t, q, names, topic="/arm/trajectory", gripper_topic="/x")
+    assert [c for c, _ in _topics(tmp_path / "b")] == ["/arm/trajectory"]
+
+
+def _topics(path: Path) -> list[tuple[str, str]]:
+    with AnyReader([path], default_typestore=TS) as reader:
+        return sorted((c.topic, c.msgtype) for c in reader.connections)
+
+
+def test_cli_reproduce_checks_the_bag_before_writing_out(tmp_path: Path, skill: Skill) -> None:
+    # A skill of 3e9 s wrote --out, then failed on the bag with a struct.error traceback.
+    skill.save(tmp_path / "skill.npz")
+    long = Skill.load(tmp_path / "skill.npz")
+    long.duration = 3e9
+    long.save(tmp_path / "long.npz")
+    bag, out = tmp_path / "trajectory", tmp_path / "repro.npz"
+    args = ["--object", "glass=0.47,0.18,0.175", "--object", "coaster=0.49,-0.17,0.006"]
+    result = CliRunner().invoke(
+        app, ["reproduce", str(tmp_path / "long.npz"), *args, "--out", str(out), "--bag", str(bag)]
+    )
+    _one_line_error(result, f"--bag {bag}: t must be < 2147483648 s", "int32 seconds")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.npz", "skill.npz"]
+    # --out and --bag the same path: the npz was written, then the bag refused.
+    same = tmp_path / "same"
+    result = CliRunner().invoke(
+        app,
+        ["reproduce", str(tmp_path / "skill.npz"), *args, "--out", str(same), "--bag", str(same)],
+    )
+    _one_line_error(result, f"--bag {same}: is the --out path too")
+    assert not same.exists()

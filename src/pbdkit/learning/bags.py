@@ -78,10 +78,13 @@ stamps), a gap in them, a robot joint missing from a message (named), an empty c
 frame that tf does not join to the base. An error about a bag's content starts with the bag's
 path. A FIFO, a device or a socket (or a bag directory holding one) is refused before it is
 opened: reading one blocks, or never ends. A damaged file makes the reader fail in many ways
-(OverflowError, KeyError, AssertionError, ...): all are a ValueError naming the bag. Writers
-refuse an existing path (a bag is a directory: nothing is overwritten or deleted) and write
-atomically: the bag is written into a temporary sibling directory and renamed onto the target
-(``os.replace``), so a reader never sees half a bag.
+(OverflowError, KeyError, AssertionError, ...): all are a ValueError naming the bag.
+
+Writers check every argument before they write anything: times within what ROS's int32
+seconds hold (below ``2**31`` s) and increasing at its 1 ns resolution, topics that are ROS names
+and distinct, at least one joint. They refuse an existing path (a bag is a directory: nothing
+is overwritten or deleted) and write atomically: the bag is written into a temporary sibling
+directory and renamed onto the target (``os.replace``), so a reader never sees half a bag.
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import re
 import shutil
 import stat
 import struct
@@ -890,6 +894,33 @@ def _check_names(names: object, n: int, what: str) -> list[str]:
     return out
 
 
+# A fully qualified ROS topic name, as bags store them: "/" then tokens of letters, digits
+# and "_", none starting with a digit (ROS 2's rules, without substitutions).
+_TOPIC_NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+# builtin_interfaces Time and Duration hold int32 seconds: times must stay below this (s).
+_MAX_ROS_SECONDS = 2**31
+_TRAJECTORY_TOPIC = "/joint_trajectory"
+_GRIPPER_TOPIC = "/gripper"
+
+
+def _check_topics(topics: Mapping[str, object]) -> None:
+    """Each topic (argument name -> value) a ROS topic name, all distinct: a topic has one
+    message type."""
+    seen: dict[str, str] = {}
+    for name, topic in topics.items():
+        if not isinstance(topic, str) or not _TOPIC_NAME.fullmatch(topic):
+            raise ValueError(
+                f"{name} must be a ROS topic name ('/' then names of letters, digits and _, "
+                f"not starting with a digit, e.g. '/joint_trajectory'), got {topic!r}"
+            )
+        if topic in seen:
+            raise ValueError(
+                f"{name} must differ from {seen[topic]} ({topic!r}): a topic carries one "
+                "message type"
+            )
+        seen[topic] = name
+
+
 def _write_bag_atomic(path: Path, storage: Storage, fill: Callable[[Writer], None]) -> None:
     """Write a rosbag2 bag at the new ``path``: into a temporary sibling directory, then renamed.
 
@@ -936,8 +967,8 @@ def write_trajectory_bag(
     velocities: npt.ArrayLike | None = None,
     accelerations: npt.ArrayLike | None = None,
     storage: Storage = "sqlite3",
-    topic: str = "/joint_trajectory",
-    gripper_topic: str = "/gripper",
+    topic: str = _TRAJECTORY_TOPIC,
+    gripper_topic: str = _GRIPPER_TOPIC,
 ) -> None:
     """Write a joint trajectory as a rosbag2 bag a ``ros2_control`` controller can replay.
 
@@ -953,10 +984,11 @@ def write_trajectory_bag(
     path : str or path-like
         The bag to create (a directory); it must not exist. Written atomically.
     t : array-like, shape (T,)
-        Time from the start of each point (s), >= 0 and strictly increasing (to 1 ns), e.g.
+        Time from the start of each point (s), >= 0, below ``2**31`` s (``time_from_start``
+        holds int32 seconds) and strictly increasing to 1 ns (its resolution), e.g.
         ``skill.times(res)``.
     joints : array-like, shape (T, n)
-        Joint positions (rad, or m), e.g. ``res.joints``.
+        Joint positions (rad, or m), n >= 1, e.g. ``res.joints``.
     joint_names : sequence of str, length n
         The controller's joint names, e.g. ``robot.joint_names``.
     gripper : array-like, shape (T,), optional
@@ -976,26 +1008,76 @@ def write_trajectory_bag(
     storage : {"sqlite3", "mcap"}
         rosbag2 storage plugin.
     topic, gripper_topic : str
-        Topic names.
+        Topic names, fully qualified (``"/name"``); with a gripper, two different topics.
 
     Raises
     ------
     ValueError
-        An existing ``path``, or a shape, value or name that does not fit (named).
+        An existing ``path``, or a shape, value or name that does not fit (named). Every
+        argument is checked before anything is written.
     """
     p = _check_new_path(path)
     plugin = _check_storage(storage)
+    message, gripper_messages = _trajectory_messages(
+        t,
+        joints,
+        joint_names,
+        gripper,
+        velocities=velocities,
+        accelerations=accelerations,
+        topic=topic,
+        gripper_topic=gripper_topic,
+    )
+    ts = _typestore()
+
+    def fill(writer: Writer) -> None:
+        conn = writer.add_connection(topic, TRAJECTORY_TYPE, typestore=ts)
+        writer.write(conn, 0, message)
+        if gripper_messages:
+            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
+            for ns, data in gripper_messages:
+                writer.write(gconn, ns, data)
+
+    _write_bag_atomic(p, plugin, fill)
+
+
+def _trajectory_messages(
+    t: npt.ArrayLike,
+    joints: npt.ArrayLike,
+    joint_names: Sequence[str],
+    gripper: npt.ArrayLike | None,
+    *,
+    velocities: npt.ArrayLike | None,
+    accelerations: npt.ArrayLike | None,
+    topic: str = _TRAJECTORY_TOPIC,
+    gripper_topic: str = _GRIPPER_TOPIC,
+) -> tuple[memoryview, list[tuple[int, memoryview]]]:
+    """The checked arguments of :func:`write_trajectory_bag` as its serialized messages: the
+    JointTrajectory, and (log time ns, Bool) of the gripper's. Nothing is written: `pbdkit
+    reproduce --bag` calls it to refuse a bag before it writes ``--out``."""
+    _check_topics({"topic": topic, **({} if gripper is None else {"gripper_topic": gripper_topic})})
     t_ = check_array(t, "t", ndim=1, min_rows=1)
     if t_[0] < 0:
         raise ValueError(f"t must be >= 0 (time from start), got t[0]={float(t_[0])!r}")
-    ns = np.round(t_ * _NS).astype(np.int64)
+    if np.any(t_ >= _MAX_ROS_SECONDS):
+        i = int(np.argmax(t_ >= _MAX_ROS_SECONDS))
+        raise ValueError(
+            f"t must be < {_MAX_ROS_SECONDS} s (2**31: time_from_start holds int32 seconds), "
+            f"got t[{i}]={float(t_[i])!r}"
+        )
+    ns = np.round(t_ * _NS).astype(np.int64)  # < 2**31 s: within int64 ns
     if np.any(np.diff(ns) <= 0):
         i = int(np.argmax(np.diff(ns) <= 0))
-        raise ValueError(
-            f"t must increase strictly (to 1 ns), got t[{i}]={float(t_[i])!r} "
-            f"and t[{i + 1}]={float(t_[i + 1])!r}"
-        )
+        a, b = float(t_[i]), float(t_[i + 1])
+        if b > a:  # increasing, but not at the resolution of the stamps
+            raise ValueError(
+                f"t must increase by at least 1 ns (the resolution of time_from_start), got "
+                f"t[{i}]={a!r} and t[{i + 1}]={b!r}, {b - a:.3g} s apart"
+            )
+        raise ValueError(f"t must increase strictly, got t[{i}]={a!r} and t[{i + 1}]={b!r}")
     q = check_array(joints, "joints", shape=(t_.shape[0], None))
+    if q.shape[1] == 0:
+        raise ValueError(f"joints must have one column per joint, at least 1, got shape {q.shape}")
     names = _check_names(joint_names, q.shape[1], "joint_names")
     closed: NDArray[np.bool_] | None = None
     if gripper is not None:
@@ -1029,18 +1111,12 @@ def write_trajectory_bag(
         for i in range(q.shape[0])
     ]
     msg = traj_cls(header=_header(0), joint_names=names, points=points)
-
-    def fill(writer: Writer) -> None:
-        conn = writer.add_connection(topic, TRAJECTORY_TYPE, typestore=ts)
-        writer.write(conn, 0, ts.serialize_cdr(msg, TRAJECTORY_TYPE))
-        if closed is not None:
-            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
-            changes = np.r_[0, np.flatnonzero(np.diff(closed)) + 1]
-            for i in changes:
-                data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
-                writer.write(gconn, int(ns[i]), data)
-
-    _write_bag_atomic(p, plugin, fill)
+    gripper_messages: list[tuple[int, memoryview]] = []
+    if closed is not None:
+        for i in np.r_[0, np.flatnonzero(np.diff(closed)) + 1]:
+            data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
+            gripper_messages.append((int(ns[i]), data))
+    return ts.serialize_cdr(msg, TRAJECTORY_TYPE), gripper_messages
 
 
 def write_demonstration_bag(
@@ -1091,7 +1167,8 @@ def write_demonstration_bag(
     shuffle : numpy.random.Generator, optional
         If given, each message lists its joints in a new random order drawn from it.
     start_time : float
-        ROS time (s) of the first sample.
+        ROS time (s) of the first sample; the last must be below ``2**31`` s (ROS 2 stamps hold
+        int32 seconds).
     frame_id : str
         ``header.frame_id`` of the object messages: the robot's base frame.
 
@@ -1112,7 +1189,14 @@ def write_demonstration_bag(
     all_names = [*names, *extra]
     _check_names(all_names, len(all_names), "joint_names and extra_joints")
     rate = check_positive_float(object_rate, "object_rate")
-    t0 = round(check_positive_float(start_time, "start_time", allow_zero=True) * _NS)
+    start = check_positive_float(start_time, "start_time", allow_zero=True)
+    if start + demo.duration >= _MAX_ROS_SECONDS:
+        raise ValueError(
+            f"start_time + the demonstration's duration ({demo.duration:g} s) must be < "
+            f"{_MAX_ROS_SECONDS} s (2**31: ROS 2 stamps hold int32 seconds), got "
+            f"start_time={start_time!r}"
+        )
+    t0 = round(start * _NS)
     topics: dict[str, str | None] = {n: f"/{n}/pose" for n in demo.object_names}
     if object_topics is not None:
         unknown = [k for k in object_topics if k not in demo.objects]
@@ -1122,6 +1206,13 @@ def write_demonstration_bag(
                 f"{list(demo.object_names)}"
             )
         topics.update(object_topics)
+    _check_topics(
+        {
+            "joint_topic": joint_topic,
+            **{f"object_topics[{n!r}]": v for n, v in topics.items() if v is not None},
+            **({} if gripper_topic is None else {"gripper_topic": gripper_topic}),
+        }
+    )
 
     ts = _typestore()
     js_cls = ts.types[JOINT_STATE_TYPE]
