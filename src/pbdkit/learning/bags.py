@@ -265,7 +265,7 @@ class _Bag:
 
 
 # Errors a reader raises that are not about the bag's content: passed on as they are.
-_PASSED_THROUGH = (PermissionError, FileNotFoundError, KeyboardInterrupt)
+_PASSED_THROUGH = (PermissionError, FileNotFoundError)
 
 
 def _raw_stamp(raw: bytes, *, ros2: bool) -> int | None:
