@@ -7,6 +7,10 @@ and fixed sources; cuts; every bad input a clear error; the `pbdkit learn BAG...
 
 from __future__ import annotations
 
+import os
+import re
+import struct
+import tracemalloc
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -157,6 +161,22 @@ def _arm_motion(n: int = 50, dt_ns: int = 20_000_000) -> list[tuple[str, str, in
         msgtype, msg = _joint_state(ns, KATANA_JOINTS, 0.01 * i + np.arange(5.0))
         out.append(("/joint_states", msgtype, ns, msg))
     return out
+
+
+def _set_joint_state(
+    msgs: list[tuple[str, str, int, Any]],
+    k: int,
+    *,
+    names: Sequence[str] = KATANA_JOINTS,
+    stamp: int | None = None,
+    log: int | None = None,
+) -> None:
+    """Message k of :func:`_arm_motion` replaced by one naming ``names`` (positions zero),
+    logged at ``log`` (default: as it was) and stamped ``stamp`` (default: its log time)."""
+    topic, msgtype, ns, _ = msgs[k]
+    log_ns = ns if log is None else log
+    stamp_ns = log_ns if stamp is None else stamp
+    msgs[k] = (topic, msgtype, log_ns, _joint_state(stamp_ns, names, [0.0] * len(names))[1])
 
 
 # ----------------------------------------------------------------------------- round trip
@@ -454,24 +474,29 @@ def test_start_and_end_cut_a_longer_bag(
         np.testing.assert_array_equal(back.objects[name], d.objects[name])
 
 
-def test_ros1_bag(tmp_path: Path, robot: Robot) -> None:
+def _write_ros1(path: Path, positions: np.ndarray) -> Path:
+    """A ROS 1 bag of joint states at 100 Hz from T0, each listing the joints reversed."""
     ts1 = get_typestore(Stores.ROS1_NOETIC)
-    path = tmp_path / "demo.bag"
-    positions = np.random.default_rng(2).normal(size=(20, 5))
     with Writer1(path) as writer:
         conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ts1)
-        for i in range(20):
+        for i, row in enumerate(positions):
             ns = T0 + i * 10**7
             stamp = ts1.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
             header = ts1.types["std_msgs/msg/Header"](seq=i, stamp=stamp, frame_id="")
             msg = ts1.types["sensor_msgs/msg/JointState"](
                 header=header,
                 name=KATANA_JOINTS[::-1],
-                position=positions[i, ::-1].copy(),
+                position=row[::-1].copy(),
                 velocity=np.zeros(0),
                 effort=np.zeros(0),
             )
             writer.write(conn, ns, ts1.serialize_ros1(msg, "sensor_msgs/msg/JointState"))
+    return path
+
+
+def test_ros1_bag(tmp_path: Path, robot: Robot) -> None:
+    positions = np.random.default_rng(2).normal(size=(20, 5))
+    path = _write_ros1(tmp_path / "demo.bag", positions)
     back = read_bag(path, robot=robot)
     np.testing.assert_array_equal(back.joints, positions)
     np.testing.assert_allclose(back.t, np.arange(20) * 0.01, rtol=0, atol=1e-12)
@@ -506,8 +531,7 @@ def test_wrong_type_names_expected_and_actual(bags: dict[str, list[Path]], robot
 
 def test_non_monotonic_stamps(tmp_path: Path, robot: Robot) -> None:
     msgs = _arm_motion(n=10)
-    topic, msgtype, ns, _ = msgs[6]
-    msgs[6] = (topic, msgtype, ns, _joint_state(T0 + 3 * 20_000_000, KATANA_JOINTS, [0.0] * 5)[1])
+    _set_joint_state(msgs, 6, stamp=T0 + 3 * 20_000_000)
     path = _write(tmp_path / "jump", msgs)
     with pytest.raises(
         ValueError,
@@ -519,9 +543,7 @@ def test_non_monotonic_stamps(tmp_path: Path, robot: Robot) -> None:
 
 def test_missing_joint_is_named(tmp_path: Path, robot: Robot) -> None:
     msgs = _arm_motion(n=5)
-    topic, msgtype, ns, _ = msgs[3]
-    names = ["pan", "lift1", "lift2", "lift3", "finger"]
-    msgs[3] = (topic, msgtype, ns, _joint_state(ns, names, [0.0] * 5)[1])
+    _set_joint_state(msgs, 3, names=["pan", "lift1", "lift2", "lift3", "finger"])
     path = _write(tmp_path / "no_roll", msgs)
     with pytest.raises(
         ValueError, match=r"joint\(s\) \['wrist_roll'\] of the robot missing from message 3 "
@@ -778,3 +800,324 @@ def test_cli_reproduce_refuses_an_existing_bag_before_any_work(tmp_path: Path) -
         ],
     )
     _one_line_error(result, f"--bag {existing}: exists; give a new path")
+
+
+# ----------------------------------------------------------------------------- hostile input
+def _damaged(data: bytes, offset: int, fill: bytes) -> bytes:
+    """``data`` with ``fill`` written over it at ``offset``, of the same length."""
+    return (data[:offset] + fill + data[offset + len(fill) :])[: len(data)]
+
+
+def _pose(ns: int, position: Sequence[float], frame: str = "base_link") -> Any:
+    pose = TS.types["geometry_msgs/msg/Pose"](
+        position=_vector("geometry_msgs/msg/Point", position),
+        orientation=TS.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    return TS.types["geometry_msgs/msg/PoseStamped"](header=_header(ns, frame), pose=pose)
+
+
+@pytest.mark.parametrize("whole_bag", [False, True])
+def test_corrupted_mcap_is_a_clear_error(tmp_path: Path, robot: Robot, whole_bag: bool) -> None:
+    # 4 KiB of 0xff in the middle of the storage file made the reader raise OverflowError.
+    bag = _write(tmp_path / "arm", _arm_motion(200), "mcap")
+    storage = bag / "arm.mcap"
+    data = storage.read_bytes()
+    storage.write_bytes(_damaged(data, len(data) // 2, b"\xff" * 4096))
+    path = bag if whole_bag else storage
+    with pytest.raises(
+        ValueError,
+        match=rf"^{re.escape(str(path))} is not a readable ROS bag: corrupt or truncated "
+        r"\(OverflowError: ",
+    ):
+        read_bag(path, robot=robot)
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap", "ros1"])
+def test_damaged_bags_fail_with_a_value_error_naming_them(
+    tmp_path: Path, robot: Robot, storage: str
+) -> None:
+    # Bytes overwritten anywhere: the bag reads, or a ValueError names it (never a KeyError,
+    # AssertionError, OverflowError, UnicodeDecodeError, ... of the reader).
+    if storage == "ros1":
+        source = _write_ros1(tmp_path / "good.bag", np.zeros((300, 5)) + np.arange(300)[:, None])
+    else:
+        suffix = "mcap" if storage == "mcap" else "db3"
+        source = _write(tmp_path / "good", _arm_motion(300), storage) / f"good.{suffix}"
+    data = source.read_bytes()
+    rng = np.random.default_rng(0)
+    damaged = tmp_path / f"damaged{source.suffix}"
+    unnamed: list[tuple[int, int, str]] = []
+    for k in range(20):
+        offset = int(rng.integers(0, len(data)))
+        size = int(rng.choice([1, 8, 64, 4096]))
+        fill = b"\xff" * size if k % 2 else rng.bytes(size)
+        damaged.write_bytes(_damaged(data, offset, fill))
+        try:
+            read_bag(damaged, robot=robot)
+        except ValueError as exc:
+            if str(damaged) not in str(exc):
+                unnamed.append((offset, size, str(exc)))
+    assert unnamed == []
+
+
+def test_start_and_end_beyond_any_ros_time(tmp_path: Path, robot: Robot) -> None:
+    # start=1e300 s made an OverflowError (1e309 ns); end=1e300 keeps everything.
+    path = _write(tmp_path / "arm", _arm_motion(20))
+    with pytest.raises(
+        ValueError,
+        match=r"start/end: 0 joint state\(s\) of '/joint_states' within \[1e\+300, end\] s, "
+        r"need at least 2; the joint states span \[0, 0\.380\] s",
+    ):
+        read_bag(path, robot=robot, start=1e300)
+    whole = read_bag(path, robot=robot)
+    np.testing.assert_array_equal(read_bag(path, robot=robot, end=1e300).joints, whole.joints)
+    assert whole.n_steps == 20
+    result = CliRunner().invoke(app, ["learn", str(path), str(path), "--start", "1e300"])
+    _one_line_error(result, f"{path}: start/end: 0 joint state(s)", "[1e+300, end]")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+def test_fifos_and_devices_are_refused(
+    tmp_path: Path, robot: Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A FIFO named like a bag blocked the reader for ever; a link to /dev/zero fed it without end.
+    for name in ["x.bag", "x.db3", "x.mcap"]:
+        os.mkfifo(tmp_path / name)
+        with pytest.raises(
+            ValueError, match=rf"x\.{name[2:]} is a FIFO \(named pipe\), not a ROS bag \(give"
+        ):
+            read_bag(tmp_path / name, robot=robot)
+    if Path("/dev/zero").exists():
+        (tmp_path / "zero.bag").symlink_to("/dev/zero")
+        with pytest.raises(ValueError, match=r"zero\.bag is a character device, not a ROS bag"):
+            read_bag(tmp_path / "zero.bag", robot=robot)
+    # A rosbag2 bag is a directory (still read); what it holds must be regular files.
+    bag = _write(tmp_path / "arm", _arm_motion(10))
+    assert read_bag(bag, robot=robot).n_steps == 10
+    (bag / "arm.db3").unlink()
+    os.mkfifo(bag / "arm.db3")
+    with pytest.raises(
+        ValueError,
+        match=r"arm: arm\.db3 is a FIFO \(named pipe\); a rosbag2 bag holds regular files only",
+    ):
+        read_bag(bag, robot=robot)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, ["learn", "x.bag", "x.db3"])
+    _one_line_error(result, "x.bag is a FIFO (named pipe), not a ROS bag")
+
+
+def _long_bag(path: Path, n: int) -> Path:
+    """n joint states at 1 kHz from T0, written fast: one message serialized, its stamp patched."""
+    msgtype, msg = _joint_state(T0, KATANA_JOINTS, np.arange(5.0))
+    raw = bytearray(TS.serialize_cdr(msg, msgtype))
+    with Writer(path, version=9) as writer:
+        conn = writer.add_connection("/joint_states", msgtype, typestore=TS)
+        for i in range(n):
+            ns = T0 + i * 1_000_000
+            # CDR: 4 bytes of encapsulation, then header.stamp as int32 sec, uint32 nanosec.
+            struct.pack_into("<iI", raw, 4, ns // 10**9, ns % 10**9)
+            writer.write(conn, ns, bytes(raw))
+    return path
+
+
+def test_read_bag_reads_only_what_it_keeps(
+    tmp_path: Path, robot: Robot, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 20 s at 1 kHz, 2 s kept: every message was deserialized and held (1e6 messages: 37 s,
+    # 2.1 GB). Now the messages outside the cut are skipped on their raw header stamps.
+    path = _long_bag(tmp_path / "long", 20_000)
+    deserialize = AnyReader.deserialize
+    count = 0
+
+    def counted(self: AnyReader, rawdata: bytes, typ: str) -> object:
+        nonlocal count
+        count += 1
+        return deserialize(self, rawdata, typ)
+
+    monkeypatch.setattr(AnyReader, "deserialize", counted)
+    back = read_bag(path, robot=robot, start=10.0, end=12.0)
+    assert back.n_steps == 2001
+    np.testing.assert_allclose(back.t, np.arange(2001) * 1e-3, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(back.joints, np.tile(np.arange(5.0), (2001, 1)))
+    assert count == 1 + 2001  # the first joint state (the cut's origin), then what is kept
+    tracemalloc.start()
+    try:
+        read_bag(path, robot=robot, start=10.0, end=12.0)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8e6, peak  # was about 37 MB: all 20,000 messages deserialized
+
+
+def test_a_nan_pose_in_the_first_second_is_dropped(tmp_path: Path, robot: Robot) -> None:
+    # The median is robust to a perception outlier; a NaN one rejected the whole bag.
+    rng = np.random.default_rng(4)
+    truth = np.array([0.45, 0.2, 0.175])
+    msgs = _arm_motion(n=100)
+    kept = []
+    unit = [0.0, 0.0, 0.0, 1.0]
+    for k in range(31):
+        ns = T0 + k * 33_333_333
+        p = truth + rng.normal(0.0, 0.002, 3)
+        if k == 3:
+            p[:] = np.nan
+        elif k == 4:
+            p[1] = np.inf
+        else:
+            kept.append(p)
+        msgs.append(("/glass/pose", "geometry_msgs/msg/PoseStamped", ns, _pose(ns, p)))
+        msgs.append(("/nan/pose", "geometry_msgs/msg/PoseStamped", ns, _pose(ns, [np.nan] * 3)))
+        cam = [np.nan, 0.0, 0.0] if k == 5 else [0.1, 0.2, 0.3]  # tf: the same rule
+        msgs.append(_tf_entry("/tf", ns, "base_link", "camera", cam, unit))
+    path = _write(tmp_path / "nan", msgs)
+    back = read_bag(path, robot=robot, objects={"glass": "/glass/pose", "cam": "tf:camera"})
+    np.testing.assert_array_equal(back.objects["glass"], np.median(kept, axis=0))
+    np.testing.assert_allclose(back.objects["cam"], [0.1, 0.2, 0.3], rtol=0, atol=1e-15)
+    with pytest.raises(
+        ValueError,
+        match=r"objects\['glass'\]: the 31 message\(s\) of '/nan/pose' stamped within the first "
+        r"second of the demonstration all hold NaN or infinite positions",
+    ):
+        read_bag(path, robot=robot, objects={"glass": "/nan/pose"})
+
+
+def test_a_nan_gripper_is_refused(tmp_path: Path, robot: Robot) -> None:
+    # NaN > 0.5 is False: a NaN gripper signal was read as "open".
+    msgs = _arm_motion(n=50)
+    float_cls = TS.types["std_msgs/msg/Float64"]
+    for i, value in [(5, 0.9), (10, np.nan), (20, 0.1)]:
+        msgs.append(
+            ("/gripper", "std_msgs/msg/Float64", T0 + i * 20_000_000, float_cls(data=value))
+        )
+    path = _write(tmp_path / "grip", msgs)
+    with pytest.raises(
+        ValueError,
+        match=rf"^{re.escape(str(path))}: gripper_topic: message 1 of '/gripper' holds nan; "
+        r"the gripper signal must be finite \(closed where > 0\.5\)",
+    ):
+        read_bag(path, robot=robot, gripper_topic="/gripper")
+    # Cut before the NaN: the messages that hold no kept sample are not read.
+    back = read_bag(path, robot=robot, gripper_topic="/gripper", end=0.1)
+    np.testing.assert_array_equal(back.gripper, [0.0] * 5 + [1.0])
+
+
+def test_a_gap_in_the_joint_states_is_refused(tmp_path: Path, robot: Robot) -> None:
+    # A 1e8 s gap in the stamps was accepted: a demonstration of three years.
+    msgs = _arm_motion(n=20)
+    gap = 10**8 * 10**9
+    for k in range(10, 20):
+        _set_joint_state(msgs, k, log=msgs[k][2] + gap)
+    path = _write(tmp_path / "gap", msgs)
+    with pytest.raises(
+        ValueError,
+        match=r"joint_topic: the joint states of '/joint_states' stop for 100000000\.020000000 s "
+        r"after message 9 \(0\.180000000 s after the first joint state\); they must come at "
+        r"least every 1 s",
+    ):
+        read_bag(path, robot=robot)
+    assert read_bag(path, robot=robot, end=1.0).n_steps == 10  # cut off: read
+    # A gap of exactly 1 s is accepted.
+    msgs = _arm_motion(n=3)
+    _set_joint_state(msgs, 2, log=msgs[2][2] + 980_000_000)
+    assert read_bag(_write(tmp_path / "one_second", msgs), robot=robot).duration == 1.02
+
+
+def test_errors_about_the_content_name_the_bag(tmp_path: Path, robot: Robot) -> None:
+    msgs = _arm_motion(n=5)
+    _set_joint_state(msgs, 3, names=["pan", "pan", *KATANA_JOINTS[1:]])
+    path = _write(tmp_path / "twice", msgs)
+    with pytest.raises(
+        ValueError,
+        match=rf"^{re.escape(str(path))}: joint_topic: message 3 of '/joint_states' "
+        r"names a joint twice",
+    ):
+        read_bag(path, robot=robot)
+    garbage = tmp_path / "garbage.bag"
+    garbage.write_bytes(b"#ROSBAG V2.0\n" + b"\xff" * 4096)
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(garbage))} is not a readable ROS bag"):
+        read_bag(garbage, robot=robot)
+
+
+def test_trajectory_times_a_bag_cannot_hold(tmp_path: Path, robot: Robot) -> None:
+    # 3e9 s gave a struct.error (int32 seconds); times up to 1e12 "must increase strictly".
+    q, names = np.zeros((3, 5)), robot.joint_names
+    with pytest.raises(
+        ValueError,
+        match=r"t must be < 2147483648 s \(2\*\*31: time_from_start holds int32 seconds\), got "
+        r"t\[2\]=3000000000\.0",
+    ):
+        write_trajectory_bag(tmp_path / "a", [0.0, 1.5e9, 3e9], q, names)
+    with pytest.raises(ValueError, match=r"t must be < 2147483648 s .*got t\[1\]=500000000000\.0"):
+        write_trajectory_bag(tmp_path / "a", [0.0, 5e11, 1e12], q, names)
+    with pytest.raises(
+        ValueError,
+        match=r"t must increase by at least 1 ns \(the resolution of time_from_start\), got "
+        r"t\[1\]=1\.0 and t\[2\]=1\.0000000001, 1e-10 s apart",
+    ):
+        write_trajectory_bag(tmp_path / "a", [0.0, 1.0, 1.0 + 1e-10], q, names)
+    demo = Demonstration(t=[0.0, 1.0], joints=np.zeros((2, 5)))
+    with pytest.raises(ValueError, match=r"start_time \+ the demonstration's duration \(1 s\)"):
+        write_demonstration_bag(tmp_path / "a", demo, names, start_time=1e12)
+    assert list(tmp_path.iterdir()) == []
+    write_trajectory_bag(tmp_path / "last", [0.0, 2.0**31 - 0.5], q[:2], names)
+    ((_, msg),) = _raw(tmp_path / "last", "/joint_trajectory")
+    assert (msg.points[1].time_from_start.sec, msg.points[1].time_from_start.nanosec) == (
+        2**31 - 1,
+        500_000_000,
+    )
+
+
+def test_trajectory_topics_and_joints_are_checked(tmp_path: Path, robot: Robot) -> None:
+    t, q, names = [0.0, 1.0], np.zeros((2, 5)), robot.joint_names
+    grip = [0.0, 1.0]
+    with pytest.raises(ValueError, match=r"topic must be a ROS topic name \('/' then .*got ''"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, topic="")
+    with pytest.raises(ValueError, match=r"gripper_topic must be a ROS topic name .*got 'grip'"):
+        write_trajectory_bag(tmp_path / "a", t, q, names, grip, gripper_topic="grip")
+    with pytest.raises(
+        ValueError,
+        match=r"gripper_topic must differ from topic \('/joint_trajectory'\): a topic carries "
+        "one message type",
+    ):
+        write_trajectory_bag(tmp_path / "a", t, q, names, grip, gripper_topic="/joint_trajectory")
+    with pytest.raises(
+        ValueError, match=r"joints must have one column per joint, at least 1, got shape \(2, 0\)"
+    ):
+        write_trajectory_bag(tmp_path / "a", t, np.zeros((2, 0)), [])
+    demo = Demonstration(t=[0.0, 1.0], joints=np.zeros((2, 5)), objects={"glass": [0, 0, 0]})
+    with pytest.raises(ValueError, match=r"object_topics\['glass'\] must differ from joint_topic"):
+        write_demonstration_bag(
+            tmp_path / "a", demo, names, object_topics={"glass": "/joint_states"}
+        )
+    assert list(tmp_path.iterdir()) == []
+    # Without a gripper, gripper_topic is not used.
+    write_trajectory_bag(tmp_path / "b", t, q, names, topic="/arm/trajectory", gripper_topic="/x")
+    assert [c for c, _ in _topics(tmp_path / "b")] == ["/arm/trajectory"]
+
+
+def _topics(path: Path) -> list[tuple[str, str]]:
+    with AnyReader([path], default_typestore=TS) as reader:
+        return sorted((c.topic, c.msgtype) for c in reader.connections)
+
+
+def test_cli_reproduce_checks_the_bag_before_writing_out(tmp_path: Path, skill: Skill) -> None:
+    # A skill of 3e9 s wrote --out, then failed on the bag with a struct.error traceback.
+    skill.save(tmp_path / "skill.npz")
+    long = Skill.load(tmp_path / "skill.npz")
+    long.duration = 3e9
+    long.save(tmp_path / "long.npz")
+    bag, out = tmp_path / "trajectory", tmp_path / "repro.npz"
+    args = ["--object", "glass=0.47,0.18,0.175", "--object", "coaster=0.49,-0.17,0.006"]
+    result = CliRunner().invoke(
+        app, ["reproduce", str(tmp_path / "long.npz"), *args, "--out", str(out), "--bag", str(bag)]
+    )
+    _one_line_error(result, f"--bag {bag}: t must be < 2147483648 s", "int32 seconds")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.npz", "skill.npz"]
+    # --out and --bag the same path: the npz was written, then the bag refused.
+    same = tmp_path / "same"
+    result = CliRunner().invoke(
+        app,
+        ["reproduce", str(tmp_path / "skill.npz"), *args, "--out", str(same), "--bag", str(same)],
+    )
+    _one_line_error(result, f"--bag {same}: is the --out path too")
+    assert not same.exists()

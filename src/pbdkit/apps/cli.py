@@ -604,11 +604,12 @@ def reproduce(
     objects = _parse_objects(obj)
     _check_output(out, "--out")
     if bag is not None:
-        _check_bag_output(bag)
+        _check_bag_output(bag, out)
     skill = Skill.load(skill_path)
     res = skill.reproduce(objects, use=use or None)
-    # Before writing anything: a skill without a duration or joint names cannot give a bag.
-    timing = None if bag is None else _bag_timing(skill, res)
+    # Before writing anything: the bag's content is checked (a skill without a duration or
+    # joint names, times beyond what a bag holds), so that an error leaves no --out behind.
+    timing = None if bag is None else _bag_timing(skill, res, bag)
     arrays = {
         "t": res.t,
         "joints": res.joints,
@@ -639,38 +640,44 @@ def reproduce(
         from ..learning.bags import write_trajectory_bag
 
         t, names = timing
-        grip = res.gripper if skill.has_gripper else None
-        # Velocities and accelerations of the timing (None without limits: positions only).
-        write_trajectory_bag(
-            bag,
-            t,
-            res.joints,
-            names,
-            gripper=grip,
-            velocities=res.velocities,
-            accelerations=res.accelerations if res.velocities is not None else None,
-        )
+        write_trajectory_bag(bag, t, res.joints, names, **_bag_extras(skill, res))
         console.print(f"wrote {bag}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
 
 
-def _check_bag_output(bag: Path) -> None:
-    """Fail unless a new bag (a directory) can be created at ``bag``."""
+def _check_bag_output(bag: Path, out: Path) -> None:
+    """Fail unless a new bag (a directory) can be created at ``bag``, apart from ``out``."""
     if bag.exists() or bag.is_symlink():
         _fail(f"--bag {bag}: exists; give a new path (a bag is a directory, never overwritten)")
+    if os.path.realpath(bag) == os.path.realpath(out):
+        _fail(f"--bag {bag}: is the --out path too; give two different paths")
     _check_output(bag, "--bag")
 
 
-def _bag_timing(skill: Skill, res: ReproductionResult) -> tuple[np.ndarray, list[str]]:
+def _bag_extras(skill: Skill, res: ReproductionResult) -> dict[str, Any]:
+    """The gripper, velocities and accelerations of the trajectory bag of `reproduce`."""
+    return {
+        "gripper": res.gripper if skill.has_gripper else None,
+        # Velocities and accelerations of the timing (None without limits: positions only).
+        "velocities": res.velocities,
+        "accelerations": res.accelerations if res.velocities is not None else None,
+    }
+
+
+def _bag_timing(skill: Skill, res: ReproductionResult, bag: Path) -> tuple[np.ndarray, list[str]]:
     """Times (s, from :meth:`pbdkit.Skill.times`) and joint names (the skill's robot's) of the
-    trajectory bag of `reproduce`."""
+    trajectory bag of `reproduce`, its whole content checked (nothing is written)."""
+    from ..learning.bags import _trajectory_messages
+
     names = getattr(skill.robot, "joint_names", None)
     if names is None:
         _fail("--bag: the skill's robot has no joint names; load it with a pbdkit.Robot")
     try:
         t = skill.times(res)
+        names = [str(n) for n in names]
+        _trajectory_messages(t, res.joints, names, **_bag_extras(skill, res))
     except ValueError as exc:
-        _fail(f"--bag: {exc}")
-    return t, [str(n) for n in names]
+        _fail(f"--bag {bag}: {exc}")
+    return t, names
 
 
 @app.command()

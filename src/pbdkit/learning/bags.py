@@ -38,7 +38,12 @@ Conventions
   seconds after the first joint-state stamp of the bag; the samples stamped within
   [first + start, first + end] are kept, and the time origin (t = 0) is the first of them: the
   first joint-state stamp at or after ``start``. The stamps must increase strictly in
-  recording order.
+  recording order, and consecutive kept samples be at most 1 s apart
+  (``MAX_JOINT_GAP_NS``): a longer gap is a paused recording or a lost driver, and a
+  demonstration has no data about the motion there (cut it off with ``start``/``end``).
+- Bags are streamed: messages are read one at a time and memory holds what is kept. A
+  message outside the cut is skipped on its header stamp, read from its raw bytes, and is
+  not deserialized (nor checked); a joint state stamped before the first is an error.
 - Joint positions are reordered to ``robot.joint_names`` by each message's ``name`` field
   (drivers publish in any order, and the order may change between messages); joints the robot
   does not have (gripper fingers) are ignored, and so are messages that name none of the
@@ -47,7 +52,9 @@ Conventions
 - Objects are positions in the robot's base frame (``robot.base``, the URDF root link), constant
   during a demonstration (as in the paper). A topic source gives the component-wise median of
   its messages stamped within the demonstration's first second, [t0, t0 + 1 s]: before the hand
-  moves anything, and robust to a perception outlier. A message in another frame than the base
+  moves anything, and robust to a perception outlier. Non-finite positions (a NaN from a
+  tracker that lost the object) are outliers too: dropped before the median, an error only
+  if no finite one remains (tf transforms likewise). A message in another frame than the base
   (its ``header.frame_id``, neither empty nor ``robot.base``) is expressed in the base frame
   through tf, as a ``"tf:frame"`` source is.
 - tf: the transforms of ``/tf`` stamped within the first second and every transform of
@@ -58,7 +65,8 @@ Conventions
   reached, the error names both chains up to where they stop.
 - The gripper messages carry no header: they are placed by their recording (log) time against
   the joint states' log times and held between messages (zero-order hold); before the first
-  message the gripper is open (0).
+  message the gripper is open (0). A NaN or infinite gripper value among the messages that
+  hold a kept sample is an error (NaN > 0.5 would read as open).
 
 Bad input
 ---------
@@ -66,21 +74,32 @@ Every problem raises before anything is returned or written: :class:`FileNotFoun
 bag that does not exist, :class:`ValueError` otherwise, naming the argument and the expected
 and actual value: a topic not in the bag (the message lists the bag's topics and types), a topic
 of another type (expected and actual types), non-monotonic stamps (the two messages and their
-stamps), a robot joint missing from a message (named), an empty cut, an object frame that tf
-does not join to the base. Writers refuse an existing path (a bag is a directory: nothing is
-overwritten or deleted) and write atomically: the bag is written into a temporary sibling
+stamps), a gap in them, a robot joint missing from a message (named), an empty cut, an object
+frame that tf does not join to the base. An error about a bag's content starts with the bag's
+path. A FIFO, a device or a socket (or a bag directory holding one) is refused before it is
+opened: reading one blocks, or never ends. A damaged file makes the reader fail in many ways
+(OverflowError, KeyError, AssertionError, ...): all are a ValueError naming the bag.
+
+Writers check every argument before they write anything: times within what ROS's int32
+seconds hold (below ``2**31`` s) and increasing at its 1 ns resolution, topics that are ROS names
+and distinct, at least one joint. They refuse an existing path (a bag is a directory: nothing
+is overwritten or deleted) and write atomically: the bag is written into a temporary sibling
 directory and renamed onto the target (``os.replace``), so a reader never sees half a bag.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import re
 import shutil
+import stat
+import struct
 import tempfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -127,6 +146,9 @@ STORAGES: tuple[Storage, ...] = ("sqlite3", "mcap")
 TF_PREFIX = "tf:"
 #: Objects are located from the messages of the demonstration's first second.
 OBJECT_WINDOW_NS = 1_000_000_000
+#: Consecutive joint states may be at most this far apart (ns): no data about the motion for
+#: longer means a paused recording or a lost driver (a gap of 1e8 s was once accepted).
+MAX_JOINT_GAP_NS = 1_000_000_000
 #: A gripper signal above this is closed.
 GRIPPER_THRESHOLD = 0.5
 _NS = 1_000_000_000
@@ -152,12 +174,23 @@ def _frame(name: str) -> str:
 
 # ============================================================================ reading
 class _Bag:
-    """An open bag: its topics, and the messages of one topic, deserialized."""
+    """An open bag: its topics, and the messages of one topic, streamed.
+
+    Messages are read one at a time (nothing holds a whole topic), and deserialized only
+    where needed: the header stamp of a message that begins with a ``std_msgs/Header`` is
+    read from its raw bytes (:meth:`stamp`), so that the messages outside a cut cost a
+    few bytes each. Any failure of the reader on the bag's content (a corrupted or
+    truncated file makes it raise OverflowError, KeyError, AssertionError, ...) becomes
+    a ValueError naming the bag.
+    """
 
     def __init__(self, reader: AnyReader, path: Path) -> None:
         self.reader = reader
         self.path = path
         self.topics = {name: info.msgtype for name, info in reader.topics.items()}
+        # Connection id -> whether its raw header stamp equals the deserialized one (checked
+        # on its first message: a bag's own message definitions could differ from Humble's).
+        self._raw_stamps: dict[int, bool] = {}
 
     def listing(self) -> str:
         """The bag's topics and types, for error messages."""
@@ -179,26 +212,144 @@ class _Bag:
             raise ValueError(f"{what}: topic {topic!r} must be of type {want}, got {got}")
         return actual
 
-    def messages(self, topic: str) -> list[tuple[int, Any]]:
-        """(log time ns, message) of every message of ``topic``, in recording order."""
+    def unreadable(self, exc: BaseException) -> ValueError:
+        """The error for a reader that failed on the bag's content."""
+        return _unreadable(self.path, exc)
+
+    def raw(self, topic: str) -> Iterator[tuple[int, bytes, Connection]]:
+        """(log time ns, raw message, connection) of each message of ``topic``, in recording
+        order (log time), not deserialized."""
         conns: list[Connection] = [c for c in self.reader.connections if c.topic == topic]
-        return [
-            (int(log), self.reader.deserialize(raw, conn.msgtype))
-            for conn, log, raw in self.reader.messages(connections=conns)
-        ]
+        if not conns:  # the reader would read every topic
+            return
+        items = self.reader.messages(connections=conns)
+        while True:
+            try:
+                conn, log, raw = next(items)
+            except StopIteration:
+                return
+            except _PASSED_THROUGH:
+                raise
+            except Exception as exc:
+                raise self.unreadable(exc) from exc
+            yield int(log), raw, conn
+
+    def message(self, raw: bytes, conn: Connection) -> Any:
+        """A raw message, deserialized."""
+        try:
+            msg = self.reader.deserialize(raw, conn.msgtype)
+        except _PASSED_THROUGH:
+            raise
+        except Exception as exc:
+            raise self.unreadable(exc) from exc
+        if conn.id not in self._raw_stamps:
+            header = getattr(msg, "header", None)
+            stamp = getattr(header, "stamp", None)
+            self._raw_stamps[conn.id] = stamp is not None and _raw_stamp(
+                raw, ros2=self.reader.is2
+            ) == _stamp_ns(stamp)
+        return msg
+
+    def stamp(self, raw: bytes, conn: Connection) -> int | None:
+        """The header stamp (ns) of a raw message, without deserializing it; None where it
+        cannot be read so (the connection's first message, which :meth:`message` checks, or
+        a type without a leading header): deserialize it then."""
+        if not self._raw_stamps.get(conn.id, False):
+            return None
+        return _raw_stamp(raw, ros2=self.reader.is2)
+
+    def messages(self, topic: str) -> Iterator[tuple[int, Any]]:
+        """(log time ns, message) of each message of ``topic``, deserialized one at a time."""
+        for log, raw, conn in self.raw(topic):
+            yield log, self.message(raw, conn)
+
+
+# Errors a reader raises that are not about the bag's content: passed on as they are.
+_PASSED_THROUGH = (PermissionError, FileNotFoundError)
+
+
+def _raw_stamp(raw: bytes, *, ros2: bool) -> int | None:
+    """The header stamp (ns) of a serialized message that begins with a std_msgs/Header.
+
+    CDR (ROS 2): a 4-byte encapsulation header (its 2nd byte 1: little-endian, 0: big),
+    then stamp.sec int32 and stamp.nanosec uint32. ROS 1: seq uint32, then stamp.secs and
+    stamp.nsecs uint32, little-endian.
+    """
+    if len(raw) < 12:
+        return None
+    if ros2:
+        order = "<" if raw[1] == 1 else ">"
+        sec, nanosec = struct.unpack_from(f"{order}iI", raw, 4)
+    else:
+        sec, nanosec = struct.unpack_from("<II", raw, 4)
+    return int(sec) * _NS + int(nanosec)
+
+
+def _unreadable(path: Path, exc: BaseException) -> ValueError:
+    """A ValueError naming the bag a reader failed on (its own error, or any other)."""
+    reader_errors = _reader_errors()
+    text = " ".join(str(exc).split())
+    if not isinstance(exc, reader_errors):
+        text = f"corrupt or truncated ({type(exc).__name__}: {text})"
+    return ValueError(f"{path} is not a readable ROS bag: {text}")
+
+
+def _file_kind(mode: int) -> str | None:
+    """What a file that is neither a directory nor a regular file is (None for those)."""
+    kinds = (
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    )
+    if stat.S_ISDIR(mode) or stat.S_ISREG(mode):
+        return None
+    return next((text for test, text in kinds if test(mode)), "not a regular file")
+
+
+def _check_bag_path(path: Path) -> None:
+    """Refuse what cannot be a bag before the reader opens it: a FIFO blocks the reader for
+    ever and a device (/dev/zero) feeds it without end. A rosbag2 bag is a directory holding
+    metadata.yaml and its storage files: those must be regular files too. Symbolic links
+    are followed (what they point to is what is read)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise FileNotFoundError(f"bag not found: {path}") from None
+    kind = _file_kind(mode)
+    if kind is not None:
+        raise ValueError(
+            f"{path} is {kind}, not a ROS bag (give a rosbag2 directory, a .db3 or .mcap "
+            "storage file, or a ROS 1 .bag file)"
+        )
+    if not stat.S_ISDIR(mode):
+        return
+    if not (path / "metadata.yaml").exists():
+        raise ValueError(
+            f"{path} is a directory without metadata.yaml: not a rosbag2 bag (give the bag's "
+            "directory, a .db3 or .mcap storage file, or a ROS 1 .bag file)"
+        )
+    for item in sorted(path.iterdir()):
+        try:
+            kind = _file_kind(item.stat().st_mode)
+        except FileNotFoundError:  # a dangling link: the reader says if it needs it
+            continue
+        if kind is not None:
+            raise ValueError(
+                f"{path}: {item.name} is {kind}; a rosbag2 bag holds regular files only"
+            )
 
 
 def _open_reader(path: Path) -> AnyReader:
     from rosbags.highlevel import AnyReader
 
-    if not path.exists():
-        raise FileNotFoundError(f"bag not found: {path}")
-    if path.is_dir() and not (path / "metadata.yaml").is_file():
-        raise ValueError(
-            f"{path} is a directory without metadata.yaml: not a rosbag2 bag (give the bag's "
-            "directory, a .db3 or .mcap storage file, or a ROS 1 .bag file)"
-        )
-    return AnyReader([path], default_typestore=_typestore())
+    _check_bag_path(path)
+    try:
+        return AnyReader([path], default_typestore=_typestore())
+    except _PASSED_THROUGH:
+        raise
+    except Exception as exc:
+        raise _unreadable(path, exc) from exc
 
 
 def _reader_errors() -> tuple[type[Exception], ...]:
@@ -241,7 +392,7 @@ def read_bag(
         > 0.5, held between messages, open before the first. Default: no gripper signal.
     start, end : float, optional
         Seconds after the first joint-state stamp of the bag: keep the samples stamped within
-        [start, end] (default: from the first, to the last).
+        [start, end] (default: from the first, to the last). Only these are deserialized.
 
     Returns
     -------
@@ -254,11 +405,12 @@ def read_bag(
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        A file that is not a bag, a missing topic (the message lists the bag's topics), a
-        topic of the wrong type (expected and actual types), stamps that do not increase, a
-        robot joint missing from a message, fewer than 2 samples between ``start`` and
-        ``end``, an object without messages in the first second, or a frame that tf does not
-        join to the base.
+        A file that is not a bag (a FIFO, a device, a damaged file), a missing topic (the
+        message lists the bag's topics), a topic of the wrong type (expected and actual
+        types), stamps that do not increase or stop for more than 1 s, a robot joint missing
+        from a message, fewer than 2 samples between ``start`` and ``end``, an object without
+        a finite position in the first second, a NaN gripper value, or a frame that tf does
+        not join to the base. An error about the bag's content starts with its path.
     """
     joint_names = getattr(robot, "joint_names", None)
     base = getattr(robot, "base", None)
@@ -268,23 +420,33 @@ def read_bag(
             f"pbdkit.robots.katana(), got {type(robot).__name__}"
         )
     sources = _check_sources(objects)
-    start_ns, end_ns = _check_window(start, end)
+    window = _check_window(start, end)
     p = Path(path)
+    reader = _open_reader(p)
     try:
-        with _open_reader(p) as reader:
-            bag = _Bag(reader, p)
-            return _read_demonstration(
-                bag,
-                joint_names=[str(n) for n in joint_names],
-                base=_frame(base),
-                joint_topic=joint_topic,
-                sources=sources,
-                gripper_topic=gripper_topic,
-                start_ns=start_ns,
-                end_ns=end_ns,
-            )
-    except _reader_errors() as exc:
-        raise ValueError(f"{p} is not a readable ROS bag: {exc}") from exc
+        reader.open()
+    except _PASSED_THROUGH:
+        raise
+    except Exception as exc:
+        raise _unreadable(p, exc) from exc
+    try:
+        return _read_demonstration(
+            _Bag(reader, p),
+            joint_names=[str(n) for n in joint_names],
+            base=_frame(base),
+            joint_topic=joint_topic,
+            sources=sources,
+            gripper_topic=gripper_topic,
+            window=window,
+        )
+    except ValueError as exc:
+        # Every error about the bag's content names the bag (one of several given to learn).
+        if str(p) in str(exc):
+            raise
+        raise ValueError(f"{p}: {exc}") from exc
+    finally:
+        with contextlib.suppress(Exception):
+            reader.close()
 
 
 def _check_sources(objects: object) -> dict[str, str | Float]:
@@ -311,14 +473,32 @@ def _check_sources(objects: object) -> dict[str, str | Float]:
     return out
 
 
-def _check_window(start: float | None, end: float | None) -> tuple[int, int | None]:
+class _Window(NamedTuple):
+    """The cut of :func:`read_bag`: nanoseconds after the first joint state."""
+
+    start_ns: int
+    end_ns: int | None
+    text: str  # "[start, end]" in seconds as given, for messages
+
+    def keeps(self, rel: int) -> bool:
+        """Whether a stamp ``rel`` ns after the first joint state is within the cut."""
+        return rel >= self.start_ns and (self.end_ns is None or rel <= self.end_ns)
+
+
+# ROS stamps hold 32-bit seconds (ROS 2: int32, ROS 1: uint32), so two stamps of a bag are
+# less than 2**32 s apart: a cut bound beyond that keeps what 2**32 s keeps. Clamping keeps
+# the bound's nanoseconds within int64 (``start=1e300`` would not be).
+_MAX_SPAN_S = 2.0**32
+
+
+def _check_window(start: float | None, end: float | None) -> _Window:
     s = 0.0 if start is None else check_positive_float(start, "start", allow_zero=True)
-    if end is None:
-        return round(s * _NS), None
-    e = check_positive_float(end, "end", allow_zero=True)
-    if e <= s:
+    e = None if end is None else check_positive_float(end, "end", allow_zero=True)
+    if e is not None and e <= s:
         raise ValueError(f"end must be > start ({s!r} s), got {e!r}")
-    return round(s * _NS), round(e * _NS)
+    text = f"[{s:g}, {'end' if e is None else f'{e:g}'}]"
+    start_ns = round(min(s, _MAX_SPAN_S) * _NS)
+    return _Window(start_ns, None if e is None else round(min(e, _MAX_SPAN_S) * _NS), text)
 
 
 def _read_demonstration(
@@ -329,8 +509,7 @@ def _read_demonstration(
     joint_topic: str,
     sources: Mapping[str, str | Float],
     gripper_topic: str | None,
-    start_ns: int,
-    end_ns: int | None,
+    window: _Window,
 ) -> Demonstration:
     bag.check_topic(joint_topic, (JOINT_STATE_TYPE,), "joint_topic")
     # Check every topic before reading any message: a wrong name fails at once.
@@ -340,19 +519,7 @@ def _read_demonstration(
     if gripper_topic is not None:
         bag.check_topic(gripper_topic, GRIPPER_TYPES, "gripper_topic")
 
-    stamps, logs, joints = _joint_states(bag, joint_topic, joint_names)
-    rel = stamps - stamps[0]
-    keep = rel >= start_ns
-    if end_ns is not None:
-        keep &= rel <= end_ns
-    if np.count_nonzero(keep) < 2:
-        span = f"{rel[-1] * 1e-9:.3f}"
-        window = f"[{start_ns * 1e-9:g}, {'end' if end_ns is None else f'{end_ns * 1e-9:g}'}]"
-        raise ValueError(
-            f"start/end: {np.count_nonzero(keep)} joint state(s) of {joint_topic!r} within "
-            f"{window} s, need at least 2; the joint states span [0, {span}] s"
-        )
-    stamps, logs, joints = stamps[keep], logs[keep], joints[keep]
+    stamps, logs, joints = _joint_states(bag, joint_topic, joint_names, window)
     t0 = int(stamps[0])
 
     tf: _TfTree | None = None
@@ -384,21 +551,37 @@ def _read_demonstration(
 
 
 def _joint_states(
-    bag: _Bag, topic: str, joint_names: list[str]
+    bag: _Bag, topic: str, joint_names: list[str], window: _Window
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], Float]:
-    """Header stamps (ns), log times (ns) and joints (T, n) in ``joint_names`` order.
+    """Header stamps (ns), log times (ns) and joints (T, n) in ``joint_names`` order of the
+    joint states within the cut ``window``.
 
     A message naming none of the robot's joints comes from another driver sharing the topic
-    (a gripper's fingers) and is skipped; one naming some of them only is an error.
+    (a gripper's fingers) and is skipped; one naming some of them only is an error. Once the
+    first joint state (the origin of the cut) is found, a message stamped outside the cut is
+    skipped on its raw header stamp, not deserialized: a long bag costs a few bytes per
+    message outside what is kept, and memory for what is kept only.
     """
-    msgs = bag.messages(topic)
     wanted = set(joint_names)
     index: list[int] = []  # the message number of each kept sample, for error messages
     stamps: list[int] = []
     logs: list[int] = []
     rows: list[Float] = []
     order: dict[tuple[str, ...], NDArray[np.intp] | None] = {}  # per layout of names
-    for i, (log, msg) in enumerate(msgs):
+    origin: int | None = None  # the first joint state's stamp: the cut counts from it
+    n_messages = n_robot = n_skipped = 0
+    last = 0  # the stamp of the last joint state seen, after the origin (ns)
+    previous: tuple[int, int] | None = None  # (message number, stamp) of the arm's last read
+    for i, (log, raw, conn) in enumerate(bag.raw(topic)):
+        n_messages += 1
+        if origin is not None:
+            ns = bag.stamp(raw, conn)
+            # Stamped before the origin: deserialized, to be refused below if it is the arm's.
+            if ns is not None and ns >= origin and not window.keeps(ns - origin):
+                n_skipped += 1
+                last = ns - origin
+                continue
+        msg = bag.message(raw, conn)
         names = tuple(msg.name)
         if names not in order:
             order[names] = (
@@ -407,6 +590,20 @@ def _joint_states(
         idx = order[names]
         if idx is None:
             continue
+        n_robot += 1
+        stamp = _stamp_ns(msg.header.stamp)
+        if previous is not None and stamp <= previous[1]:
+            raise ValueError(
+                f"joint_topic: the header stamps of {topic!r} must increase strictly in "
+                f"recording order; message {i} is stamped {_seconds(stamp)} s, not after "
+                f"message {previous[0]} ({_seconds(previous[1])} s)"
+            )
+        previous = (i, stamp)
+        if origin is None:
+            origin = stamp
+        last = stamp - origin
+        if not window.keeps(last):
+            continue
         position = np.asarray(msg.position, dtype=np.float64)
         if position.shape != (len(names),):
             raise ValueError(
@@ -414,23 +611,30 @@ def _joint_states(
                 f"{position.shape[0]} positions; they must match"
             )
         rows.append(position[idx])
-        stamps.append(_stamp_ns(msg.header.stamp))
+        stamps.append(stamp)
         logs.append(log)
         index.append(i)
-    if len(rows) < 2:
+    if origin is None or (n_robot < 2 and not n_skipped):
         seen = sorted({n for names in order for n in names})
         raise ValueError(
-            f"joint_topic: {len(rows)} message(s) of {topic!r} (of {len(msgs)}) name the "
+            f"joint_topic: {n_robot} message(s) of {topic!r} (of {n_messages}) name the "
             f"robot's joints {joint_names}, need at least 2; the messages name {seen}"
         )
-    stamps_ = np.array(stamps, dtype=np.int64)
-    bad = np.flatnonzero(np.diff(stamps_) <= 0)
-    if bad.size:
-        k = int(bad[0]) + 1
+    if len(rows) < 2:
         raise ValueError(
-            f"joint_topic: the header stamps of {topic!r} must increase strictly in recording "
-            f"order; message {index[k]} is stamped {_seconds(stamps[k])} s, not after message "
-            f"{index[k - 1]} ({_seconds(stamps[k - 1])} s)"
+            f"start/end: {len(rows)} joint state(s) of {topic!r} within {window.text} s, "
+            f"need at least 2; the joint states span [0, {last * 1e-9:.3f}] s"
+        )
+    stamps_ = np.array(stamps, dtype=np.int64)
+    gaps = np.diff(stamps_)
+    long = np.flatnonzero(gaps > MAX_JOINT_GAP_NS)
+    if long.size:
+        k = int(long[0]) + 1
+        raise ValueError(
+            f"joint_topic: the joint states of {topic!r} stop for {_seconds(int(gaps[k - 1]))} "
+            f"s after message {index[k - 1]} ({_seconds(stamps[k - 1] - origin)} s after the "
+            f"first joint state); they must come at least every {MAX_JOINT_GAP_NS * 1e-9:g} s "
+            "(a longer gap is a paused recording or a lost driver: cut it off with start/end)"
         )
     return stamps_, np.array(logs, dtype=np.int64), np.stack(rows)
 
@@ -476,22 +680,30 @@ def _object_position(
     what: str,
 ) -> Float:
     msgtype = bag.check_topic(topic, tuple(OBJECT_TYPES), what)
-    msgs = bag.messages(topic)
     window: list[Float] = []
     frames: set[str] = set()
-    stamps: list[int] = []
-    for _, msg in msgs:
-        ns = _stamp_ns(msg.header.stamp)
-        stamps.append(ns)
-        if t0 <= ns <= t0 + OBJECT_WINDOW_NS:
-            pos, frame = _position_of(msg, msgtype)
-            window.append(pos)
+    n_messages = n_finite = 0
+    first = last = 0  # the earliest and latest stamps (ns), for the error message
+    for _, raw, conn in bag.raw(topic):
+        msg = None
+        ns = bag.stamp(raw, conn)
+        if ns is None:
+            msg = bag.message(raw, conn)
+            ns = _stamp_ns(msg.header.stamp)
+        first, last = (ns, ns) if not n_messages else (min(first, ns), max(last, ns))
+        n_messages += 1
+        if not t0 <= ns <= t0 + OBJECT_WINDOW_NS:
+            continue  # outside the first second: not deserialized
+        pos, frame = _position_of(bag.message(raw, conn) if msg is None else msg, msgtype)
+        window.append(pos)
+        if np.all(np.isfinite(pos)):  # a NaN from perception is an outlier too: dropped
+            n_finite += 1
             frames.add(frame)
     if not window:
         span = (
-            f"its {len(msgs)} messages are stamped from {_seconds(min(stamps) - t0)} to "
-            f"{_seconds(max(stamps) - t0)} s"
-            if msgs
+            f"its {n_messages} messages are stamped from {_seconds(first - t0)} to "
+            f"{_seconds(last - t0)} s"
+            if n_messages
             else "it has no messages"
         )
         raise ValueError(
@@ -499,13 +711,18 @@ def _object_position(
             f"demonstration ([0, 1] s after the first joint state); {span}. Give the position "
             "as x,y,z, or choose start"
         )
+    if not n_finite:
+        raise ValueError(
+            f"{what}: the {len(window)} message(s) of {topic!r} stamped within the first "
+            "second of the demonstration all hold NaN or infinite positions. Give the position "
+            "as x,y,z, or choose start"
+        )
     if len(frames) > 1:
         raise ValueError(
             f"{what}: the messages of {topic!r} are in several frames {sorted(frames)}"
         )
-    position = np.median(np.stack(window), axis=0)
-    if not np.all(np.isfinite(position)):
-        raise ValueError(f"{what}: the position from {topic!r} is not finite: {position}")
+    finite = [p for p in window if np.all(np.isfinite(p))]
+    position = np.median(np.stack(finite), axis=0)
     (frame,) = frames
     if frame in ("", base):
         return np.asarray(position, dtype=np.float64)
@@ -514,14 +731,35 @@ def _object_position(
 
 
 def _gripper(bag: _Bag, topic: str, joint_logs: NDArray[np.int64]) -> Float:
-    """The gripper signal held at each joint state's log time: 1.0 closed, 0.0 open."""
-    msgs = bag.messages(topic)
-    logs = np.array([log for log, _ in msgs], dtype=np.int64)
-    closed = np.array([float(msg.data) > GRIPPER_THRESHOLD for _, msg in msgs], dtype=np.float64)
+    """The gripper signal held at each joint state's log time: 1.0 closed, 0.0 open.
+
+    Only the messages that hold a kept sample are deserialized: the last one logged at or
+    before the first kept joint state, and those up to the last (the bag is read in log
+    order, so reading stops there).
+    """
+    first, last = int(joint_logs.min()), int(joint_logs.max())
+    held: list[tuple[int, int, bytes, Connection]] = []  # (message number, log, raw, conn)
+    for i, (log, raw, conn) in enumerate(bag.raw(topic)):
+        if log > last:
+            break
+        if log <= first:
+            held = []  # an earlier message is replaced by this one at the first sample
+        held.append((i, log, raw, conn))
+    logs = np.array([log for _, log, _, _ in held], dtype=np.int64)
+    closed = np.zeros(len(held), dtype=np.float64)
+    for k, (i, _, raw, conn) in enumerate(held):
+        value = float(bag.message(raw, conn).data)
+        if not np.isfinite(value):
+            # NaN > 0.5 is False: it would read as "open" where the signal is unknown.
+            raise ValueError(
+                f"gripper_topic: message {i} of {topic!r} holds {value}; the gripper signal "
+                f"must be finite (closed where > {GRIPPER_THRESHOLD})"
+            )
+        closed[k] = value > GRIPPER_THRESHOLD
     idx = np.searchsorted(logs, joint_logs, side="right") - 1
     out = np.zeros(joint_logs.shape[0], dtype=np.float64)
-    held = idx >= 0
-    out[held] = closed[idx[held]]
+    held_at = idx >= 0
+    out[held_at] = closed[idx[held_at]]
     return out
 
 
@@ -613,6 +851,12 @@ def _mean_transform(
 ) -> tuple[Float, Float]:
     """Rotation and translation of one link from its samples: median translation, mean of
     the sign-aligned quaternions, normalized (the chordal mean: exact for equal samples)."""
+    items = [(p, q) for p, q in items if np.all(np.isfinite(p)) and np.all(np.isfinite(q))]
+    if not items:  # non-finite samples are dropped as outliers, as an object topic's are
+        raise ValueError(
+            f"tf: the transforms {parent!r} -> {child!r} of the first second are all NaN or "
+            "infinite"
+        )
     trans = np.median(np.stack([p for p, _ in items]), axis=0)
     quats = np.stack([q for _, q in items])
     quats = quats * np.where(quats @ quats[0] < 0, -1.0, 1.0)[:, None]
@@ -648,6 +892,33 @@ def _check_names(names: object, n: int, what: str) -> list[str]:
     if len(set(out)) != n:
         raise ValueError(f"{what} must be distinct, got {out}")
     return out
+
+
+# A fully qualified ROS topic name, as bags store them: "/" then tokens of letters, digits
+# and "_", none starting with a digit (ROS 2's rules, without substitutions).
+_TOPIC_NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+# builtin_interfaces Time and Duration hold int32 seconds: times must stay below this (s).
+_MAX_ROS_SECONDS = 2**31
+_TRAJECTORY_TOPIC = "/joint_trajectory"
+_GRIPPER_TOPIC = "/gripper"
+
+
+def _check_topics(topics: Mapping[str, object]) -> None:
+    """Each topic (argument name -> value) a ROS topic name, all distinct: a topic has one
+    message type."""
+    seen: dict[str, str] = {}
+    for name, topic in topics.items():
+        if not isinstance(topic, str) or not _TOPIC_NAME.fullmatch(topic):
+            raise ValueError(
+                f"{name} must be a ROS topic name ('/' then names of letters, digits and _, "
+                f"not starting with a digit, e.g. '/joint_trajectory'), got {topic!r}"
+            )
+        if topic in seen:
+            raise ValueError(
+                f"{name} must differ from {seen[topic]} ({topic!r}): a topic carries one "
+                "message type"
+            )
+        seen[topic] = name
 
 
 def _write_bag_atomic(path: Path, storage: Storage, fill: Callable[[Writer], None]) -> None:
@@ -696,8 +967,8 @@ def write_trajectory_bag(
     velocities: npt.ArrayLike | None = None,
     accelerations: npt.ArrayLike | None = None,
     storage: Storage = "sqlite3",
-    topic: str = "/joint_trajectory",
-    gripper_topic: str = "/gripper",
+    topic: str = _TRAJECTORY_TOPIC,
+    gripper_topic: str = _GRIPPER_TOPIC,
 ) -> None:
     """Write a joint trajectory as a rosbag2 bag a ``ros2_control`` controller can replay.
 
@@ -713,10 +984,11 @@ def write_trajectory_bag(
     path : str or path-like
         The bag to create (a directory); it must not exist. Written atomically.
     t : array-like, shape (T,)
-        Time from the start of each point (s), >= 0 and strictly increasing (to 1 ns), e.g.
+        Time from the start of each point (s), >= 0, below ``2**31`` s (``time_from_start``
+        holds int32 seconds) and strictly increasing to 1 ns (its resolution), e.g.
         ``skill.times(res)``.
     joints : array-like, shape (T, n)
-        Joint positions (rad, or m), e.g. ``res.joints``.
+        Joint positions (rad, or m), n >= 1, e.g. ``res.joints``.
     joint_names : sequence of str, length n
         The controller's joint names, e.g. ``robot.joint_names``.
     gripper : array-like, shape (T,), optional
@@ -736,26 +1008,76 @@ def write_trajectory_bag(
     storage : {"sqlite3", "mcap"}
         rosbag2 storage plugin.
     topic, gripper_topic : str
-        Topic names.
+        Topic names, fully qualified (``"/name"``); with a gripper, two different topics.
 
     Raises
     ------
     ValueError
-        An existing ``path``, or a shape, value or name that does not fit (named).
+        An existing ``path``, or a shape, value or name that does not fit (named). Every
+        argument is checked before anything is written.
     """
     p = _check_new_path(path)
     plugin = _check_storage(storage)
+    message, gripper_messages = _trajectory_messages(
+        t,
+        joints,
+        joint_names,
+        gripper,
+        velocities=velocities,
+        accelerations=accelerations,
+        topic=topic,
+        gripper_topic=gripper_topic,
+    )
+    ts = _typestore()
+
+    def fill(writer: Writer) -> None:
+        conn = writer.add_connection(topic, TRAJECTORY_TYPE, typestore=ts)
+        writer.write(conn, 0, message)
+        if gripper_messages:
+            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
+            for ns, data in gripper_messages:
+                writer.write(gconn, ns, data)
+
+    _write_bag_atomic(p, plugin, fill)
+
+
+def _trajectory_messages(
+    t: npt.ArrayLike,
+    joints: npt.ArrayLike,
+    joint_names: Sequence[str],
+    gripper: npt.ArrayLike | None,
+    *,
+    velocities: npt.ArrayLike | None,
+    accelerations: npt.ArrayLike | None,
+    topic: str = _TRAJECTORY_TOPIC,
+    gripper_topic: str = _GRIPPER_TOPIC,
+) -> tuple[memoryview, list[tuple[int, memoryview]]]:
+    """The checked arguments of :func:`write_trajectory_bag` as its serialized messages: the
+    JointTrajectory, and (log time ns, Bool) of the gripper's. Nothing is written: `pbdkit
+    reproduce --bag` calls it to refuse a bag before it writes ``--out``."""
+    _check_topics({"topic": topic, **({} if gripper is None else {"gripper_topic": gripper_topic})})
     t_ = check_array(t, "t", ndim=1, min_rows=1)
     if t_[0] < 0:
         raise ValueError(f"t must be >= 0 (time from start), got t[0]={float(t_[0])!r}")
-    ns = np.round(t_ * _NS).astype(np.int64)
+    if np.any(t_ >= _MAX_ROS_SECONDS):
+        i = int(np.argmax(t_ >= _MAX_ROS_SECONDS))
+        raise ValueError(
+            f"t must be < {_MAX_ROS_SECONDS} s (2**31: time_from_start holds int32 seconds), "
+            f"got t[{i}]={float(t_[i])!r}"
+        )
+    ns = np.round(t_ * _NS).astype(np.int64)  # < 2**31 s: within int64 ns
     if np.any(np.diff(ns) <= 0):
         i = int(np.argmax(np.diff(ns) <= 0))
-        raise ValueError(
-            f"t must increase strictly (to 1 ns), got t[{i}]={float(t_[i])!r} "
-            f"and t[{i + 1}]={float(t_[i + 1])!r}"
-        )
+        a, b = float(t_[i]), float(t_[i + 1])
+        if b > a:  # increasing, but not at the resolution of the stamps
+            raise ValueError(
+                f"t must increase by at least 1 ns (the resolution of time_from_start), got "
+                f"t[{i}]={a!r} and t[{i + 1}]={b!r}, {b - a:.3g} s apart"
+            )
+        raise ValueError(f"t must increase strictly, got t[{i}]={a!r} and t[{i + 1}]={b!r}")
     q = check_array(joints, "joints", shape=(t_.shape[0], None))
+    if q.shape[1] == 0:
+        raise ValueError(f"joints must have one column per joint, at least 1, got shape {q.shape}")
     names = _check_names(joint_names, q.shape[1], "joint_names")
     closed: NDArray[np.bool_] | None = None
     if gripper is not None:
@@ -789,18 +1111,12 @@ def write_trajectory_bag(
         for i in range(q.shape[0])
     ]
     msg = traj_cls(header=_header(0), joint_names=names, points=points)
-
-    def fill(writer: Writer) -> None:
-        conn = writer.add_connection(topic, TRAJECTORY_TYPE, typestore=ts)
-        writer.write(conn, 0, ts.serialize_cdr(msg, TRAJECTORY_TYPE))
-        if closed is not None:
-            gconn = writer.add_connection(gripper_topic, "std_msgs/msg/Bool", typestore=ts)
-            changes = np.r_[0, np.flatnonzero(np.diff(closed)) + 1]
-            for i in changes:
-                data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
-                writer.write(gconn, int(ns[i]), data)
-
-    _write_bag_atomic(p, plugin, fill)
+    gripper_messages: list[tuple[int, memoryview]] = []
+    if closed is not None:
+        for i in np.r_[0, np.flatnonzero(np.diff(closed)) + 1]:
+            data = ts.serialize_cdr(bool_cls(data=bool(closed[i])), "std_msgs/msg/Bool")
+            gripper_messages.append((int(ns[i]), data))
+    return ts.serialize_cdr(msg, TRAJECTORY_TYPE), gripper_messages
 
 
 def write_demonstration_bag(
@@ -851,7 +1167,8 @@ def write_demonstration_bag(
     shuffle : numpy.random.Generator, optional
         If given, each message lists its joints in a new random order drawn from it.
     start_time : float
-        ROS time (s) of the first sample.
+        ROS time (s) of the first sample; the last must be below ``2**31`` s (ROS 2 stamps hold
+        int32 seconds).
     frame_id : str
         ``header.frame_id`` of the object messages: the robot's base frame.
 
@@ -872,7 +1189,14 @@ def write_demonstration_bag(
     all_names = [*names, *extra]
     _check_names(all_names, len(all_names), "joint_names and extra_joints")
     rate = check_positive_float(object_rate, "object_rate")
-    t0 = round(check_positive_float(start_time, "start_time", allow_zero=True) * _NS)
+    start = check_positive_float(start_time, "start_time", allow_zero=True)
+    if start + demo.duration >= _MAX_ROS_SECONDS:
+        raise ValueError(
+            f"start_time + the demonstration's duration ({demo.duration:g} s) must be < "
+            f"{_MAX_ROS_SECONDS} s (2**31: ROS 2 stamps hold int32 seconds), got "
+            f"start_time={start_time!r}"
+        )
+    t0 = round(start * _NS)
     topics: dict[str, str | None] = {n: f"/{n}/pose" for n in demo.object_names}
     if object_topics is not None:
         unknown = [k for k in object_topics if k not in demo.objects]
@@ -882,6 +1206,13 @@ def write_demonstration_bag(
                 f"{list(demo.object_names)}"
             )
         topics.update(object_topics)
+    _check_topics(
+        {
+            "joint_topic": joint_topic,
+            **{f"object_topics[{n!r}]": v for n, v in topics.items() if v is not None},
+            **({} if gripper_topic is None else {"gripper_topic": gripper_topic}),
+        }
+    )
 
     ts = _typestore()
     js_cls = ts.types[JOINT_STATE_TYPE]
