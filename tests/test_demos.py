@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import tracemalloc
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -281,6 +283,49 @@ def test_load_rejects_truncated_archive(tmp_path: Path) -> None:
     truncated.write_bytes(path.read_bytes()[:100])
     with pytest.raises(ValueError, match=r"not a readable \.npz archive"):
         load_demonstrations(truncated)
+
+
+def test_load_refuses_unknown_keys_before_loading_any_array(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(12)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    arrays = _stored(path)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **arrays, extra=np.zeros(10**5), demo_01_t=np.zeros(2))
+    loaded: list[tuple[int, ...]] = []
+    real = np.lib.format.read_array
+
+    def spy(fp: Any, *args: Any, **kwargs: Any) -> np.ndarray:
+        out = real(fp, *args, **kwargs)
+        loaded.append(out.shape)
+        return out
+
+    monkeypatch.setattr(np.lib.format, "read_array", spy)
+    with pytest.raises(
+        ValueError, match=r"bad\.npz .*: n_demos is 2 but the file holds 'extra', 'demo_01_t',"
+    ):
+        load_demonstrations(bad)
+    assert (10**5,) not in loaded and len(loaded) == 5  # the header keys only
+
+
+def test_load_bounds_the_work_of_a_huge_n_demos(tmp_path: Path) -> None:
+    """n_demos = 10**6 declared, 2 stored: refused at the first missing key, in little memory
+    (the check used to list every key n_demos implies)."""
+    rng = np.random.default_rng(13)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{**_stored(path), "n_demos": np.array(10**6)})
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=r"missing key 'demo_2_t' \(n_demos is 1000000\)"):
+            load_demonstrations(bad)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * 2**20
 
 
 # ----------------------------------------------------------------------------- CSV

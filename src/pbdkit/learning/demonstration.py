@@ -59,7 +59,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import load_npz_safe, save_npz_atomic
+from .._io import open_npz, save_npz_atomic
 from .._validation import check_array, check_int, check_positions
 
 __all__ = [
@@ -370,19 +370,28 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
         :class:`Demonstration` check. The message names the file and the key.
     """
     p = Path(path)
-    data = load_npz_safe(p, what=FORMAT_NAME + " file")
-    _header(data, p, FORMAT_NAME, FORMAT_VERSION)
-    try:
-        demos = _demonstrations_from_arrays(data)
-    except KeyError as exc:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
+    # The archive's headers are checked first (sizes, object arrays); then its header keys are
+    # read, and every other key is judged by name against them before any array is loaded.
+    with open_npz(p, what=FORMAT_NAME + " file") as data:
+        _header(data, p, FORMAT_NAME, FORMAT_VERSION)
+        try:
+            demos = _demonstrations_from_arrays(data)
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
     return demos
 
 
+_HEADER_KEYS = frozenset({"format", "version", "n_demos", "object_names", "has_gripper"})
+
+
 def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demonstration]:
-    """The demonstrations of a loaded file, checked against its header keys (n_demos, ...)."""
+    """The demonstrations of a file, checked against its header keys (n_demos, ...).
+
+    ``data`` may load each array when it is asked for (:class:`pbdkit._io.NpzArchive`): the
+    keys are checked against the header before any demonstration's array is read.
+    """
     n_arr = np.asarray(data["n_demos"])
     n_demos = int(n_arr) if n_arr.shape == () and n_arr.dtype.kind in "iu" else -1
     if n_demos < 1:
@@ -399,12 +408,16 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
         raise ValueError(f"has_gripper must be a boolean, got {grip_arr!r}")
     has_gripper = bool(grip_arr)
     fields = ("t", "joints", "objects", "gripper") if has_gripper else ("t", "joints", "objects")
-    expected = [f"demo_{i}_{f}" for i in range(n_demos) for f in fields]
-    for key in expected:
-        if key not in data:
-            raise ValueError(f"missing key {key!r} (n_demos is {n_demos})")
-    header = {"format", "version", "n_demos", "object_names", "has_gripper"}
-    extra = sorted(set(data) - set(expected) - header, key=_demo_key_order)
+    # Key by key up to the first missing one: the file's own keys bound the work, whatever
+    # n_demos it declares.
+    for i in range(n_demos):
+        for f in fields:
+            if f"demo_{i}_{f}" not in data:
+                raise ValueError(f"missing key 'demo_{i}_{f}' (n_demos is {n_demos})")
+    extra = sorted(
+        (k for k in data if k not in _HEADER_KEYS and not _described(k, n_demos, fields)),
+        key=_demo_key_order,
+    )
     if extra:
         shown = ", ".join(repr(k) for k in extra[:4]) + (", ..." if len(extra) > 4 else "")
         raise ValueError(
@@ -433,10 +446,18 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
     return demos
 
 
+def _described(key: str, n_demos: int, fields: Sequence[str]) -> bool:
+    """Whether ``key`` is ``demo_{i}_{field}`` with i < n_demos (i written as str(i) does)."""
+    i, field = _demo_key_order(key)
+    return 0 <= i < n_demos and field in fields and key == f"demo_{i}_{field}"
+
+
 def _demo_key_order(key: str) -> tuple[int, str]:
     """Sort ``demo_{i}_*`` keys by demonstration number (demo_2 before demo_10)."""
     parts = key.split("_", 2)
-    if len(parts) == 3 and parts[0] == "demo" and parts[1].isdigit():
+    # ASCII digits, at most 18 (int() refuses other digits, and strings of over 4300).
+    digits = parts[1] if len(parts) == 3 else ""
+    if parts[0] == "demo" and digits.isascii() and digits.isdigit() and len(digits) <= 18:
         return int(parts[1]), parts[2]
     return -1, key
 

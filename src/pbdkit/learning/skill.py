@@ -31,7 +31,9 @@ URDF, no acceleration or jerk limit).
 
 from __future__ import annotations
 
+import functools
 import os
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -42,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import load_npz_safe, save_npz_atomic
+from .._io import NpzArchive, open_npz, save_npz_atomic
 from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
@@ -72,6 +74,10 @@ TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
 #: arm take over 1 GB, far beyond the paper's 1000 steps; a file asking for more is refused
 #: rather than exhausting memory at the first reproduction.
 MAX_STEPS = 10**6
+#: The most bytes the arrays of a skill file may take once loaded (:meth:`Skill.load`), read
+#: from the archive's headers before anything is loaded. A skill holds a few GMMs, a URDF and
+#: limits: kilobytes to a few megabytes.
+MAX_FILE_BYTES = 64 * 2**20
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
 CovarianceMode = Literal["exact", "paper"]
@@ -629,12 +635,19 @@ class Skill:
         FileNotFoundError
             If ``path`` does not exist.
         ValueError
-            A corrupt or foreign file, another format version, or inconsistent content.
+            A corrupt or foreign file, another format version, a key the format does not have,
+            arrays of more than :data:`MAX_FILE_BYTES` in all, or inconsistent content.
         """
+        p = Path(path)
+        # Sizes and keys are checked from the archive's headers before any array is loaded.
+        with open_npz(p, what=FORMAT_NAME + " file", max_bytes=MAX_FILE_BYTES) as data:
+            return cls._from_archive(data, p, robot)
+
+    @classmethod
+    def _from_archive(cls, data: NpzArchive, p: Path, robot: KinematicModel | None) -> Skill:
+        """The skill in an open archive (:meth:`load`)."""
         from ..robots._joint_limits import check_limit_array, joint_limits_mapping
 
-        p = Path(path)
-        data = load_npz_safe(p, what=FORMAT_NAME + " file")
         fmt = data.get("format")
         if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != FORMAT_NAME:
             raise ValueError(
@@ -649,6 +662,11 @@ class Skill:
                 f"this pbdkit reads version {FORMAT_VERSION}"
             )
         try:
+            names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        data.check_keys(functools.partial(_is_skill_key, n_objects=len(names)))
+        try:
             n_steps = _stored_int(data["n_steps"])
             if n_steps is None or not 2 <= n_steps <= MAX_STEPS:
                 raise ValueError(
@@ -659,7 +677,6 @@ class Skill:
                 raise ValueError(
                     f"n_joints must be an integer >= 1, got {_shown(data['n_joints'])}"
                 )
-            names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
             has_gripper = bool(data["has_gripper"])
             reach = float(data["reach"])
             duration = float(data["duration"]) if "duration" in data else float("nan")
@@ -733,6 +750,41 @@ class Skill:
             reach=reach,
             duration=duration,
         )
+
+
+_BASE_KEYS = frozenset(
+    {
+        "format",
+        "version",
+        "n_steps",
+        "n_joints",
+        "object_names",
+        "has_gripper",
+        "reach",
+        "duration",
+        "robot_urdf",
+        "robot_tip",
+        "robot_velocity_limit",
+        "robot_acceleration_limit",
+        "robot_jerk_limit",
+    }
+)
+# gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.
+_SPACE_KEY = re.compile(
+    r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
+    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen))"
+)
+
+
+def _is_skill_key(key: str, n_objects: int) -> bool:
+    """Whether :meth:`Skill.save` writes ``key`` for a skill of ``n_objects`` objects."""
+    if key in _BASE_KEYS:
+        return True
+    match = _SPACE_KEY.fullmatch(key)
+    if match is None:
+        return False
+    index = match.group(1) or match.group(2)
+    return index is None or int(index) < n_objects
 
 
 def _stored_int(value: NDArray[Any]) -> int | None:
