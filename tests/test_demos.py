@@ -97,6 +97,49 @@ def test_demonstration_rejects_bad_input(kwargs: dict[str, object], match: str) 
         Demonstration(**args)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (
+            {"joints": np.ones((3, 2), dtype=complex)},
+            r"joints must be an array of numbers, got complex",
+        ),
+        ({"joints": [["0.1", "0.2"]] * 3}, r"joints must be an array of numbers, got strings"),
+        (
+            {"joints": np.ones((3, 2), dtype=bool)},
+            r"joints must be an array of numbers, got booleans",
+        ),
+        ({"t": [False, True, 2.0 + 0j]}, r"t must be an array of numbers, got complex"),
+        ({"t": np.array([0, 1, 1], dtype=bool)}, r"t must be an array of numbers, got booleans"),
+        ({"gripper": np.array([0, 1, 1], dtype=complex)}, r"gripper .* got complex"),
+    ],
+)
+def test_demonstration_refuses_values_that_are_not_real(
+    kwargs: dict[str, object], match: str
+) -> None:
+    """Issue 22: joints of strings, complex (imaginary part dropped) or bool were accepted."""
+    args: dict[str, object] = {"t": [0.0, 1.0, 2.0], "joints": np.zeros((3, 2))}
+    with pytest.raises(ValueError, match=match):
+        Demonstration(**{**args, **kwargs})  # type: ignore[arg-type]
+    # A gripper signal may be given as booleans (closed = True).
+    d = Demonstration(args["t"], args["joints"], gripper=[False, True, True])  # type: ignore[arg-type]
+    assert d.gripper is not None and d.gripper.tolist() == [0.0, 1.0, 1.0]
+
+
+@pytest.mark.parametrize("dtype", ["<U20", np.complex128, np.bool_])
+def test_load_refuses_joints_stored_as_strings_complex_or_bool(tmp_path: Path, dtype: Any) -> None:
+    rng = np.random.default_rng(14)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    arrays = _stored(path)
+    arrays["demo_1_joints"] = arrays["demo_1_joints"].astype(dtype)
+    np.savez(path, **arrays)
+    with pytest.raises(
+        ValueError, match=r"d\.npz is not a valid pbdkit-demonstrations file: demo_1: joints must"
+    ):
+        load_demonstrations(path)
+
+
 # ----------------------------------------------------------------------------- rescaling
 def test_rescaled_is_exact_on_linear_signals_and_keeps_endpoints() -> None:
     rng = np.random.default_rng(1)

@@ -154,7 +154,7 @@ class Demonstration:
         gripper: npt.ArrayLike | None = None,
     ) -> None:
         # Copies: the arrays are made read-only and must not freeze the caller's own arrays.
-        t_ = check_array(t, "t", ndim=1).copy()
+        t_ = check_array(t, "t", ndim=1, allow_bool=False).copy()
         if t_.shape[0] < 2:
             raise ValueError(f"t must have at least 2 samples, got {t_.shape[0]}")
         dt = np.diff(t_)
@@ -164,7 +164,7 @@ class Demonstration:
                 f"t must be strictly increasing, got t[{i}]={float(t_[i])!r} "
                 f">= t[{i + 1}]={float(t_[i + 1])!r}"
             )
-        joints_ = check_array(joints, "joints", ndim=2).copy()
+        joints_ = check_array(joints, "joints", ndim=2, allow_bool=False).copy()
         if joints_.shape[0] != t_.shape[0] or joints_.shape[1] < 1:
             raise ValueError(f"joints must have shape ({t_.shape[0]}, n), got {joints_.shape}")
         objects_ = _check_objects({} if objects is None else objects)
