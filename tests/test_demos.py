@@ -423,3 +423,56 @@ def test_csv_missing_file_and_columns(tmp_path: Path) -> None:
     binary.write_bytes(b"\xff\xfe\x00\x81")
     with pytest.raises(ValueError, match="not a UTF-8 text CSV file"):
         demonstration_from_csv(binary, objects={})
+
+
+def test_csv_with_a_byte_order_mark_and_other_delimiters(tmp_path: Path) -> None:
+    """Issue 22: a UTF-8 BOM (spreadsheets write one) made the first column name '\\ufefft'."""
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbft;pan;lift1\r\n0;0.1;0.2\r\n0.5;0.2;0.3\r\n")
+    d = demonstration_from_csv(path, None, delimiter=";")
+    np.testing.assert_array_equal(d.t, [0.0, 0.5])
+    np.testing.assert_array_equal(d.joints, [[0.1, 0.2], [0.2, 0.3]])
+    assert d.object_names == ()
+    tabs = tmp_path / "tabs.tsv"
+    tabs.write_text("t\tpan\n0\t1\n1\t2\n")
+    assert demonstration_from_csv(tabs, {}, delimiter="\t").joints.tolist() == [[1.0], [2.0]]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (
+            {"delimiter": ""},
+            r"delimiter must be one character that cannot occur in a number.*got ''",
+        ),
+        ({"delimiter": ",,"}, r"delimiter must be one character .*got ',,'"),
+        ({"delimiter": "."}, r"delimiter must be one character .*got '\.'"),
+        ({"delimiter": None}, r"delimiter must be one character .*got None"),
+        (
+            {"joint_columns": ["pan", "pan"]},
+            r"joint_columns must name each column once, got \['pan'\]",
+        ),
+        ({"joint_columns": ["pan", "t"]}, r"joint_columns: 't' is the time, not a joint"),
+        ({"joint_columns": ["gripper"]}, r"joint_columns: 'gripper' is the gripper signal"),
+        ({"joint_columns": "pan"}, r"joint_columns must be a list of column names, got str"),
+        ({"joint_columns": [0]}, r"joint_columns must be column names \(strings\), got 0"),
+        ({"objects": [("glass", [0.0, 0.0, 0.0])]}, r"d\.csv: objects must be a dict"),
+    ],
+)
+def test_csv_refuses_bad_arguments(tmp_path: Path, kwargs: dict[str, Any], match: str) -> None:
+    """Issue 22: delimiter="" or objects=None raised TypeError; a column could be used twice."""
+    path = tmp_path / "d.csv"
+    path.write_text("t,pan,lift1,gripper\n0,1,2,0\n1,2,3,1\n")
+    args: dict[str, Any] = {"objects": {}, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        demonstration_from_csv(path, **args)
+
+
+def test_csv_errors_from_the_demonstration_name_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "log_3.csv"
+    path.write_text("t,pan\n0,1\n0,2\n")
+    with pytest.raises(ValueError, match=r"log_3\.csv: t must be strictly increasing"):
+        demonstration_from_csv(path, {})
+    path.write_text("t,pan\n0,1\n1,2\n")
+    with pytest.raises(ValueError, match=r"log_3\.csv: objects\['glass'\] must have shape"):
+        demonstration_from_csv(path, {"glass": [0.0, 1.0]})

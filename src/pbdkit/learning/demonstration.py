@@ -464,7 +464,7 @@ def _demo_key_order(key: str) -> tuple[int, str]:
 
 def demonstration_from_csv(
     path: str | os.PathLike[str],
-    objects: Mapping[str, npt.ArrayLike],
+    objects: Mapping[str, npt.ArrayLike] | None,
     *,
     joint_columns: Sequence[str] | None = None,
     delimiter: str = ",",
@@ -474,14 +474,17 @@ def demonstration_from_csv(
     Parameters
     ----------
     path : str or path-like
-        CSV file with a header line; columns ``t``, joint angles, optional ``gripper``.
-    objects : dict str -> array-like, shape (3,)
-        Object positions in the robot's base frame during this demonstration.
+        CSV file with a header line; columns ``t``, joint angles, optional ``gripper``. UTF-8,
+        with or without a byte order mark (as spreadsheet programs write it).
+    objects : dict str -> array-like, shape (3,), or None
+        Object positions in the robot's base frame during this demonstration (None or ``{}``:
+        none, a joint-space skill only).
     joint_columns : sequence of str, optional
-        Joint columns to use, in this order. Default: every column other than ``t`` and
-        ``gripper``, in file order.
+        Joint columns to use, in this order, each once (not ``t`` nor ``gripper``). Default:
+        every column other than ``t`` and ``gripper``, in file order.
     delimiter : str
-        Field separator.
+        Field separator: one character that cannot occur in a number (``","``, ``";"``,
+        ``"\\t"``, ...).
 
     Returns
     -------
@@ -492,14 +495,18 @@ def demonstration_from_csv(
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        No header, no ``t`` column, a missing joint column, a non-numeric value, or any
-        :class:`Demonstration` check.
+        A bad ``delimiter`` or ``joint_columns``, no header, no ``t`` column, a missing joint
+        column, a non-numeric value, or any :class:`Demonstration` check. Every message about
+        the file names it.
     """
+    _check_delimiter(delimiter)
+    cols_given = None if joint_columns is None else _check_joint_columns(joint_columns)
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"CSV file not found: {p}")
     try:
-        text = p.read_text(encoding="utf-8")
+        # utf-8-sig: a byte order mark (Excel's "CSV UTF-8") is not part of the first column name.
+        text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{p} is not a UTF-8 text CSV file: {exc}") from exc
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
@@ -510,10 +517,10 @@ def demonstration_from_csv(
         raise ValueError(f"{p}: the header must contain a column 't', got {header}")
     if len(set(header)) != len(header):
         raise ValueError(f"{p}: duplicate column names in the header {header}")
-    if joint_columns is None:
+    if cols_given is None:
         cols = [h for h in header if h not in ("t", "gripper")]
     else:
-        cols = list(joint_columns)
+        cols = cols_given
         missing = [c for c in cols if c not in header]
         if missing:
             raise ValueError(f"{p}: joint columns {missing} not in the header {header}")
@@ -531,9 +538,48 @@ def demonstration_from_csv(
             f"got a table of shape {table.shape}"
         )
     col = {h: i for i, h in enumerate(header)}
-    return Demonstration(
-        t=table[:, col["t"]],
-        joints=table[:, [col[c] for c in cols]],
-        objects=dict(objects),
-        gripper=table[:, col["gripper"]] if "gripper" in col else None,
-    )
+    try:
+        return Demonstration(
+            t=table[:, col["t"]],
+            joints=table[:, [col[c] for c in cols]],
+            objects=objects,
+            gripper=table[:, col["gripper"]] if "gripper" in col else None,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{p}: {exc}") from exc
+
+
+# Characters of numbers (and of nan, inf), quotes, comments and line ends: not separators.
+_NOT_DELIMITERS = frozenset('.+-"#\r\n')
+
+
+def _check_delimiter(delimiter: object) -> None:
+    if (
+        not isinstance(delimiter, str)
+        or len(delimiter) != 1
+        or delimiter.isalnum()
+        or delimiter in _NOT_DELIMITERS
+    ):
+        raise ValueError(
+            "delimiter must be one character that cannot occur in a number, such as ',', ';' "
+            f"or a tab, got {delimiter!r}"
+        )
+
+
+def _check_joint_columns(joint_columns: object) -> list[str]:
+    if isinstance(joint_columns, str) or not isinstance(joint_columns, Sequence):
+        raise ValueError(
+            f"joint_columns must be a list of column names, got {type(joint_columns).__name__}"
+        )
+    cols = list(joint_columns)
+    bad = [c for c in cols if not isinstance(c, str)]
+    if bad:
+        raise ValueError(f"joint_columns must be column names (strings), got {bad[0]!r}")
+    roles = {"t": "the time", "gripper": "the gripper signal"}
+    taken = [c for c in cols if c in roles]
+    if taken:
+        raise ValueError(f"joint_columns: {taken[0]!r} is {roles[taken[0]]}, not a joint")
+    twice = sorted({c for c in cols if cols.count(c) > 1})
+    if twice:
+        raise ValueError(f"joint_columns must name each column once, got {twice} more than once")
+    return cols
