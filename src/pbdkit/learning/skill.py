@@ -32,6 +32,7 @@ URDF, no acceleration or jerk limit).
 from __future__ import annotations
 
 import functools
+import math
 import os
 import re
 import warnings
@@ -60,7 +61,15 @@ from .probabilistic_ik import (
     step_limit_from_velocity,
 )
 
-__all__ = ["MAX_COMPONENTS", "MAX_STEPS", "VARIABILITY_FLOOR", "Skill", "space_data"]
+__all__ = [
+    "MAX_COMPONENTS",
+    "MAX_FILE_BYTES",
+    "MAX_STEPS",
+    "MIN_STEP_SECONDS",
+    "VARIABILITY_FLOOR",
+    "Skill",
+    "space_data",
+]
 
 Float = NDArray[np.float64]
 #: Default variability floors (variances): joint angles (rad^2), gripper signal, hand position
@@ -78,6 +87,13 @@ MAX_STEPS = 10**6
 #: from the archive's headers before anything is loaded. A skill holds a few GMMs, a URDF and
 #: limits: kilobytes to a few megabytes.
 MAX_FILE_BYTES = 64 * 2**20
+#: The shortest time step a skill may have (s): its duration over ``n_steps - 1`` steps. A
+#: nanosecond is a thousand times finer than the fastest servo loop (1 MHz). Far shorter steps
+#: give no motion: with a skill of 1e-300 s, the cube of the step (the jerk term of the motion
+#: limits) underflows to 0, and from steps of about 1e-17 s on, the retiming to the limits
+#: fails on NaN. :meth:`Skill.learn` and :meth:`Skill.load` refuse a duration that gives a
+#: shorter step, or that is not finite.
+MIN_STEP_SECONDS = 1e-9
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
 CovarianceMode = Literal["exact", "paper"]
@@ -209,7 +225,9 @@ class Skill:
             limit) give a :class:`pbdkit.learning.demonstration.LimitWarning` per demonstration,
             naming the
             joint, the value and the sample; they are learned as recorded, and reproductions
-            are clipped to the limits anyway.
+            are clipped to the limits anyway. Their time stamps are in seconds: their mean
+            duration over ``n_steps - 1`` steps must give a step of at least
+            :data:`MIN_STEP_SECONDS`.
         robot : KinematicModel
             The arm (e.g. :func:`pbdkit.robots.katana`); its forward kinematics gives x.
         n_steps : int
@@ -268,6 +286,11 @@ class Skill:
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
         n_steps = check_int(n_steps, "n_steps", minimum=2, maximum=MAX_STEPS)
+        with np.errstate(over="ignore"):  # durations near 1e308: inf, refused next
+            duration = float(np.mean([d.duration for d in items]))
+        problem = _duration_problem(duration, n_steps)
+        if problem:
+            raise ValueError(f"demos: {problem} (are the time stamps t in seconds?)")
         _warn_outside_limits(items, robot)
         floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
@@ -319,7 +342,7 @@ class Skill:
             object_names=names,
             has_gripper=has_gripper,
             reach=reach,
-            duration=float(np.mean([d.duration for d in items])),
+            duration=duration,
         )
 
     # ------------------------------------------------------------------ generalization
@@ -710,6 +733,10 @@ class Skill:
                 f"{expected} for n_joints={n_joints}, gripper={has_gripper} (time, then "
                 "the joints and the gripper; time and x - o for an object)"
             )
+        # NaN: unknown (a skill learned before durations were stored); else as learn checks it.
+        problem = "" if math.isnan(duration) else _duration_problem(duration, n_steps)
+        if problem:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {problem}")
         if not (np.isfinite(reach) and reach > 0):
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: reach must be > 0, got {reach}"
@@ -774,6 +801,19 @@ _SPACE_KEY = re.compile(
     r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
     r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen))"
 )
+
+
+def _duration_problem(duration: float, n_steps: int) -> str:
+    """Why a skill cannot last ``duration`` seconds over ``n_steps`` steps ("" if it can)."""
+    if not math.isfinite(duration) or duration <= 0:
+        return f"the duration must be finite and > 0 (s), got {duration!r}"
+    step = duration / (n_steps - 1)
+    if not step >= MIN_STEP_SECONDS:
+        return (
+            f"a duration of {duration:.6g} s over n_steps={n_steps} steps gives a time step of "
+            f"{step:.3g} s; it must be at least MIN_STEP_SECONDS = {MIN_STEP_SECONDS:g} s"
+        )
+    return ""
 
 
 def _is_skill_key(key: str, n_objects: int) -> bool:
