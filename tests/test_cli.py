@@ -245,3 +245,57 @@ def test_reproduce_refuses_an_object_given_twice(tmp_path: Path) -> None:
         ],
     )
     _one_line_error(result, "--object glass is given twice")
+
+
+# ----------------------------------------------------------------------------- issue 22
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize("link", ["same path", "symbolic link", "hard link"])
+@pytest.mark.parametrize(
+    ("command", "label"),
+    [
+        (["learn", "in.npz"], "DEMOS"),
+        (["learn", "demos.npz", "--robot", "in.npz"], "--robot"),
+        (
+            ["learn", "demos.npz", "--robot", "arm.urdf", "--joint-limits", "in.npz"],
+            "--joint-limits",
+        ),
+        (["reproduce", "in.npz", "--object", "glass=0.3,0,0.1"], "SKILL"),
+    ],
+)
+def test_out_may_not_be_an_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: list[str], label: str, link: str
+) -> None:
+    """Issue 22: `reproduce s.npz --out s.npz` and `learn d.npz --out d.npz` destroyed the input."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "in.npz").write_bytes(b"the input")
+    (tmp_path / "arm.urdf").write_text("<robot/>")
+    out = {"same path": "in.npz", "symbolic link": "link.npz", "hard link": "hard.npz"}[link]
+    if link == "symbolic link":
+        (tmp_path / out).symlink_to(tmp_path / "in.npz")
+    elif link == "hard link":
+        os.link(tmp_path / "in.npz", tmp_path / out)
+    result = CliRunner().invoke(app, [*command, "--out", out])
+    _one_line_error(result, f"--out {out}: is also {label} in.npz, which the command reads")
+    assert (tmp_path / "in.npz").read_bytes() == b"the input"
+
+
+def test_reproduce_out_may_not_be_the_bag(tmp_path: Path) -> None:
+    """Issue 22: `--out X --bag X` wrote the .npz, then failed on the bag."""
+    skill = tmp_path / "skill.npz"
+    skill.write_bytes(b"not read")
+    out = tmp_path / "x"
+    result = CliRunner().invoke(
+        app,
+        [
+            "reproduce",
+            str(skill),
+            "--object",
+            "glass=0.3,0,0.1",
+            "--out",
+            str(out),
+            "--bag",
+            str(out),
+        ],
+    )
+    _one_line_error(result, f"--out {out}: is also --bag {out}; give each output its own path")
+    assert list(tmp_path.iterdir()) == [skill]

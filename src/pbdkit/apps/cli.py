@@ -10,7 +10,7 @@ import functools
 import gc
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar, cast
 
@@ -88,13 +88,35 @@ def _reports_errors(command: _Command) -> _Command:
     return cast(_Command, run)
 
 
-def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
+def _check_output(
+    path: Path,
+    option: str,
+    *,
+    folder: bool = False,
+    inputs: Sequence[tuple[str, Path | None]] = (),
+    also: Sequence[tuple[str, Path | None]] = (),
+) -> None:
     """Fail unless ``path`` can be written: a file (its directory exists and is writable), or
     with ``folder`` a directory to write into (existing, or to be created in a writable one).
+
+    ``inputs`` are the files the command reads, each with the name the command gives it
+    (``("SKILL", path)``, ``("--robot", path)``; a path None: not given): ``path`` may be none
+    of them (writing it would destroy the input). ``also`` are the other outputs of the
+    command, named so too: ``path`` may be none of them (the first written would be lost, or
+    make the second fail after it).
 
     Called before any work, so that a long run does not end on a path it cannot write. A
     symbolic link is judged by the file it points to (that file is what gets written).
     """
+    for label, source in inputs:
+        if source is not None and _same_file(path, source):
+            _fail(
+                f"{option} {path}: is also {label} {source}, which the command reads; give "
+                f"{option} another path"
+            )
+    for label, other in also:
+        if other is not None and _same_file(path, other):
+            _fail(f"{option} {path}: is also {label} {other}; give each output its own path")
     real = Path(os.path.realpath(path))
     if folder and real.exists():
         if not real.is_dir():
@@ -110,6 +132,17 @@ def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
         _fail(f"{option} {path}: the directory {parent} {what}")
     if not os.access(parent, os.W_OK | os.X_OK):
         _fail(f"{option} {path}: the directory {parent} is not writable")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name the same file: the same path once links are resolved, or
+    (both existing) the same file on disk (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet): different files
+        return False
 
 
 # ----------------------------------------------------------------------------- commands
@@ -482,7 +515,9 @@ def learn(
                 "directory, .db3, .mcap or .bag file)"
             )
     sources = _parse_sources(obj or [])
-    _check_output(out, "--out")
+    read: list[tuple[str, Path | None]] = [("DEMOS", d) for d in demos]
+    read += [("--robot", None if shipped else Path(robot)), ("--joint-limits", joint_limits)]
+    _check_output(out, "--out", inputs=read)
     if shipped:
         arm = robots.load(robot)
     elif Path(robot).is_file():
@@ -590,7 +625,8 @@ def reproduce(
     from ..learning.skill import Skill
 
     objects = _parse_objects(obj)
-    _check_output(out, "--out")
+    # The bag too is written (after the .npz): --out may not be where it goes.
+    _check_output(out, "--out", inputs=[("SKILL", skill_path)], also=[("--bag", bag)])
     if bag is not None:
         _check_bag_output(bag)
     skill = Skill.load(skill_path)
