@@ -299,3 +299,23 @@ def test_reproduce_out_may_not_be_the_bag(tmp_path: Path) -> None:
     )
     _one_line_error(result, f"--out {out}: is also --bag {out}; give each output its own path")
     assert list(tmp_path.iterdir()) == [skill]
+
+
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["teach", "--demos", "3"],
+        ["evaluate", "--trials", "2"],
+        ["demo", "--task", "coaster"],
+        ["study", "--task", "coaster"],
+    ],
+)
+def test_a_negative_seed_names_the_option(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: list[str]
+) -> None:
+    """Issue 22: `--seed -1` failed inside NumPy, without naming the option."""
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, [*command, "--seed", "-1"])
+    _one_line_error(result, "--seed must be an integer >= 0, got -1")
+    assert list(tmp_path.iterdir()) == []

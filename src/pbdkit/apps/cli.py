@@ -145,6 +145,12 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def _check_seed(seed: int) -> None:
+    """Fail unless ``seed`` can seed NumPy's generators (an integer >= 0)."""
+    if seed < 0:
+        _fail(f"--seed must be an integer >= 0, got {seed}")
+
+
 # ----------------------------------------------------------------------------- commands
 def _robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
     """The registered robot task named ``task``, or a usage error listing the choices (the
@@ -266,6 +272,7 @@ def demo(
     a video, report.html and metrics.json in OUT. With --online, the fused controller also
     runs in the physics loop under a disturbance, beside the offline run."""
     _check_output(out, "--out", folder=True)
+    _check_seed(seed)
     _check_perturb(perturb)
     if task == "lasa":
         from .demo import run_lasa_demo
@@ -372,6 +379,7 @@ def teach(
             f"need at least 2 demonstrations, got {demos}", param_hint="--demos"
         )
     _check_output(out, "--out")
+    _check_seed(seed)
     spec = _robot_task(task)
     from ..learning.demonstration import save_demonstrations
     from ..sim.teacher import teach as sim_teach
@@ -734,6 +742,7 @@ def evaluate(
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    _check_seed(seed)
     _check_workers(workers, scheduler)
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
@@ -803,6 +812,7 @@ def study(
     """Where a skill works: a map of the table per object, a learning curve (2-10
     demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
     _check_output(out, "--out", folder=True)
+    _check_seed(seed)
     _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)
