@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import typer
 from typer.testing import CliRunner, Result
 
 from pbdkit.apps.cli import app
@@ -319,3 +320,30 @@ def test_a_negative_seed_names_the_option(
     result = CliRunner().invoke(app, [*command, "--seed", "-1"])
     _one_line_error(result, "--seed must be an integer >= 0, got -1")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_one_object_parser_for_learn_and_reproduce() -> None:
+    """`reproduce` takes positions, `learn` also a topic or tf:FRAME; one parser, one set of
+    messages (there were two)."""
+    from pbdkit.apps.cli import _parse_objects
+
+    positions = _parse_objects(["glass=0.3,0,0.1", "coaster=-1e-1,2,inf"])
+    assert list(positions) == ["glass", "coaster"]
+    np.testing.assert_array_equal(positions["glass"], [0.3, 0.0, 0.1])
+    sources = _parse_objects(
+        ["glass=/glass/pose", "coaster=tf:coaster", "basin=0.5,0,0"], sources=True
+    )
+    assert sources["glass"] == "/glass/pose" and sources["coaster"] == "tf:coaster"
+    np.testing.assert_array_equal(sources["basin"], [0.5, 0.0, 0.0])
+    for texts, kinds, match in [
+        (["glass=/glass/pose"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=/glass/pose'"),
+        (["glass=1,2"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
+        (["glass=1,2"], {"sources": True}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
+        (["glass="], {}, r"expected NAME=x,y,z \(metres\), got 'glass='"),
+        (["=1,2,3"], {"sources": True}, r"expected NAME=SOURCE \(a topic, tf:frame or x,y,z\)"),
+    ]:
+        with pytest.raises(typer.BadParameter, match=match):
+            _parse_objects(texts, **kinds)
+    for kinds in ({}, {"sources": True}):
+        with pytest.raises(typer.Exit):
+            _parse_objects(["glass=1,2,3", "glass=1,2,3"], **kinds)

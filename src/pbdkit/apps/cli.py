@@ -12,7 +12,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, Literal, NoReturn, TypeVar, cast, overload
 
 import numpy as np
 import typer
@@ -399,31 +399,6 @@ def _is_bag(path: Path) -> bool:
     return path.is_dir() or path.suffix in _BAG_SUFFIXES
 
 
-def _parse_sources(texts: list[str]) -> dict[str, str | np.ndarray]:
-    """The --object NAME=SOURCE options of `learn`: a topic, tf:frame, or x,y,z (metres)."""
-    sources: dict[str, str | np.ndarray] = {}
-    for text in texts:
-        name, sep, rest = text.partition("=")
-        if not sep or not name or not rest:
-            raise typer.BadParameter(
-                f"expected NAME=SOURCE (a topic, tf:frame or x,y,z), got {text!r}",
-                param_hint="--object",
-            )
-        if name in sources:
-            _fail(f"--object {name} is given twice; give each object once")
-        try:
-            values = [float(v) for v in rest.split(",")]
-        except ValueError:
-            sources[name] = rest
-            continue
-        if len(values) != 3:
-            raise typer.BadParameter(
-                f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
-            )
-        sources[name] = np.array(values)
-    return sources
-
-
 @app.command()
 @_reports_errors
 def learn(
@@ -522,7 +497,7 @@ def learn(
                 f"{unknown[0]}: not an .npz file of demonstrations nor a ROS bag (a rosbag2 "
                 "directory, .db3, .mcap or .bag file)"
             )
-    sources = _parse_sources(obj or [])
+    sources = _parse_objects(obj or [], sources=True)
     read: list[tuple[str, Path | None]] = [("DEMOS", d) for d in demos]
     read += [("--robot", None if shipped else Path(robot)), ("--joint-limits", joint_limits)]
     _check_output(out, "--out", inputs=read)
@@ -583,27 +558,44 @@ def _load_demos(
     return items
 
 
-def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]:
-    """The --object options as a dict; an object given twice is an error."""
-    objects: dict[str, np.ndarray] = {}
+@overload
+def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]: ...
+
+
+@overload
+def _parse_objects(texts: list[str], *, sources: Literal[True]) -> dict[str, str | np.ndarray]: ...
+
+
+def _parse_objects(texts: list[str], *, sources: bool = False) -> dict[str, Any]:
+    """The --object NAME=VALUE options as a dict; an object given twice is an error.
+
+    VALUE is a position x,y,z (metres); with ``sources`` (`learn`'s bags), also where to read
+    it: a topic or tf:FRAME (any VALUE that is not numbers).
+    """
+    objects: dict[str, Any] = {}
     for text in texts:
-        name, position = _parse_object(text)
+        name, value = _parse_object(text, sources=sources)
         if name in objects:
             _fail(f"--object {name} is given twice; give each object once")
-        objects[name] = position
+        objects[name] = value
     return objects
 
 
-def _parse_object(text: str) -> tuple[str, np.ndarray]:
+def _parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
+    """One --object NAME=VALUE option (see :func:`_parse_objects`)."""
     name, sep, rest = text.partition("=")
+    position = "NAME=x,y,z (metres)"
+    if not sep or not name or not rest:
+        want = "NAME=SOURCE (a topic, tf:frame or x,y,z)" if sources else position
+        raise typer.BadParameter(f"expected {want}, got {text!r}", param_hint="--object")
     try:
         values = [float(v) for v in rest.split(",")]
     except ValueError:
+        if sources:
+            return name, rest
         values = []
-    if not sep or not name or len(values) != 3:
-        raise typer.BadParameter(
-            f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
-        )
+    if len(values) != 3:
+        raise typer.BadParameter(f"expected {position}, got {text!r}", param_hint="--object")
     return name, np.array(values)
 
 
