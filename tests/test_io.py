@@ -229,6 +229,27 @@ def test_npz_members_that_are_not_arrays_truncated_or_twice_are_refused(tmp_path
         load_npz_safe(path)
 
 
+def test_npz_header_length_is_checked_before_the_header_is_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A version-2 .npy header may declare 4 GiB: its length is bounded before it is read."""
+    path = tmp_path / "a.npz"
+    length = 10**7
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("x.npy", b"\x93NUMPY\x02\x00" + length.to_bytes(4, "little") + b" " * length)
+    reads: list[int] = []
+    real = zipfile.ZipExtFile.read
+
+    def read(self: zipfile.ZipExtFile, n: int = -1) -> bytes:
+        reads.append(n)
+        return real(self, n)
+
+    monkeypatch.setattr(zipfile.ZipExtFile, "read", read)
+    with pytest.raises(ValueError, match=r"key 'x': the \.npy header declares 10000000 bytes"):
+        load_npz_safe(path)
+    assert max(reads) < 100
+
+
 def _small_skill(tmp_path: Path) -> Path:
     from pbdkit.learning.skill import Skill
     from pbdkit.robots import katana

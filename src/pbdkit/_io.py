@@ -8,6 +8,7 @@ import math
 import os
 import secrets
 import stat
+import struct
 import zipfile
 import zlib
 from collections.abc import Callable, Collection, Iterator, Mapping
@@ -249,19 +250,36 @@ def _size(n: int) -> str:
     raise AssertionError  # pragma: no cover
 
 
+# The longest .npy header read (bytes): NumPy's own bound (np.load's max_header_size). The
+# length is checked before the header is read: a version-2 header may declare 4 GiB.
+_MAX_NPY_HEADER = 10_000
+
+
 def _npy_header(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> NpyHeader:
     """The header of one ``.npy`` member: reads a few hundred bytes, never the array."""
     with archive.open(info) as member:
         version = np.lib.format.read_magic(member)
         # The versions np.save writes for arrays without object fields (3.0: field names
         # that need UTF-8, which pbdkit never writes).
-        if version == (1, 0):
-            shape, _, dtype = np.lib.format.read_array_header_1_0(member)
-        elif version == (2, 0):
-            shape, _, dtype = np.lib.format.read_array_header_2_0(member)
-        else:
+        if version not in ((1, 0), (2, 0)):
             raise ValueError(f".npy format version {version[0]}.{version[1]} is not supported")
-        header_end = member.tell()
+        length_format = "<H" if version == (1, 0) else "<I"
+        length_bytes = member.read(struct.calcsize(length_format))
+        if len(length_bytes) != struct.calcsize(length_format):
+            raise ValueError("the .npy header is truncated")
+        (length,) = struct.unpack(length_format, length_bytes)
+        if length > _MAX_NPY_HEADER:
+            raise ValueError(
+                f"the .npy header declares {length} bytes, more than {_MAX_NPY_HEADER}"
+            )
+        text = member.read(length)
+    read_header = (
+        np.lib.format.read_array_header_1_0
+        if version == (1, 0)
+        else np.lib.format.read_array_header_2_0
+    )
+    shape, _, dtype = read_header(io.BytesIO(length_bytes + text))
+    header_end = np.lib.format.MAGIC_LEN + len(length_bytes) + length
     if dtype.hasobject:
         raise ValueError("it holds an object array, which would need pickle to load")
     nbytes = math.prod(int(s) for s in shape) * int(dtype.itemsize)

@@ -29,6 +29,10 @@ key                   dtype, shape              meaning
 ``demo_{i}_gripper``  float64, (T_i,)           gripper signal (0 open, 1 closed), optional
 ====================  ========================  ===============================================
 
+:func:`load_demonstrations` judges the archive from its headers before it loads an array: a
+key not in this table (or a ``demo_{i}_*`` with i >= ``n_demos``), an object array, or arrays of
+more than 1 GiB in all (``pbdkit._io.MAX_NPZ_BYTES``) are refused.
+
 CSV (:func:`demonstration_from_csv`), for logs recorded on a real robot: one file per
 demonstration, comma-separated, one header line, then one row per sample::
 

@@ -26,7 +26,10 @@ always does), ``robot_velocity_limit``, ``robot_acceleration_limit`` and ``robot
 float64 (n_joints,), rad/s, rad/s^2, rad/s^3, each > 0 or inf (no limit); :meth:`Skill.load`
 rebuilds the robot with them (they win over the URDF's velocity, as a joint_limits YAML does).
 These keys were added within version 1: a file without them loads as before (velocity from the
-URDF, no acceleration or jerk limit).
+URDF, no acceleration or jerk limit). Also ``duration`` (s, NaN if unknown) and, per space,
+``sel_{space}_*`` (the model selection). :meth:`Skill.load` judges the archive from its headers
+before it loads an array: any other key, or arrays of more than :data:`MAX_FILE_BYTES` in all,
+are refused.
 """
 
 from __future__ import annotations
