@@ -377,6 +377,7 @@ def test_a_refused_object_update_is_not_kept(skill: Skill, demos: list[Demonstra
         (np.full(5, 0.1 + 0.0j), r"q_measured must be an array of numbers, got complex"),
         (np.ones(5, dtype=bool), r"q_measured must be an array of numbers, got booleans"),
         (["0.1"] * 5, r"q_measured must be an array of numbers, got strings"),
+        ([0.1, [0.2, 0.3], 0.1, 0.1, 0.1], r"q_measured must be an array of numbers, got list"),
     ],
 )
 def test_postures_must_be_real_numbers(

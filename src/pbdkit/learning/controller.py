@@ -422,7 +422,10 @@ class Controller:
                 if self._timed is None
                 else "the run is done: the arm was brought to rest at the last step"
             )
-        q = np.asarray(q_measured)
+        try:
+            q = np.asarray(q_measured)
+        except ValueError:  # ragged: the full check names it
+            q = np.empty(0)
         if q.dtype != np.float64 or q.shape != self._lower.shape or not np.isfinite(q).all():
             # The full check (integers are converted; complex, bool, strings refused).
             q = check_array(
