@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import typer
 from typer.testing import CliRunner, Result
 
 from pbdkit.apps.cli import app
@@ -245,3 +246,104 @@ def test_reproduce_refuses_an_object_given_twice(tmp_path: Path) -> None:
         ],
     )
     _one_line_error(result, "--object glass is given twice")
+
+
+# ----------------------------------------------------------------------------- issue 22
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize("link", ["same path", "symbolic link", "hard link"])
+@pytest.mark.parametrize(
+    ("command", "label"),
+    [
+        (["learn", "in.npz"], "DEMOS"),
+        (["learn", "demos.npz", "--robot", "in.npz"], "--robot"),
+        (
+            ["learn", "demos.npz", "--robot", "arm.urdf", "--joint-limits", "in.npz"],
+            "--joint-limits",
+        ),
+        (["reproduce", "in.npz", "--object", "glass=0.3,0,0.1"], "SKILL"),
+    ],
+)
+def test_out_may_not_be_an_input(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: list[str], label: str, link: str
+) -> None:
+    """Issue 22: `reproduce s.npz --out s.npz` and `learn d.npz --out d.npz` destroyed the input."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "in.npz").write_bytes(b"the input")
+    (tmp_path / "arm.urdf").write_text("<robot/>")
+    out = {"same path": "in.npz", "symbolic link": "link.npz", "hard link": "hard.npz"}[link]
+    if link == "symbolic link":
+        (tmp_path / out).symlink_to(tmp_path / "in.npz")
+    elif link == "hard link":
+        os.link(tmp_path / "in.npz", tmp_path / out)
+    result = CliRunner().invoke(app, [*command, "--out", out])
+    _one_line_error(result, f"--out {out}: is also {label} in.npz, which the command reads")
+    assert (tmp_path / "in.npz").read_bytes() == b"the input"
+
+
+def test_reproduce_out_may_not_be_the_bag(tmp_path: Path) -> None:
+    """Issue 22: `--out X --bag X` wrote the .npz, then failed on the bag."""
+    skill = tmp_path / "skill.npz"
+    skill.write_bytes(b"not read")
+    out = tmp_path / "x"
+    result = CliRunner().invoke(
+        app,
+        [
+            "reproduce",
+            str(skill),
+            "--object",
+            "glass=0.3,0,0.1",
+            "--out",
+            str(out),
+            "--bag",
+            str(out),
+        ],
+    )
+    _one_line_error(result, f"--out {out}: is also --bag {out}; give each output its own path")
+    assert list(tmp_path.iterdir()) == [skill]
+
+
+@pytest.mark.usefixtures("no_simulation")
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["teach", "--demos", "3"],
+        ["evaluate", "--trials", "2"],
+        ["demo", "--task", "coaster"],
+        ["study", "--task", "coaster"],
+    ],
+)
+def test_a_negative_seed_names_the_option(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: list[str]
+) -> None:
+    """Issue 22: `--seed -1` failed inside NumPy, without naming the option."""
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, [*command, "--seed", "-1"])
+    _one_line_error(result, "--seed must be an integer >= 0, got -1")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_one_object_parser_for_learn_and_reproduce() -> None:
+    """`reproduce` takes positions, `learn` also a topic or tf:FRAME; one parser, one set of
+    messages (there were two)."""
+    from pbdkit.apps.cli import _parse_objects
+
+    positions = _parse_objects(["glass=0.3,0,0.1", "coaster=-1e-1,2,inf"])
+    assert list(positions) == ["glass", "coaster"]
+    np.testing.assert_array_equal(positions["glass"], [0.3, 0.0, 0.1])
+    sources = _parse_objects(
+        ["glass=/glass/pose", "coaster=tf:coaster", "basin=0.5,0,0"], sources=True
+    )
+    assert sources["glass"] == "/glass/pose" and sources["coaster"] == "tf:coaster"
+    np.testing.assert_array_equal(sources["basin"], [0.5, 0.0, 0.0])
+    for texts, kinds, match in [
+        (["glass=/glass/pose"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=/glass/pose'"),
+        (["glass=1,2"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
+        (["glass=1,2"], {"sources": True}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
+        (["glass="], {}, r"expected NAME=x,y,z \(metres\), got 'glass='"),
+        (["=1,2,3"], {"sources": True}, r"expected NAME=SOURCE \(a topic, tf:frame or x,y,z\)"),
+    ]:
+        with pytest.raises(typer.BadParameter, match=match):
+            _parse_objects(texts, **kinds)
+    for kinds in ({}, {"sources": True}):
+        with pytest.raises(typer.Exit):
+            _parse_objects(["glass=1,2,3", "glass=1,2,3"], **kinds)

@@ -372,6 +372,32 @@ def test_a_refused_object_update_is_not_kept(skill: Skill, demos: list[Demonstra
 
 
 # ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize(
+    ("posture", "match"),
+    [
+        (np.full(5, 0.1 + 0.0j), r"q_measured must be an array of numbers, got complex"),
+        (np.ones(5, dtype=bool), r"q_measured must be an array of numbers, got booleans"),
+        (["0.1"] * 5, r"q_measured must be an array of numbers, got strings"),
+        ([0.1, [0.2, 0.3], 0.1, 0.1, 0.1], r"q_measured must be an array of numbers, got list"),
+    ],
+)
+def test_postures_must_be_real_numbers(
+    skill: Skill, demos: list[Demonstration], posture: object, match: str
+) -> None:
+    """Issue 22: complex postures lost their imaginary part, booleans were taken for 0 and 1."""
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    with pytest.raises(ValueError, match=match):
+        ctrl.step(posture)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=match):
+        skill.controller({"glass": glass}).stream(1000).step(posture)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=match.replace("q_measured", "q0")):
+        skill.controller({"glass": glass}, q0=posture)  # type: ignore[arg-type]
+    # Integers are numbers: converted as before.
+    q = np.round(demos[0].joints[0]).astype(int)
+    assert ctrl.step(q).index == 0
+
+
 def test_controller_bad_input(skill: Skill, demos: list[Demonstration]) -> None:
     glass, _ = unseen_glass(demos)
     ctrl = skill.controller({"glass": glass})

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import tracemalloc
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -93,6 +95,49 @@ def test_demonstration_rejects_bad_input(kwargs: dict[str, object], match: str) 
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         Demonstration(**args)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (
+            {"joints": np.ones((3, 2), dtype=complex)},
+            r"joints must be an array of numbers, got complex",
+        ),
+        ({"joints": [["0.1", "0.2"]] * 3}, r"joints must be an array of numbers, got strings"),
+        (
+            {"joints": np.ones((3, 2), dtype=bool)},
+            r"joints must be an array of numbers, got booleans",
+        ),
+        ({"t": [False, True, 2.0 + 0j]}, r"t must be an array of numbers, got complex"),
+        ({"t": np.array([0, 1, 1], dtype=bool)}, r"t must be an array of numbers, got booleans"),
+        ({"gripper": np.array([0, 1, 1], dtype=complex)}, r"gripper .* got complex"),
+    ],
+)
+def test_demonstration_refuses_values_that_are_not_real(
+    kwargs: dict[str, object], match: str
+) -> None:
+    """Issue 22: joints of strings, complex (imaginary part dropped) or bool were accepted."""
+    args: dict[str, object] = {"t": [0.0, 1.0, 2.0], "joints": np.zeros((3, 2))}
+    with pytest.raises(ValueError, match=match):
+        Demonstration(**{**args, **kwargs})  # type: ignore[arg-type]
+    # A gripper signal may be given as booleans (closed = True).
+    d = Demonstration(args["t"], args["joints"], gripper=[False, True, True])  # type: ignore[arg-type]
+    assert d.gripper is not None and d.gripper.tolist() == [0.0, 1.0, 1.0]
+
+
+@pytest.mark.parametrize("dtype", ["<U20", np.complex128, np.bool_])
+def test_load_refuses_joints_stored_as_strings_complex_or_bool(tmp_path: Path, dtype: Any) -> None:
+    rng = np.random.default_rng(14)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    arrays = _stored(path)
+    arrays["demo_1_joints"] = arrays["demo_1_joints"].astype(dtype)
+    np.savez(path, **arrays)
+    with pytest.raises(
+        ValueError, match=r"d\.npz is not a valid pbdkit-demonstrations file: demo_1: joints must"
+    ):
+        load_demonstrations(path)
 
 
 # ----------------------------------------------------------------------------- rescaling
@@ -283,6 +328,49 @@ def test_load_rejects_truncated_archive(tmp_path: Path) -> None:
         load_demonstrations(truncated)
 
 
+def test_load_refuses_unknown_keys_before_loading_any_array(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(12)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    arrays = _stored(path)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **arrays, extra=np.zeros(10**5), demo_01_t=np.zeros(2))
+    loaded: list[tuple[int, ...]] = []
+    real = np.lib.format.read_array
+
+    def spy(fp: Any, *args: Any, **kwargs: Any) -> np.ndarray:
+        out = real(fp, *args, **kwargs)
+        loaded.append(out.shape)
+        return out
+
+    monkeypatch.setattr(np.lib.format, "read_array", spy)
+    with pytest.raises(
+        ValueError, match=r"bad\.npz .*: n_demos is 2 but the file holds 'extra', 'demo_01_t',"
+    ):
+        load_demonstrations(bad)
+    assert (10**5,) not in loaded and len(loaded) == 5  # the header keys only
+
+
+def test_load_bounds_the_work_of_a_huge_n_demos(tmp_path: Path) -> None:
+    """n_demos = 10**6 declared, 2 stored: refused at the first missing key, in little memory
+    (the check used to list every key n_demos implies)."""
+    rng = np.random.default_rng(13)
+    path = tmp_path / "d.npz"
+    save_demonstrations([random_demo(rng), random_demo(rng)], path)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{**_stored(path), "n_demos": np.array(10**6)})
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=r"missing key 'demo_2_t' \(n_demos is 1000000\)"):
+            load_demonstrations(bad)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * 2**20
+
+
 # ----------------------------------------------------------------------------- CSV
 def test_csv_import(tmp_path: Path) -> None:
     rng = np.random.default_rng(9)
@@ -335,3 +423,56 @@ def test_csv_missing_file_and_columns(tmp_path: Path) -> None:
     binary.write_bytes(b"\xff\xfe\x00\x81")
     with pytest.raises(ValueError, match="not a UTF-8 text CSV file"):
         demonstration_from_csv(binary, objects={})
+
+
+def test_csv_with_a_byte_order_mark_and_other_delimiters(tmp_path: Path) -> None:
+    """Issue 22: a UTF-8 BOM (spreadsheets write one) made the first column name '\\ufefft'."""
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbft;pan;lift1\r\n0;0.1;0.2\r\n0.5;0.2;0.3\r\n")
+    d = demonstration_from_csv(path, None, delimiter=";")
+    np.testing.assert_array_equal(d.t, [0.0, 0.5])
+    np.testing.assert_array_equal(d.joints, [[0.1, 0.2], [0.2, 0.3]])
+    assert d.object_names == ()
+    tabs = tmp_path / "tabs.tsv"
+    tabs.write_text("t\tpan\n0\t1\n1\t2\n")
+    assert demonstration_from_csv(tabs, {}, delimiter="\t").joints.tolist() == [[1.0], [2.0]]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (
+            {"delimiter": ""},
+            r"delimiter must be one character that cannot occur in a number.*got ''",
+        ),
+        ({"delimiter": ",,"}, r"delimiter must be one character .*got ',,'"),
+        ({"delimiter": "."}, r"delimiter must be one character .*got '\.'"),
+        ({"delimiter": None}, r"delimiter must be one character .*got None"),
+        (
+            {"joint_columns": ["pan", "pan"]},
+            r"joint_columns must name each column once, got \['pan'\]",
+        ),
+        ({"joint_columns": ["pan", "t"]}, r"joint_columns: 't' is the time, not a joint"),
+        ({"joint_columns": ["gripper"]}, r"joint_columns: 'gripper' is the gripper signal"),
+        ({"joint_columns": "pan"}, r"joint_columns must be a list of column names, got str"),
+        ({"joint_columns": [0]}, r"joint_columns must be column names \(strings\), got 0"),
+        ({"objects": [("glass", [0.0, 0.0, 0.0])]}, r"d\.csv: objects must be a dict"),
+    ],
+)
+def test_csv_refuses_bad_arguments(tmp_path: Path, kwargs: dict[str, Any], match: str) -> None:
+    """Issue 22: delimiter="" or objects=None raised TypeError; a column could be used twice."""
+    path = tmp_path / "d.csv"
+    path.write_text("t,pan,lift1,gripper\n0,1,2,0\n1,2,3,1\n")
+    args: dict[str, Any] = {"objects": {}, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        demonstration_from_csv(path, **args)
+
+
+def test_csv_errors_from_the_demonstration_name_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "log_3.csv"
+    path.write_text("t,pan\n0,1\n0,2\n")
+    with pytest.raises(ValueError, match=r"log_3\.csv: t must be strictly increasing"):
+        demonstration_from_csv(path, {})
+    path.write_text("t,pan\n0,1\n1,2\n")
+    with pytest.raises(ValueError, match=r"log_3\.csv: objects\['glass'\] must have shape"):
+        demonstration_from_csv(path, {"glass": [0.0, 1.0]})

@@ -571,6 +571,31 @@ def test_learn_bounds_n_steps_like_load(robot: Robot, demos: list[Demonstration]
     assert MAX_STEPS == 10**6
 
 
+@pytest.mark.parametrize(
+    ("scale", "match"),
+    [
+        (1e-300, r"a duration of 1e-300 s over n_steps=40 steps gives a time step of 2.56e-302 s"),
+        (1e-8, r"gives a time step of 2.56e-10 s; it must be at least MIN_STEP_SECONDS = 1e-09"),
+        (1.7e308, r"the duration must be finite and > 0 \(s\), got inf"),
+    ],
+)
+def test_learn_and_load_refuse_a_duration_whose_step_underflows(
+    robot: Robot, demos: list[Demonstration], tmp_path: Path, scale: float, match: str
+) -> None:
+    """Issue 22: a skill of 1e-300 s reproduced a motion that never moved, without a word."""
+    scaled = [Demonstration(d.t / d.t[-1] * scale, d.joints, d.objects, d.gripper) for d in demos]
+    with pytest.raises(ValueError, match=r"^demos: .*" + match + r".*\(are the time stamps t in"):
+        Skill.learn(scaled, robot, n_steps=40)
+    # A file that says so is refused too.
+    path = tmp_path / "skill.npz"
+    Skill.learn(demos[:3], robot, n_steps=40, n_components=1).save(path)
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    np.savez(path, **{**arrays, "duration": np.array(scale * (1.0 if scale < 1 else 2.0))})
+    with pytest.raises(ValueError, match=r"skill\.npz is not a valid pbdkit-skill file: "):
+        Skill.load(path)
+
+
 def _with_joint(demo: Demonstration, sample: int, joint: int, value: float) -> Demonstration:
     joints = demo.joints.copy()
     joints[sample, joint] = value

@@ -4,18 +4,32 @@ from __future__ import annotations
 
 import errno
 import io
+import math
 import os
 import secrets
 import stat
+import struct
 import zipfile
-from collections.abc import Mapping
+import zlib
+from collections.abc import Callable, Collection, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["atomic_write_bytes", "load_npz_safe", "save_npz_atomic", "write_json"]
+__all__ = [
+    "MAX_NPZ_BYTES",
+    "NpyHeader",
+    "NpzArchive",
+    "atomic_write_bytes",
+    "load_npz_safe",
+    "open_npz",
+    "save_npz_atomic",
+    "write_json",
+]
 
 # Flags of the temporary file: created here, never reused (O_EXCL), never through a link.
 _TMP_FLAGS = (
@@ -110,36 +124,298 @@ def save_npz_atomic(path: str | os.PathLike[str], arrays: Mapping[str, NDArray[A
     atomic_write_bytes(path, buf.getvalue())
 
 
-def load_npz_safe(path: str | os.PathLike[str], *, what: str = "file") -> dict[str, NDArray[Any]]:
-    """Load every array of an ``.npz`` file with ``allow_pickle=False``.
+#: The most bytes the arrays of one ``.npz`` file may take once loaded (1 GiB), unless a reader
+#: states its own bound. The sizes are read from the archive's headers before any array is: a
+#: small file that would decompress into gigabytes (a "zip bomb") is refused at once. pbdkit's
+#: files are far smaller (a skill: kilobytes; 10 demonstrations of 10**5 samples of a 7-joint
+#: arm: 64 MB).
+MAX_NPZ_BYTES = 2**30
+
+
+@dataclass(frozen=True)
+class NpyHeader:
+    """What the ``.npy`` header of one member of an ``.npz`` archive declares.
+
+    Attributes
+    ----------
+    shape : tuple of int
+    dtype : numpy.dtype
+    nbytes : int
+        Bytes of the array once loaded (``prod(shape) * dtype.itemsize``).
+    """
+
+    shape: tuple[int, ...]
+    dtype: np.dtype[Any]
+    nbytes: int
+
+
+class NpzArchive(Mapping[str, NDArray[Any]]):
+    """An open ``.npz`` archive whose members were checked from their headers alone.
+
+    Build it with :func:`open_npz`, which has read the zip directory and each member's ``.npy``
+    header (a few hundred bytes each) but no array: :attr:`headers` tells the keys, shapes,
+    dtypes and sizes, so that a reader refuses unknown keys or absurd sizes before it loads
+    anything. As a mapping, ``archive[key]`` loads one array (:meth:`read`, no pickle) each
+    time it is asked for; ``key in archive``, ``len`` and iteration use the headers only. Use
+    it as a context manager.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        what: str,
+        file: io.BufferedReader,
+        archive: zipfile.ZipFile,
+        headers: Mapping[str, NpyHeader],
+        members: Mapping[str, zipfile.ZipInfo],
+    ) -> None:
+        self.path = path
+        self.what = what
+        self.headers: Mapping[str, NpyHeader] = MappingProxyType(dict(headers))
+        self._file, self._zip, self._members = file, archive, dict(members)
+
+    def __enter__(self) -> NpzArchive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the archive and its file."""
+        self._zip.close()
+        self._file.close()
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.headers
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.headers)
+
+    def __len__(self) -> int:
+        return len(self.headers)
+
+    def __getitem__(self, key: str) -> NDArray[Any]:
+        return self.read(key)
+
+    def read(self, key: str) -> NDArray[Any]:
+        """The array stored under ``key`` (as ``np.load(path)[key]`` gives it).
+
+        Raises
+        ------
+        KeyError
+            If the archive has no such key.
+        ValueError
+            If the member is corrupt or truncated (the message names the file).
+        """
+        info = self._members[key]
+        try:
+            with self._zip.open(info) as member:
+                return np.lib.format.read_array(member, allow_pickle=False)
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
+            raise ValueError(
+                f"{self.path} is not a valid {self.what} (key {key!r} does not read): {exc}"
+            ) from exc
+
+    def check_keys(self, allowed: Callable[[str], bool] | Collection[str]) -> None:
+        """Refuse keys that the reader does not know (before any of them is loaded).
+
+        Parameters
+        ----------
+        allowed : collection of str, or callable str -> bool
+            The keys the format has.
+
+        Raises
+        ------
+        ValueError
+            Naming the file, the first unknown keys and their declared sizes.
+        """
+        known = allowed if callable(allowed) else frozenset(allowed).__contains__
+        unknown = [k for k in self.headers if not known(k)]
+        if unknown:
+            shown = ", ".join(f"{k!r} ({_size(self.headers[k].nbytes)})" for k in unknown[:4])
+            more = f" and {len(unknown) - 4} more" if len(unknown) > 4 else ""
+            raise ValueError(
+                f"{self.path} is not a valid {self.what}: unknown key(s) {shown}{more}; "
+                "the format has no such key"
+            )
+
+
+def _size(n: int) -> str:
+    """A byte count for a message: ``512 B``, ``3.1 MB``, ``2.1 GB``."""
+    if n < 1000:
+        return f"{n} B"
+    for unit, scale in (("kB", 1e3), ("MB", 1e6), ("GB", 1e9), ("TB", 1e12)):
+        if n < 1000 * scale or unit == "TB":
+            return f"{n / scale:.3g} {unit}"
+    raise AssertionError  # pragma: no cover
+
+
+# The longest .npy header read (bytes): NumPy's own bound (np.load's max_header_size). The
+# length is checked before the header is read: a version-2 header may declare 4 GiB.
+_MAX_NPY_HEADER = 10_000
+
+
+def _npy_header(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> NpyHeader:
+    """The header of one ``.npy`` member: reads a few hundred bytes, never the array."""
+    with archive.open(info) as member:
+        version = np.lib.format.read_magic(member)
+        # The versions np.save writes for arrays without object fields (3.0: field names
+        # that need UTF-8, which pbdkit never writes).
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f".npy format version {version[0]}.{version[1]} is not supported")
+        length_format = "<H" if version == (1, 0) else "<I"
+        length_bytes = member.read(struct.calcsize(length_format))
+        if len(length_bytes) != struct.calcsize(length_format):
+            raise ValueError("the .npy header is truncated")
+        (length,) = struct.unpack(length_format, length_bytes)
+        if length > _MAX_NPY_HEADER:
+            raise ValueError(
+                f"the .npy header declares {length} bytes, more than {_MAX_NPY_HEADER}"
+            )
+        text = member.read(length)
+    read_header = (
+        np.lib.format.read_array_header_1_0
+        if version == (1, 0)
+        else np.lib.format.read_array_header_2_0
+    )
+    shape, _, dtype = read_header(io.BytesIO(length_bytes + text))
+    header_end = np.lib.format.MAGIC_LEN + len(length_bytes) + length
+    if dtype.hasobject:
+        raise ValueError("it holds an object array, which would need pickle to load")
+    nbytes = math.prod(int(s) for s in shape) * int(dtype.itemsize)
+    if info.file_size < header_end + nbytes:
+        raise ValueError(
+            f"the array declares {_size(nbytes)} but the member holds "
+            f"{_size(max(info.file_size - header_end, 0))} (truncated)"
+        )
+    return NpyHeader(tuple(int(s) for s in shape), dtype, nbytes)
+
+
+def open_npz(
+    path: str | os.PathLike[str], *, what: str = "file", max_bytes: int = MAX_NPZ_BYTES
+) -> NpzArchive:
+    """Open an ``.npz`` archive and check every member from its headers, loading no array.
+
+    Parameters
+    ----------
+    path : str or path-like
+    what : str
+        What the file should be, for the messages ("pbdkit-skill file").
+    max_bytes : int
+        The most bytes all arrays together may take once loaded (:data:`MAX_NPZ_BYTES`).
+
+    Returns
+    -------
+    archive : NpzArchive
+        Open: use it in a ``with`` block.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the file is not a NumPy ``.npz`` archive (foreign content: it is not a zip file),
-        is corrupt or truncated, or holds object arrays that would need pickle to load.
+        If the file is not a NumPy ``.npz`` archive (foreign content: it is not a zip file), is
+        corrupt or truncated, has a member that is not an ``.npy`` array, a key twice, an object
+        array (which would need pickle), or arrays of more than ``max_bytes`` in total (sizes
+        from the headers: nothing is decompressed beyond them).
     """
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{what} not found: {p}")
     try:
-        # Open the file ourselves: np.load(path) leaks its handle when the archive is truncated.
-        with open(p, "rb") as f:
-            # np.load takes whatever is neither a zip nor an .npy file for a pickle (which
-            # allow_pickle=False then refuses, "contains pickled data"): look at it first.
-            if f.read(4) in _ZIP_MAGIC:
-                f.seek(0)
-                with np.load(f, allow_pickle=False) as data:
-                    return {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, OSError, EOFError, KeyError) as exc:
+        # Open the file ourselves: a ZipFile given a path leaks its handle when the archive is
+        # truncated.
+        f = open(p, "rb")  # noqa: SIM115 (closed by the archive, or below)
+    except OSError as exc:
         raise ValueError(f"{p} is not a valid {what} (not a readable .npz archive): {exc}") from exc
-    except ValueError as exc:  # e.g. an object array, which would need pickle
-        raise ValueError(f"{p} is not a valid {what}: {exc}") from exc
-    raise ValueError(
-        f"{p} is not a NumPy .npz archive (it does not start like a zip file); expected a {what}"
-    )
+    try:
+        # np.load takes whatever is neither a zip nor an .npy file for a pickle: look first.
+        if f.read(4) not in _ZIP_MAGIC:
+            raise ValueError(
+                f"{p} is not a NumPy .npz archive (it does not start like a zip file); "
+                f"expected a {what}"
+            )
+        f.seek(0)
+        try:
+            archive = zipfile.ZipFile(f)
+        except (zipfile.BadZipFile, OSError, EOFError) as exc:
+            raise ValueError(
+                f"{p} is not a valid {what} (not a readable .npz archive): {exc}"
+            ) from exc
+        try:
+            headers, members = _check_members(archive, p, what, max_bytes)
+        except BaseException:
+            archive.close()
+            raise
+    except BaseException:
+        f.close()
+        raise
+    return NpzArchive(p, what, f, archive, headers, members)
+
+
+def _check_members(
+    archive: zipfile.ZipFile, p: Path, what: str, max_bytes: int
+) -> tuple[dict[str, NpyHeader], dict[str, zipfile.ZipInfo]]:
+    """The header of every member of an open archive, checked (see :func:`open_npz`)."""
+    headers: dict[str, NpyHeader] = {}
+    members: dict[str, zipfile.ZipInfo] = {}
+    total = 0
+    for info in archive.infolist():
+        # np.savez stores the array of key k as the member k.npy.
+        if not info.filename.endswith(".npy"):
+            raise ValueError(
+                f"{p} is not a valid {what}: the member {info.filename!r} is not an .npy array"
+            )
+        key = info.filename[: -len(".npy")]
+        if key in members:
+            raise ValueError(f"{p} is not a valid {what}: the key {key!r} is stored twice")
+        try:
+            header = _npy_header(archive, info)
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
+            raise ValueError(f"{p} is not a valid {what}: key {key!r}: {exc}") from exc
+        headers[key], members[key] = header, info
+        total += header.nbytes
+        if total > max_bytes:
+            biggest = max(headers, key=lambda k: headers[k].nbytes)
+            raise ValueError(
+                f"{p} is not a valid {what}: its arrays would take more than {_size(max_bytes)} "
+                f"once loaded (at least {_size(total)}; key {biggest!r}: "
+                f"{_size(headers[biggest].nbytes)})"
+            )
+    return headers, members
+
+
+def load_npz_safe(
+    path: str | os.PathLike[str],
+    *,
+    what: str = "file",
+    keys: Callable[[str], bool] | Collection[str] | None = None,
+    max_bytes: int = MAX_NPZ_BYTES,
+) -> dict[str, NDArray[Any]]:
+    """Load every array of an ``.npz`` file with ``allow_pickle=False``, after checking the
+    archive from its headers (:func:`open_npz`).
+
+    Parameters
+    ----------
+    path : str or path-like
+    what : str
+        What the file should be, for the messages.
+    keys : collection of str, or callable str -> bool, optional
+        The keys the format has: any other is refused before an array is loaded. Default: any.
+    max_bytes : int
+        The most bytes all arrays together may take once loaded.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        As :func:`open_npz`, or an unknown key.
+    """
+    with open_npz(path, what=what, max_bytes=max_bytes) as archive:
+        if keys is not None:
+            archive.check_keys(keys)
+        return {k: archive.read(k) for k in archive}
 
 
 def _json_default(value: object) -> object:

@@ -30,6 +30,19 @@ def shape_str(shape: Sequence[int | str | None]) -> str:
     return "(" + ", ".join(parts) + ")"
 
 
+# dtype kinds of real numbers (float, signed and unsigned integers), and how the others read.
+_REAL_KINDS = frozenset("fiu")
+_KIND_NAMES = {
+    "b": "booleans",
+    "c": "complex (not real) values",
+    "U": "strings",
+    "S": "bytes",
+    "M": "dates",
+    "m": "time deltas",
+    "V": "raw or structured records",
+}
+
+
 def check_array(
     x: npt.ArrayLike,
     name: str,
@@ -38,8 +51,12 @@ def check_array(
     shape: Sequence[int | None] | None = None,
     finite: bool = True,
     min_rows: int | None = None,
+    allow_bool: bool = True,
 ) -> NDArray[np.float64]:
     """Convert ``x`` to a float64 array and check its shape and values.
+
+    Real numbers only: complex values (whose imaginary part a conversion would drop), strings
+    (which NumPy would parse) and dates are refused, and booleans unless ``allow_bool``.
 
     Parameters
     ----------
@@ -55,15 +72,30 @@ def check_array(
         Reject NaN and infinite values.
     min_rows : int, optional
         Minimum size of the first axis.
+    allow_bool : bool
+        Accept booleans (as 0 and 1): a gripper signal may be given so; a joint angle may not.
 
     Returns
     -------
     arr : ndarray of float64
     """
+    not_numbers = f"{name} must be an array of numbers, got {type(x).__name__}"
     try:
-        arr = np.ascontiguousarray(x, dtype=np.float64)
+        given = np.asarray(x)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be an array of numbers, got {type(x).__name__}") from exc
+        raise ValueError(not_numbers) from exc
+    kind = given.dtype.kind
+    if kind not in _REAL_KINDS and kind != "O" and not (kind == "b" and allow_bool):
+        raise ValueError(
+            f"{name} must be an array of numbers, got {_KIND_NAMES.get(kind, 'other values')} "
+            f"(dtype {given.dtype})"
+        )
+    try:
+        # An object array (Python integers beyond int64, Fractions, ...): converted from x,
+        # one value at a time, as before.
+        arr = np.ascontiguousarray(x if kind == "O" else given, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(not_numbers) from exc
     if shape is not None:
         expected = tuple(shape)
         ok = arr.ndim == len(expected) and all(

@@ -10,9 +10,9 @@ import functools
 import gc
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, Literal, NoReturn, TypeVar, cast, overload
 
 import numpy as np
 import typer
@@ -88,13 +88,35 @@ def _reports_errors(command: _Command) -> _Command:
     return cast(_Command, run)
 
 
-def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
+def _check_output(
+    path: Path,
+    option: str,
+    *,
+    folder: bool = False,
+    inputs: Sequence[tuple[str, Path | None]] = (),
+    also: Sequence[tuple[str, Path | None]] = (),
+) -> None:
     """Fail unless ``path`` can be written: a file (its directory exists and is writable), or
     with ``folder`` a directory to write into (existing, or to be created in a writable one).
+
+    ``inputs`` are the files the command reads, each with the name the command gives it
+    (``("SKILL", path)``, ``("--robot", path)``; a path None: not given): ``path`` may be none
+    of them (writing it would destroy the input). ``also`` are the other outputs of the
+    command, named so too: ``path`` may be none of them (the first written would be lost, or
+    make the second fail after it).
 
     Called before any work, so that a long run does not end on a path it cannot write. A
     symbolic link is judged by the file it points to (that file is what gets written).
     """
+    for label, source in inputs:
+        if source is not None and _same_file(path, source):
+            _fail(
+                f"{option} {path}: is also {label} {source}, which the command reads; give "
+                f"{option} another path"
+            )
+    for label, other in also:
+        if other is not None and _same_file(path, other):
+            _fail(f"{option} {path}: is also {label} {other}; give each output its own path")
     real = Path(os.path.realpath(path))
     if folder and real.exists():
         if not real.is_dir():
@@ -110,6 +132,23 @@ def _check_output(path: Path, option: str, *, folder: bool = False) -> None:
         _fail(f"{option} {path}: the directory {parent} {what}")
     if not os.access(parent, os.W_OK | os.X_OK):
         _fail(f"{option} {path}: the directory {parent} is not writable")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name the same file: the same path once links are resolved, or
+    (both existing) the same file on disk (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet): different files
+        return False
+
+
+def _check_seed(seed: int) -> None:
+    """Fail unless ``seed`` can seed NumPy's generators (an integer >= 0)."""
+    if seed < 0:
+        _fail(f"--seed must be an integer >= 0, got {seed}")
 
 
 # ----------------------------------------------------------------------------- commands
@@ -244,6 +283,7 @@ def demo(
     a video, report.html and metrics.json in OUT. With --online, the fused controller also
     runs in the physics loop under a disturbance, beside the offline run."""
     _check_output(out, "--out", folder=True)
+    _check_seed(seed)
     _check_perturb(perturb)
     if task == "lasa":
         _check_lasa_shape(shape)
@@ -351,6 +391,7 @@ def teach(
             f"need at least 2 demonstrations, got {demos}", param_hint="--demos"
         )
     _check_output(out, "--out")
+    _check_seed(seed)
     spec = _robot_task(task)
     from ..learning.demonstration import save_demonstrations
     from ..sim.teacher import teach as sim_teach
@@ -368,31 +409,6 @@ _BAG_SUFFIXES = (".db3", ".mcap", ".bag")
 
 def _is_bag(path: Path) -> bool:
     return path.is_dir() or path.suffix in _BAG_SUFFIXES
-
-
-def _parse_sources(texts: list[str]) -> dict[str, str | np.ndarray]:
-    """The --object NAME=SOURCE options of `learn`: a topic, tf:frame, or x,y,z (metres)."""
-    sources: dict[str, str | np.ndarray] = {}
-    for text in texts:
-        name, sep, rest = text.partition("=")
-        if not sep or not name or not rest:
-            raise typer.BadParameter(
-                f"expected NAME=SOURCE (a topic, tf:frame or x,y,z), got {text!r}",
-                param_hint="--object",
-            )
-        if name in sources:
-            _fail(f"--object {name} is given twice; give each object once")
-        try:
-            values = [float(v) for v in rest.split(",")]
-        except ValueError:
-            sources[name] = rest
-            continue
-        if len(values) != 3:
-            raise typer.BadParameter(
-                f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
-            )
-        sources[name] = np.array(values)
-    return sources
 
 
 @app.command()
@@ -493,8 +509,10 @@ def learn(
                 f"{unknown[0]}: not an .npz file of demonstrations nor a ROS bag (a rosbag2 "
                 "directory, .db3, .mcap or .bag file)"
             )
-    sources = _parse_sources(obj or [])
-    _check_output(out, "--out")
+    sources = _parse_objects(obj or [], sources=True)
+    read: list[tuple[str, Path | None]] = [("DEMOS", d) for d in demos]
+    read += [("--robot", None if shipped else Path(robot)), ("--joint-limits", joint_limits)]
+    _check_output(out, "--out", inputs=read)
     if shipped:
         arm = robots.load(robot)
     elif Path(robot).is_file():
@@ -552,27 +570,44 @@ def _load_demos(
     return items
 
 
-def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]:
-    """The --object options as a dict; an object given twice is an error."""
-    objects: dict[str, np.ndarray] = {}
+@overload
+def _parse_objects(texts: list[str]) -> dict[str, np.ndarray]: ...
+
+
+@overload
+def _parse_objects(texts: list[str], *, sources: Literal[True]) -> dict[str, str | np.ndarray]: ...
+
+
+def _parse_objects(texts: list[str], *, sources: bool = False) -> dict[str, Any]:
+    """The --object NAME=VALUE options as a dict; an object given twice is an error.
+
+    VALUE is a position x,y,z (metres); with ``sources`` (`learn`'s bags), also where to read
+    it: a topic or tf:FRAME (any VALUE that is not numbers).
+    """
+    objects: dict[str, Any] = {}
     for text in texts:
-        name, position = _parse_object(text)
+        name, value = _parse_object(text, sources=sources)
         if name in objects:
             _fail(f"--object {name} is given twice; give each object once")
-        objects[name] = position
+        objects[name] = value
     return objects
 
 
-def _parse_object(text: str) -> tuple[str, np.ndarray]:
+def _parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
+    """One --object NAME=VALUE option (see :func:`_parse_objects`)."""
     name, sep, rest = text.partition("=")
+    position = "NAME=x,y,z (metres)"
+    if not sep or not name or not rest:
+        want = "NAME=SOURCE (a topic, tf:frame or x,y,z)" if sources else position
+        raise typer.BadParameter(f"expected {want}, got {text!r}", param_hint="--object")
     try:
         values = [float(v) for v in rest.split(",")]
     except ValueError:
+        if sources:
+            return name, rest
         values = []
-    if not sep or not name or len(values) != 3:
-        raise typer.BadParameter(
-            f"expected NAME=x,y,z (metres), got {text!r}", param_hint="--object"
-        )
+    if len(values) != 3:
+        raise typer.BadParameter(f"expected {position}, got {text!r}", param_hint="--object")
     return name, np.array(values)
 
 
@@ -602,7 +637,8 @@ def reproduce(
     from ..learning.skill import Skill
 
     objects = _parse_objects(obj)
-    _check_output(out, "--out")
+    # The bag too is written (after the .npz): --out may not be where it goes.
+    _check_output(out, "--out", inputs=[("SKILL", skill_path)], also=[("--bag", bag)])
     if bag is not None:
         _check_bag_output(bag, out)
     skill = Skill.load(skill_path)
@@ -717,6 +753,7 @@ def evaluate(
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    _check_seed(seed)
     _check_workers(workers, scheduler)
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
@@ -786,6 +823,7 @@ def study(
     """Where a skill works: a map of the table per object, a learning curve (2-10
     demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
     _check_output(out, "--out", folder=True)
+    _check_seed(seed)
     _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)

@@ -381,10 +381,15 @@ class Controller:
                 if self._timed is None
                 else "the run is done: the arm was brought to rest at the last step"
             )
-        q = np.asarray(q_measured, dtype=np.float64)
-        if q.shape != self._lower.shape or not np.isfinite(q).all():
-            # the full check, for its message
-            q = check_array(q_measured, "q_measured", shape=(self._lower.shape[0],))
+        try:
+            q = np.asarray(q_measured)
+        except ValueError:  # ragged: the full check names it
+            q = np.empty(0)
+        if q.dtype != np.float64 or q.shape != self._lower.shape or not np.isfinite(q).all():
+            # The full check (integers are converted; complex, bool, strings refused).
+            q = check_array(
+                q_measured, "q_measured", shape=(self._lower.shape[0],), allow_bool=False
+            )
         q = np.minimum(np.maximum(q, self._lower), self._upper)
         if objects is not None:
             self._update_objects(objects)
@@ -660,7 +665,7 @@ class CommandStream:
         ``objects`` (any subset of the skill's objects) reach the controller at its next step.
         """
         ctrl = self.controller
-        q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],))
+        q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],), allow_bool=False)
         if objects is not None:
             self._pending.update(check_positions(objects, "objects"))
         if self.done:

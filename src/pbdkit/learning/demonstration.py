@@ -29,6 +29,10 @@ key                   dtype, shape              meaning
 ``demo_{i}_gripper``  float64, (T_i,)           gripper signal (0 open, 1 closed), optional
 ====================  ========================  ===============================================
 
+:func:`load_demonstrations` judges the archive from its headers before it loads an array: a
+key not in this table (or a ``demo_{i}_*`` with i >= ``n_demos``), an object array, or arrays of
+more than 1 GiB in all (``pbdkit._io.MAX_NPZ_BYTES``) are refused.
+
 CSV (:func:`demonstration_from_csv`), for logs recorded on a real robot: one file per
 demonstration, comma-separated, one header line, then one row per sample::
 
@@ -59,7 +63,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import load_npz_safe, save_npz_atomic
+from .._io import open_npz, save_npz_atomic
 from .._validation import check_array, check_int, check_positions
 
 __all__ = [
@@ -154,7 +158,7 @@ class Demonstration:
         gripper: npt.ArrayLike | None = None,
     ) -> None:
         # Copies: the arrays are made read-only and must not freeze the caller's own arrays.
-        t_ = check_array(t, "t", ndim=1).copy()
+        t_ = check_array(t, "t", ndim=1, allow_bool=False).copy()
         if t_.shape[0] < 2:
             raise ValueError(f"t must have at least 2 samples, got {t_.shape[0]}")
         dt = np.diff(t_)
@@ -164,7 +168,7 @@ class Demonstration:
                 f"t must be strictly increasing, got t[{i}]={float(t_[i])!r} "
                 f">= t[{i + 1}]={float(t_[i + 1])!r}"
             )
-        joints_ = check_array(joints, "joints", ndim=2).copy()
+        joints_ = check_array(joints, "joints", ndim=2, allow_bool=False).copy()
         if joints_.shape[0] != t_.shape[0] or joints_.shape[1] < 1:
             raise ValueError(f"joints must have shape ({t_.shape[0]}, n), got {joints_.shape}")
         objects_ = _check_objects({} if objects is None else objects)
@@ -370,19 +374,28 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
         :class:`Demonstration` check. The message names the file and the key.
     """
     p = Path(path)
-    data = load_npz_safe(p, what=FORMAT_NAME + " file")
-    _header(data, p, FORMAT_NAME, FORMAT_VERSION)
-    try:
-        demos = _demonstrations_from_arrays(data)
-    except KeyError as exc:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
+    # The archive's headers are checked first (sizes, object arrays); then its header keys are
+    # read, and every other key is judged by name against them before any array is loaded.
+    with open_npz(p, what=FORMAT_NAME + " file") as data:
+        _header(data, p, FORMAT_NAME, FORMAT_VERSION)
+        try:
+            demos = _demonstrations_from_arrays(data)
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
     return demos
 
 
+_HEADER_KEYS = frozenset({"format", "version", "n_demos", "object_names", "has_gripper"})
+
+
 def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demonstration]:
-    """The demonstrations of a loaded file, checked against its header keys (n_demos, ...)."""
+    """The demonstrations of a file, checked against its header keys (n_demos, ...).
+
+    ``data`` may load each array when it is asked for (:class:`pbdkit._io.NpzArchive`): the
+    keys are checked against the header before any demonstration's array is read.
+    """
     n_arr = np.asarray(data["n_demos"])
     n_demos = int(n_arr) if n_arr.shape == () and n_arr.dtype.kind in "iu" else -1
     if n_demos < 1:
@@ -399,12 +412,16 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
         raise ValueError(f"has_gripper must be a boolean, got {grip_arr!r}")
     has_gripper = bool(grip_arr)
     fields = ("t", "joints", "objects", "gripper") if has_gripper else ("t", "joints", "objects")
-    expected = [f"demo_{i}_{f}" for i in range(n_demos) for f in fields]
-    for key in expected:
-        if key not in data:
-            raise ValueError(f"missing key {key!r} (n_demos is {n_demos})")
-    header = {"format", "version", "n_demos", "object_names", "has_gripper"}
-    extra = sorted(set(data) - set(expected) - header, key=_demo_key_order)
+    # Key by key up to the first missing one: the file's own keys bound the work, whatever
+    # n_demos it declares.
+    for i in range(n_demos):
+        for f in fields:
+            if f"demo_{i}_{f}" not in data:
+                raise ValueError(f"missing key 'demo_{i}_{f}' (n_demos is {n_demos})")
+    extra = sorted(
+        (k for k in data if k not in _HEADER_KEYS and not _described(k, n_demos, fields)),
+        key=_demo_key_order,
+    )
     if extra:
         shown = ", ".join(repr(k) for k in extra[:4]) + (", ..." if len(extra) > 4 else "")
         raise ValueError(
@@ -433,17 +450,25 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
     return demos
 
 
+def _described(key: str, n_demos: int, fields: Sequence[str]) -> bool:
+    """Whether ``key`` is ``demo_{i}_{field}`` with i < n_demos (i written as str(i) does)."""
+    i, field = _demo_key_order(key)
+    return 0 <= i < n_demos and field in fields and key == f"demo_{i}_{field}"
+
+
 def _demo_key_order(key: str) -> tuple[int, str]:
     """Sort ``demo_{i}_*`` keys by demonstration number (demo_2 before demo_10)."""
     parts = key.split("_", 2)
-    if len(parts) == 3 and parts[0] == "demo" and parts[1].isdigit():
+    # ASCII digits, at most 18 (int() refuses other digits, and strings of over 4300).
+    digits = parts[1] if len(parts) == 3 else ""
+    if parts[0] == "demo" and digits.isascii() and digits.isdigit() and len(digits) <= 18:
         return int(parts[1]), parts[2]
     return -1, key
 
 
 def demonstration_from_csv(
     path: str | os.PathLike[str],
-    objects: Mapping[str, npt.ArrayLike],
+    objects: Mapping[str, npt.ArrayLike] | None,
     *,
     joint_columns: Sequence[str] | None = None,
     delimiter: str = ",",
@@ -453,14 +478,17 @@ def demonstration_from_csv(
     Parameters
     ----------
     path : str or path-like
-        CSV file with a header line; columns ``t``, joint angles, optional ``gripper``.
-    objects : dict str -> array-like, shape (3,)
-        Object positions in the robot's base frame during this demonstration.
+        CSV file with a header line; columns ``t``, joint angles, optional ``gripper``. UTF-8,
+        with or without a byte order mark (as spreadsheet programs write it).
+    objects : dict str -> array-like, shape (3,), or None
+        Object positions in the robot's base frame during this demonstration (None or ``{}``:
+        none, a joint-space skill only).
     joint_columns : sequence of str, optional
-        Joint columns to use, in this order. Default: every column other than ``t`` and
-        ``gripper``, in file order.
+        Joint columns to use, in this order, each once (not ``t`` nor ``gripper``). Default:
+        every column other than ``t`` and ``gripper``, in file order.
     delimiter : str
-        Field separator.
+        Field separator: one character that cannot occur in a number (``","``, ``";"``,
+        ``"\\t"``, ...).
 
     Returns
     -------
@@ -471,14 +499,18 @@ def demonstration_from_csv(
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        No header, no ``t`` column, a missing joint column, a non-numeric value, or any
-        :class:`Demonstration` check.
+        A bad ``delimiter`` or ``joint_columns``, no header, no ``t`` column, a missing joint
+        column, a non-numeric value, or any :class:`Demonstration` check. Every message about
+        the file names it.
     """
+    _check_delimiter(delimiter)
+    cols_given = None if joint_columns is None else _check_joint_columns(joint_columns)
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"CSV file not found: {p}")
     try:
-        text = p.read_text(encoding="utf-8")
+        # utf-8-sig: a byte order mark (Excel's "CSV UTF-8") is not part of the first column name.
+        text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{p} is not a UTF-8 text CSV file: {exc}") from exc
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
@@ -489,10 +521,10 @@ def demonstration_from_csv(
         raise ValueError(f"{p}: the header must contain a column 't', got {header}")
     if len(set(header)) != len(header):
         raise ValueError(f"{p}: duplicate column names in the header {header}")
-    if joint_columns is None:
+    if cols_given is None:
         cols = [h for h in header if h not in ("t", "gripper")]
     else:
-        cols = list(joint_columns)
+        cols = cols_given
         missing = [c for c in cols if c not in header]
         if missing:
             raise ValueError(f"{p}: joint columns {missing} not in the header {header}")
@@ -510,9 +542,48 @@ def demonstration_from_csv(
             f"got a table of shape {table.shape}"
         )
     col = {h: i for i, h in enumerate(header)}
-    return Demonstration(
-        t=table[:, col["t"]],
-        joints=table[:, [col[c] for c in cols]],
-        objects=dict(objects),
-        gripper=table[:, col["gripper"]] if "gripper" in col else None,
-    )
+    try:
+        return Demonstration(
+            t=table[:, col["t"]],
+            joints=table[:, [col[c] for c in cols]],
+            objects=objects,
+            gripper=table[:, col["gripper"]] if "gripper" in col else None,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{p}: {exc}") from exc
+
+
+# Characters of numbers (and of nan, inf), quotes, comments and line ends: not separators.
+_NOT_DELIMITERS = frozenset('.+-"#\r\n')
+
+
+def _check_delimiter(delimiter: object) -> None:
+    if (
+        not isinstance(delimiter, str)
+        or len(delimiter) != 1
+        or delimiter.isalnum()
+        or delimiter in _NOT_DELIMITERS
+    ):
+        raise ValueError(
+            "delimiter must be one character that cannot occur in a number, such as ',', ';' "
+            f"or a tab, got {delimiter!r}"
+        )
+
+
+def _check_joint_columns(joint_columns: object) -> list[str]:
+    if isinstance(joint_columns, str) or not isinstance(joint_columns, Sequence):
+        raise ValueError(
+            f"joint_columns must be a list of column names, got {type(joint_columns).__name__}"
+        )
+    cols = list(joint_columns)
+    bad = [c for c in cols if not isinstance(c, str)]
+    if bad:
+        raise ValueError(f"joint_columns must be column names (strings), got {bad[0]!r}")
+    roles = {"t": "the time", "gripper": "the gripper signal"}
+    taken = [c for c in cols if c in roles]
+    if taken:
+        raise ValueError(f"joint_columns: {taken[0]!r} is {roles[taken[0]]}, not a joint")
+    twice = sorted({c for c in cols if cols.count(c) > 1})
+    if twice:
+        raise ValueError(f"joint_columns must name each column once, got {twice} more than once")
+    return cols

@@ -1164,7 +1164,7 @@ def _joint_only(step: JointStep, theta0: Float, start: int = 0) -> tuple[Float, 
 
 
 def _check_q0(q0: npt.ArrayLike, lower: Float, upper: Float) -> Float:
-    q = check_array(q0, "q0", shape=(lower.shape[0],))
+    q = check_array(q0, "q0", shape=(lower.shape[0],), allow_bool=False)
     bad = np.flatnonzero((q < lower) | (q > upper))
     if bad.size:
         j = int(bad[0])

@@ -26,12 +26,18 @@ always does), ``robot_velocity_limit``, ``robot_acceleration_limit`` and ``robot
 float64 (n_joints,), rad/s, rad/s^2, rad/s^3, each > 0 or inf (no limit); :meth:`Skill.load`
 rebuilds the robot with them (they win over the URDF's velocity, as a joint_limits YAML does).
 These keys were added within version 1: a file without them loads as before (velocity from the
-URDF, no acceleration or jerk limit).
+URDF, no acceleration or jerk limit). Also ``duration`` (s, NaN if unknown) and, per space,
+``sel_{space}_*`` (the model selection). :meth:`Skill.load` judges the archive from its headers
+before it loads an array: any other key, or arrays of more than :data:`MAX_FILE_BYTES` in all,
+are refused.
 """
 
 from __future__ import annotations
 
+import functools
+import math
 import os
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -42,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import load_npz_safe, save_npz_atomic
+from .._io import NpzArchive, open_npz, save_npz_atomic
 from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
@@ -59,7 +65,15 @@ from .probabilistic_ik import (
     step_limit_from_velocity,
 )
 
-__all__ = ["MAX_COMPONENTS", "MAX_STEPS", "VARIABILITY_FLOOR", "Skill", "space_data"]
+__all__ = [
+    "MAX_COMPONENTS",
+    "MAX_FILE_BYTES",
+    "MAX_STEPS",
+    "MIN_STEP_SECONDS",
+    "VARIABILITY_FLOOR",
+    "Skill",
+    "space_data",
+]
 
 Float = NDArray[np.float64]
 #: Default variability floors (variances): joint angles (rad^2), gripper signal, hand position
@@ -73,6 +87,17 @@ TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
 #: arm take over 1 GB, far beyond the paper's 1000 steps; a file asking for more is refused
 #: rather than exhausting memory at the first reproduction.
 MAX_STEPS = 10**6
+#: The most bytes the arrays of a skill file may take once loaded (:meth:`Skill.load`), read
+#: from the archive's headers before anything is loaded. A skill holds a few GMMs, a URDF and
+#: limits: kilobytes to a few megabytes.
+MAX_FILE_BYTES = 64 * 2**20
+#: The shortest time step a skill may have (s): its duration over ``n_steps - 1`` steps. A
+#: nanosecond is a thousand times finer than the fastest servo loop (1 MHz). Far shorter steps
+#: give no motion: with a skill of 1e-300 s, the cube of the step (the jerk term of the motion
+#: limits) underflows to 0, and from steps of about 1e-17 s on, the retiming to the limits
+#: fails on NaN. :meth:`Skill.learn` and :meth:`Skill.load` refuse a duration that gives a
+#: shorter step, or that is not finite.
+MIN_STEP_SECONDS = 1e-9
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
 CovarianceMode = Literal["exact", "paper"]
@@ -204,7 +229,9 @@ class Skill:
             limit) give a :class:`pbdkit.learning.demonstration.LimitWarning` per demonstration,
             naming the
             joint, the value and the sample; they are learned as recorded, and reproductions
-            are clipped to the limits anyway.
+            are clipped to the limits anyway. Their time stamps are in seconds: their mean
+            duration over ``n_steps - 1`` steps must give a step of at least
+            :data:`MIN_STEP_SECONDS`.
         robot : KinematicModel
             The arm (e.g. :func:`pbdkit.robots.katana`); its forward kinematics gives x.
         n_steps : int
@@ -263,6 +290,11 @@ class Skill:
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
         n_steps = check_int(n_steps, "n_steps", minimum=2, maximum=MAX_STEPS)
+        with np.errstate(over="ignore"):  # durations near 1e308: inf, refused next
+            duration = float(np.mean([d.duration for d in items]))
+        problem = _duration_problem(duration, n_steps)
+        if problem:
+            raise ValueError(f"demos: {problem} (are the time stamps t in seconds?)")
         _warn_outside_limits(items, robot)
         floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
@@ -314,7 +346,7 @@ class Skill:
             object_names=names,
             has_gripper=has_gripper,
             reach=reach,
-            duration=float(np.mean([d.duration for d in items])),
+            duration=duration,
         )
 
     # ------------------------------------------------------------------ generalization
@@ -620,12 +652,19 @@ class Skill:
         FileNotFoundError
             If ``path`` does not exist.
         ValueError
-            A corrupt or foreign file, another format version, or inconsistent content.
+            A corrupt or foreign file, another format version, a key the format does not have,
+            arrays of more than :data:`MAX_FILE_BYTES` in all, or inconsistent content.
         """
+        p = Path(path)
+        # Sizes and keys are checked from the archive's headers before any array is loaded.
+        with open_npz(p, what=FORMAT_NAME + " file", max_bytes=MAX_FILE_BYTES) as data:
+            return cls._from_archive(data, p, robot)
+
+    @classmethod
+    def _from_archive(cls, data: NpzArchive, p: Path, robot: KinematicModel | None) -> Skill:
+        """The skill in an open archive (:meth:`load`)."""
         from ..robots._joint_limits import check_limit_array, joint_limits_mapping
 
-        p = Path(path)
-        data = load_npz_safe(p, what=FORMAT_NAME + " file")
         fmt = data.get("format")
         if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != FORMAT_NAME:
             raise ValueError(
@@ -640,6 +679,11 @@ class Skill:
                 f"this pbdkit reads version {FORMAT_VERSION}"
             )
         try:
+            names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        data.check_keys(functools.partial(_is_skill_key, n_objects=len(names)))
+        try:
             n_steps = _stored_int(data["n_steps"])
             if n_steps is None or not 2 <= n_steps <= MAX_STEPS:
                 raise ValueError(
@@ -650,7 +694,6 @@ class Skill:
                 raise ValueError(
                     f"n_joints must be an integer >= 1, got {_shown(data['n_joints'])}"
                 )
-            names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
             has_gripper = bool(data["has_gripper"])
             reach = float(data["reach"])
             duration = float(data["duration"]) if "duration" in data else float("nan")
@@ -684,6 +727,10 @@ class Skill:
                 f"{expected} for n_joints={n_joints}, gripper={has_gripper} (time, then "
                 "the joints and the gripper; time and x - o for an object)"
             )
+        # NaN: unknown (a skill learned before durations were stored); else as learn checks it.
+        problem = "" if math.isnan(duration) else _duration_problem(duration, n_steps)
+        if problem:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {problem}")
         if not (np.isfinite(reach) and reach > 0):
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: reach must be > 0, got {reach}"
@@ -724,6 +771,54 @@ class Skill:
             reach=reach,
             duration=duration,
         )
+
+
+_BASE_KEYS = frozenset(
+    {
+        "format",
+        "version",
+        "n_steps",
+        "n_joints",
+        "object_names",
+        "has_gripper",
+        "reach",
+        "duration",
+        "robot_urdf",
+        "robot_tip",
+        "robot_velocity_limit",
+        "robot_acceleration_limit",
+        "robot_jerk_limit",
+    }
+)
+# gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.
+_SPACE_KEY = re.compile(
+    r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
+    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen))"
+)
+
+
+def _duration_problem(duration: float, n_steps: int) -> str:
+    """Why a skill cannot last ``duration`` seconds over ``n_steps`` steps ("" if it can)."""
+    if not math.isfinite(duration) or duration <= 0:
+        return f"the duration must be finite and > 0 (s), got {duration!r}"
+    step = duration / (n_steps - 1)
+    if not step >= MIN_STEP_SECONDS:
+        return (
+            f"a duration of {duration:.6g} s over n_steps={n_steps} steps gives a time step of "
+            f"{step:.3g} s; it must be at least MIN_STEP_SECONDS = {MIN_STEP_SECONDS:g} s"
+        )
+    return ""
+
+
+def _is_skill_key(key: str, n_objects: int) -> bool:
+    """Whether :meth:`Skill.save` writes ``key`` for a skill of ``n_objects`` objects."""
+    if key in _BASE_KEYS:
+        return True
+    match = _SPACE_KEY.fullmatch(key)
+    if match is None:
+        return False
+    index = match.group(1) or match.group(2)
+    return index is None or int(index) < n_objects
 
 
 def _stored_int(value: NDArray[Any]) -> int | None:
