@@ -1113,11 +1113,11 @@ def test_cli_reproduce_checks_the_bag_before_writing_out(tmp_path: Path, skill: 
     )
     _one_line_error(result, f"--bag {bag}: t must be < 2147483648 s", "int32 seconds")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["long.npz", "skill.npz"]
-    # --out and --bag the same path: the npz was written, then the bag refused.
+    # --out and --bag the same path: refused before anything is written.
     same = tmp_path / "same"
     result = CliRunner().invoke(
         app,
         ["reproduce", str(tmp_path / "skill.npz"), *args, "--out", str(same), "--bag", str(same)],
     )
-    _one_line_error(result, f"--bag {same}: is the --out path too")
+    _one_line_error(result, f"--out {same}: is also --bag {same}; give each output its own path")
     assert not same.exists()

@@ -681,11 +681,10 @@ def reproduce(
 
 
 def _check_bag_output(bag: Path, out: Path) -> None:
-    """Fail unless a new bag (a directory) can be created at ``bag``, apart from ``out``."""
+    """Fail unless a new bag (a directory) can be created at ``bag`` (``out`` is another path:
+    :func:`_check_output` checked that)."""
     if bag.exists() or bag.is_symlink():
         _fail(f"--bag {bag}: exists; give a new path (a bag is a directory, never overwritten)")
-    if os.path.realpath(bag) == os.path.realpath(out):
-        _fail(f"--bag {bag}: is the --out path too; give two different paths")
     _check_output(bag, "--bag")
 
 
