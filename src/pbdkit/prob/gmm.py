@@ -99,6 +99,7 @@ from threadpoolctl import threadpool_limits
 
 from .._defaults import MAX_COMPONENTS as MAX_COMPONENTS  # its documented home: pbdkit.prob.gmm
 from .._validation import check_array, check_int, check_positive_float
+from .gaussian import inverse_cholesky_factor
 from .gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 
 __all__ = [
@@ -230,12 +231,8 @@ def _params_from_stats(
 
 def _precision_factors(covariances: Float) -> Float:
     """U_k with Sigma_k^-1 = U_k U_k^T (U_k = L_k^-T for Sigma_k = L_k L_k^T), batched."""
-    try:
-        chol = np.linalg.cholesky(covariances)
-    except np.linalg.LinAlgError:
-        raise ValueError(_not_positive_definite(covariances)) from None
-    eye = np.broadcast_to(np.eye(covariances.shape[-1]), covariances.shape)
-    return np.swapaxes(np.linalg.solve(chol, eye), -1, -2)
+    linv = inverse_cholesky_factor(covariances, "covariances", message=_not_positive_definite)
+    return np.swapaxes(linv, -1, -2)
 
 
 def _not_positive_definite(covariances: Float) -> str:
