@@ -46,6 +46,7 @@ from .._io import load_npz_safe, save_npz_atomic
 from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
+from ..prob.gmr import CovarianceMode
 from .controller import Controller
 from .demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .probabilistic_ik import (
@@ -74,7 +75,6 @@ TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
 MAX_STEPS = 10**6
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
-CovarianceMode = Literal["exact", "paper"]
 
 
 class Skill:

@@ -1168,7 +1168,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         X_in: npt.ArrayLike,
         in_dims: Sequence[int] | int = (0,),
-        covariance: Literal["exact", "paper"] = "exact",
+        covariance: CovarianceMode = "exact",
     ) -> tuple[Float, Float]:
         """Gaussian mixture regression: p(xi^O | xi^I = x) for every row of X_in (paper Table I).
 
@@ -1205,7 +1205,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         x_in: npt.ArrayLike,
         in_dims: Sequence[int] | int = (0,),
-        covariance: Literal["exact", "paper"] = "exact",
+        covariance: CovarianceMode = "exact",
     ) -> tuple[Float, Float]:
         """GMR at a single query, with minimal overhead (for a control loop).
 
