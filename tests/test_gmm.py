@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -22,6 +23,7 @@ from pbdkit.learning.datasets import lasa_names, load_lasa
 from pbdkit.prob.gmm import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
+    MAX_COMPONENTS,
     MIN_TIME_SPREAD,
     _e_step,
     _Floor,
@@ -144,7 +146,11 @@ def test_set_params_round_trip_and_repr() -> None:
 def test_scikit_learn_estimator_checks(check: str) -> None:
     if not hasattr(estimator_checks, check):  # added in later scikit-learn versions
         pytest.skip(f"{check} is not in scikit-learn {sklearn.__version__}")
-    getattr(estimator_checks, check)("GMM", GMM())
+    with warnings.catch_warnings():
+        # Some checks pass class labels as the positional y: this release still reads integer
+        # labels there as groups, with the deprecation warning tested below.
+        warnings.filterwarnings("ignore", r"GMM\.fit\(X, groups\) is deprecated", FutureWarning)
+        getattr(estimator_checks, check)("GMM", GMM())
 
 
 _UNFITTED_CALLS: dict[str, Callable[[GMM], Any]] = {
@@ -721,3 +727,35 @@ def test_basin_task_gmr_means_do_not_jump() -> None:
         joints = np.stack([d.joints for d in rescaled])
         step = np.abs(np.diff(c.joint_mean, axis=0)).max()
         assert step <= 1.5 * np.abs(np.diff(joints, axis=1)).max(), seed
+
+
+# ----------------------------------------------------------------------------- API (issue 22)
+def test_max_components_default_is_the_module_cap() -> None:
+    # GMM(max_components=10) used to disagree with MAX_COMPONENTS = 30 (Skill's and the CLI's).
+    assert GMM().max_components is None and repr(GMM()) == "GMM()"
+    x = _trajectories(np.random.default_rng(30), n_demos=3, n_steps=40)
+    gmm = GMM("auto", min_time_spread=0.0).fit(x)
+    assert max(gmm.selection_.candidates) == MAX_COMPONENTS
+    capped = GMM("auto", max_components=5, min_time_spread=0.0).fit(x)
+    assert max(capped.selection_.candidates) == 5
+
+
+def test_fit_has_scikit_learns_signature_and_warns_on_positional_groups() -> None:
+    fit = inspect.signature(GMM.fit).parameters
+    assert list(fit)[:3] == ["self", "X", "y"] and fit["y"].default is None
+    assert fit["groups"].kind is inspect.Parameter.KEYWORD_ONLY
+    two = _piecewise_demos(np.random.default_rng(31), n_demos=2)
+    g = np.tile([0, 1], len(two) // 2)  # interleaved: only explicit groups find them
+    ref = GMM("auto", max_components=4).fit(two, groups=g)
+    # pbdkit 0.1.0's fit(X, groups): still read as groups for one release, with a warning.
+    with pytest.warns(FutureWarning, match=r"GMM\.fit\(X, groups\) is deprecated.*groups="):
+        old = GMM("auto", max_components=4).fit(two, g)
+    assert old.selection_.n_folds == 2
+    np.testing.assert_array_equal(old.means_, ref.means_)
+    # A Pipeline's y (targets, not one integer label per row) is ignored, without a warning.
+    x = _trajectories(np.random.default_rng(32), n_demos=2, n_steps=50)
+    plain = GMM(3).fit(x)
+    for y in (np.linspace(0.0, 1.0, len(x)), np.arange(len(x) - 1), [[1, 2]], "labels"):
+        np.testing.assert_array_equal(GMM(3).fit(x, y).means_, plain.means_)
+    both = GMM(3).fit(x, np.arange(len(x)), groups=np.repeat([0, 1], 50))
+    np.testing.assert_array_equal(both.means_, plain.means_)

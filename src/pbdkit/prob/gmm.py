@@ -86,6 +86,7 @@ BIC of a subsample of n_eff points (``bic_samples_per_sequence`` per sequence, d
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -527,6 +528,15 @@ LOCAL_SPREAD_FLOOR = 0.01
 MIN_TIME_SPREAD = 0.2
 
 
+def _one_label_per_row(y: object, n_rows: int) -> bool:
+    """Whether fit's positional y looks like pbdkit 0.1.0's groups: integers, shape (N,)."""
+    try:
+        a = np.asarray(y)
+    except (ValueError, TypeError):
+        return False
+    return a.ndim == 1 and a.shape[0] == n_rows and a.dtype.kind in "iu"
+
+
 def _select_by_cv(
     candidates: Sequence[int], cv: Callable[[int], Float], n_folds: int
 ) -> ModelSelection:
@@ -635,8 +645,9 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         Number of components K; ``"auto"`` chooses K in 1..``max_components`` by
         cross-validation over the sequences (module docstring, "Choosing K"; needs a time
         column and at least 2 sequences); ``"bic"`` by the effective-sample-size BIC.
-    max_components : int
-        Largest K tried when K is chosen.
+    max_components : int or None
+        Largest K tried when K is chosen. None (default): :data:`MAX_COMPONENTS`, the cap
+        :class:`pbdkit.Skill` and the command line use too.
     reg_covar : float or array-like, shape (D,)
         Added to the diagonal of every covariance: one value for every dimension, or one per
         dimension. In the units of the data squared, it is a floor on the variability a
@@ -701,7 +712,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         n_components: int | Literal["auto", "bic"] = 5,
         *,
-        max_components: int = 10,
+        max_components: int | None = None,
         reg_covar: float | npt.ArrayLike = 1e-6,
         max_iter: int = 100,
         tol: float = 1e-3,
@@ -759,7 +770,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     "n_components='auto' cross-validates a regression on time and needs "
                     "time_dim; use n_components='bic' or an integer"
                 )
-            kmax = check_int(self.max_components, "max_components", minimum=1)
+            kmax = MAX_COMPONENTS if self.max_components is None else self.max_components
+            kmax = check_int(kmax, "max_components", minimum=1)
             kmax = min(kmax, n_samples)
             return self.n_components, list(range(1, kmax + 1)), floor
         k = check_int(self.n_components, "n_components", minimum=1)
@@ -797,16 +809,25 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         resp[np.arange(x.shape[0]), labels] = 1.0
         return resp
 
-    def fit(self, X: npt.ArrayLike, groups: npt.ArrayLike | None = None) -> GMM:
+    def fit(
+        self, X: npt.ArrayLike, y: object = None, *, groups: npt.ArrayLike | None = None
+    ) -> GMM:
         """Fit the mixture to X by EM (choosing K if asked).
 
         Parameters
         ----------
         X : array-like, shape (N, D)
             Samples in rows; column ``time_dim`` (0 by default) holds time.
+        y : ignored
+            Ignored, present for API consistency by convention (scikit-learn's
+            ``fit(X, y)``: a Pipeline passes its targets here). Deprecated: pbdkit 0.1.0 took
+            ``groups`` as the second positional argument, so an integer array of one label per
+            row given here (and no ``groups=``) is still read as ``groups``, with a
+            FutureWarning, for this release.
         groups : array-like, shape (N,), optional
-            Sequence (demonstration) of every row. Default: a new sequence wherever the time
-            column decreases (stacked demonstrations), or one sequence without a time column.
+            Keyword-only. Sequence (demonstration) of every row. Default: a new sequence
+            wherever the time column decreases (stacked demonstrations), or one sequence
+            without a time column.
 
         Returns
         -------
@@ -814,6 +835,14 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         """
         x_raw = check_array(X, "X", ndim=2, min_rows=2)
         n, d = x_raw.shape
+        if y is not None and groups is None and _one_label_per_row(y, n):
+            warnings.warn(
+                "GMM.fit(X, groups) is deprecated: the second argument is y, ignored as in "
+                "scikit-learn; it is read as groups for this release only: pass groups=...",
+                FutureWarning,
+                stacklevel=2,
+            )
+            groups = np.asarray(y)
         method, candidates, diag = self._check_params(n, d)
         spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
         # A constant column with no floor gives every component a zero variance there.
