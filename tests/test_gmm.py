@@ -25,6 +25,7 @@ from pbdkit.prob.gmm import (
     LOCAL_SPREAD_FLOOR,
     MAX_COMPONENTS,
     MIN_TIME_SPREAD,
+    REG_COVAR,
     _e_step,
     _Floor,
     _floor_time_variance,
@@ -37,6 +38,7 @@ from pbdkit.prob.gmm import (
     local_spread,
     n_parameters,
     pooled_spread,
+    scale_aware_floor,
     sequences_from_time,
     time_based_init,
 )
@@ -759,3 +761,64 @@ def test_fit_has_scikit_learns_signature_and_warns_on_positional_groups() -> Non
         np.testing.assert_array_equal(GMM(3).fit(x, y).means_, plain.means_)
     both = GMM(3).fit(x, np.arange(len(x)), groups=np.repeat([0, 1], 50))
     np.testing.assert_array_equal(both.means_, plain.means_)
+
+
+# ----------------------------------------------------------------------------- floors and scale
+def test_scale_aware_floor_is_scikit_learns_from_unit_variance_up() -> None:
+    rng = np.random.default_rng(33)
+    t = np.linspace(0.0, 20.0, 200)  # seconds
+    x = np.column_stack([t, 2.0 * np.sin(t), rng.normal(0.0, 1.5, 200)])  # variances 33, 2, 2
+    np.testing.assert_array_equal(scale_aware_floor(x), np.full(3, REG_COVAR))
+    # The default is bit-identical to an explicit reg_covar=1e-6 there (scikit-learn's).
+    a, b = GMM(4).fit(x), GMM(4, reg_covar=1e-6).fit(x)
+    np.testing.assert_array_equal(a.covariances_, b.covariances_)
+    small = x * np.array([1e-3, 1e-9, 1.0])
+    small[:, 2] = 5.0  # a constant column takes the largest variance as its scale
+    floor = scale_aware_floor(small)
+    np.testing.assert_array_equal(floor[:2], REG_COVAR * small[:, :2].var(axis=0))
+    assert floor[2] == floor[0]
+    assert scale_aware_floor(np.ones((4, 2))).tolist() == [REG_COVAR, REG_COVAR]
+
+
+def _lasa_rows(time_scale: float, space_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """LASA's G as Skill.learn samples it (100 of 1000 steps per demonstration), time in
+    [0, time_scale], positions times space_scale; and the 1000 query times."""
+    demos = load_lasa("GShape")
+    t = np.linspace(0.0, time_scale, 1000)
+    x = np.vstack([np.column_stack([t[::10], space_scale * d.pos[::10]]) for d in demos])
+    return x, t
+
+
+def test_gmr_scales_with_the_data() -> None:
+    # Issue 22, defect 7: with a 1e-6 floor, time over 1 ms (variance 8e-8) gave one component
+    # and a flat GMR, and positions of nanometres a covariance 1e12 times their variance.
+    x, t = _lasa_rows(1.0, 1.0)
+    xs, ts = _lasa_rows(1e-3, 1e-9)
+    ref = GMM("auto", max_components=12).fit(x)
+    small = GMM("auto", max_components=12).fit(xs)
+    assert small.n_components_ == ref.n_components_ >= 5
+    mean, cov = ref.regress(t[:, None])
+    mean_s, cov_s = small.regress(ts[:, None])
+    spread = np.ptp(mean, axis=0)
+    np.testing.assert_allclose(mean_s / 1e-9, mean, rtol=0, atol=1e-3 * spread.max())
+    np.testing.assert_allclose(cov_s / 1e-18, cov, rtol=1e-2, atol=1e-3 * cov.max())
+
+
+def test_a_floor_that_hides_the_data_is_refused() -> None:
+    x, _ = _lasa_rows(2e-3, 1.0)  # a 2 ms motion: time variance 3.4e-7
+    with pytest.raises(
+        ValueError,
+        match=r"reg_covar of the time column X\[:, 0\] is 1e-06, 2\.\d+ times its variance "
+        r"\(3\.\d+e-07; at most 0\.1 times is allowed\).*reg_covar=None",
+    ):
+        GMM(5, reg_covar=1e-6).fit(x)
+    x, _ = _lasa_rows(1.0, 1e-9)  # nanometres: variance ~1e-16
+    with pytest.raises(
+        ValueError,
+        match=r"reg_covar is above the variance of every column but time \(X\[:, \d\]: "
+        r"1e-06 > \d\.\d+e-1\d\)",
+    ):
+        GMM(5, reg_covar=1e-6).fit(x)
+    # A still column under its floor is fine while another column varies above its own.
+    x[:, 2] = 1e-12 * np.sin(np.arange(len(x)))
+    GMM(2, reg_covar=[1e-6, 1e-20, 1e-6]).fit(x)

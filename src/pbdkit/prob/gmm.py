@@ -15,6 +15,17 @@ loops cost 1-3 ms per iteration on these tiny problems. ``reg_covar`` (one value
 dimension) is added to every covariance's diagonal: in the data's units squared, a floor on the
 variability a component can claim.
 
+Floors and scale. A floor in the data's units suits one scale of data only: scikit-learn's 1e-6 is
+larger than the whole variance of time over 2 ms (3.3e-7 s^2: one component, a flat GMR) and
+1e12 times that of positions in nanometres. The default ``reg_covar=None`` is therefore relative,
+:data:`REG_COVAR` (1e-6) times each column's variance, and at most 1e-6 in the data's units
+(:func:`scale_aware_floor`): scikit-learn's 1e-6 for every column of variance 1 or more, a floor
+of 0.1 % of the standard deviation for smaller ones, so that the mixture and its regression scale
+with the data (tested to 1e-3 of the motion on LASA, time times 1e-3 and positions times 1e-9). A
+floor given explicitly is kept as given, in the data's units, except that a time floor above
+:data:`MAX_TIME_FLOOR_FRACTION` of the time's variance, or a floor above the variance of every
+other varying column, is refused with a ValueError: either hides the data's structure.
+
 Time floor (``min_time_spread``). EM on trajectories has degenerate optima along time: the
 demonstrations are sampled on one shared grid of steps, so a component can take the samples of a
 single step (of one demonstration, or a few) and shrink its time variance to ``reg_covar``'s
@@ -110,6 +121,7 @@ __all__ = [
     "local_spread",
     "n_parameters",
     "pooled_spread",
+    "scale_aware_floor",
     "sequences_from_time",
     "time_based_init",
 ]
@@ -526,6 +538,60 @@ LOCAL_SPREAD_FLOOR = 0.01
 #: Default ``min_time_spread``: every component's time standard deviation is at least this
 #: fraction of the components' spacing (the time span over K); module docstring, "Time floor".
 MIN_TIME_SPREAD = 0.2
+#: ``reg_covar=None``: the floor of a column is this fraction of its variance, and at most this
+#: value in the data's units (scikit-learn's default ``reg_covar``).
+REG_COVAR = 1e-6
+#: A time floor (``reg_covar`` of the time column) above this fraction of the time column's
+#: variance is refused: every component would be at least a third of the time's standard
+#: deviation (9 % of the span) wide, too wide for more than about five components to be told
+#: apart along time (LASA's G drawn in 2 ms under a floor of 1e-6 s^2, 3 times the time's
+#: variance: one component, a GMR mean 0.95 of the shape's spread off the demonstrations' mean).
+MAX_TIME_FLOOR_FRACTION = 0.1
+
+
+def scale_aware_floor(X: npt.ArrayLike) -> Float:
+    """The floor of ``reg_covar=None``: per column, REG_COVAR min(1, var), var its variance.
+
+    A constant column takes the largest column variance as its scale (its floor only needs to
+    be positive: every component has the same variance there); all-constant data take
+    :data:`REG_COVAR`.
+
+    Parameters
+    ----------
+    X : array-like, shape (N, D)
+
+    Returns
+    -------
+    reg_covar : ndarray, shape (D,)
+    """
+    var = check_array(X, "X", ndim=2).var(axis=0)
+    scale = np.where(var > 0.0, var, var.max(initial=0.0))
+    floor = REG_COVAR * np.minimum(1.0, scale)
+    return np.where(floor > 0.0, floor, REG_COVAR)
+
+
+def _check_floor_scale(x: Float, floor: Float, time_dim: int | None) -> None:
+    """Refuse a floor that would hide the data (module docstring, "Floors and scale")."""
+    var = x.var(axis=0)
+    if time_dim is not None and var[time_dim] > 0.0:
+        v, f = float(var[time_dim]), float(floor[time_dim])
+        if f > MAX_TIME_FLOOR_FRACTION * v:
+            raise ValueError(
+                f"reg_covar of the time column X[:, {time_dim}] is {f:.3g}, {f / v:.3g} times "
+                f"its variance ({v:.3g}; at most {MAX_TIME_FLOOR_FRACTION:g} times is allowed): "
+                "no component could be narrower in time than the motion; pass reg_covar=None "
+                f"(scale-aware), a time floor of at most {MAX_TIME_FLOOR_FRACTION * v:.3g}, or "
+                "time in longer units"
+            )
+    cols = [j for j in range(x.shape[1]) if j != time_dim and var[j] > 0.0]
+    if cols and all(floor[j] > var[j] for j in cols):
+        j = max(cols, key=lambda c: float(var[c] / floor[c]))
+        raise ValueError(
+            f"reg_covar is above the variance of every column but time (X[:, {j}]: "
+            f"{float(floor[j]):.3g} > {float(var[j]):.3g}): the components would model the "
+            "floor, not the data; pass reg_covar=None (scale-aware), a smaller reg_covar, or "
+            "rescale the data"
+        )
 
 
 def _one_label_per_row(y: object, n_rows: int) -> bool:
@@ -648,10 +714,17 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
     max_components : int or None
         Largest K tried when K is chosen. None (default): :data:`MAX_COMPONENTS`, the cap
         :class:`pbdkit.Skill` and the command line use too.
-    reg_covar : float or array-like, shape (D,)
+    reg_covar : float, array-like of shape (D,), or None
         Added to the diagonal of every covariance: one value for every dimension, or one per
         dimension. In the units of the data squared, it is a floor on the variability a
-        component can claim (scikit-learn's ``reg_covar``, per dimension).
+        component can claim (scikit-learn's ``reg_covar``, per dimension). None (default):
+        scale-aware, :data:`REG_COVAR` (1e-6) times each column's variance and at most 1e-6
+        (module docstring, "Floors and scale"): scikit-learn's 1e-6 for columns of variance 1
+        or more, 0.1 % of the standard deviation at smaller scales, so the fit scales with the
+        data (milliseconds, nanometres). A given value is taken as is, in the data's units; a
+        time floor above :data:`MAX_TIME_FLOOR_FRACTION` of the time column's variance, or a
+        floor above the variance of every other varying column, is refused (it would hide the
+        data's structure).
     max_iter : int
         Maximum number of EM iterations per fit.
     tol : float
@@ -713,7 +786,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         n_components: int | Literal["auto", "bic"] = 5,
         *,
         max_components: int | None = None,
-        reg_covar: float | npt.ArrayLike = 1e-6,
+        reg_covar: float | npt.ArrayLike | None = None,
         max_iter: int = 100,
         tol: float = 1e-3,
         random_state: int | np.random.RandomState | None = None,
@@ -740,10 +813,13 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self.cv_scale = cv_scale
 
     # ------------------------------------------------------------------ fitting
-    def _check_params(self, n_samples: int, n_dims: int) -> tuple[str, list[int], Float]:
-        """Validated (method, candidate Ks, per-dimension floor)."""
+    def _check_params(self, x: Float) -> tuple[str, list[int], Float]:
+        """Validated (method, candidate Ks, per-dimension floor) for the data x (N, D)."""
+        n_samples, n_dims = x.shape
         reg = self.reg_covar
-        if np.ndim(reg) == 0:
+        if reg is None:
+            floor = scale_aware_floor(x)
+        elif np.ndim(reg) == 0:
             floor = np.full(n_dims, check_positive_float(reg, "reg_covar", allow_zero=True))
         else:
             floor = check_array(reg, "reg_covar", shape=(n_dims,))
@@ -759,6 +835,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             td = check_int(self.time_dim, "time_dim", minimum=0)
             if td >= n_dims:
                 raise ValueError(f"time_dim must be in [0, {n_dims}) for X with {n_dims} columns")
+        _check_floor_scale(x, floor, None if self.time_dim is None else int(self.time_dim))
         if isinstance(self.n_components, str):
             if self.n_components not in ("auto", "bic"):
                 raise ValueError(
@@ -843,7 +920,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                 stacklevel=2,
             )
             groups = np.asarray(y)
-        method, candidates, diag = self._check_params(n, d)
+        method, candidates, diag = self._check_params(x_raw)
         spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
         # A constant column with no floor gives every component a zero variance there.
         flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (diag <= 0.0))
