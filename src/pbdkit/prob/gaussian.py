@@ -74,9 +74,16 @@ def inverse_cholesky_factor(
     ValueError
         If a matrix is not positive definite.
     """
+    return _cholesky_with_inverse(covariance, name, message)[1]
+
+
+def _cholesky_with_inverse(
+    covariance: Float, name: str = "covariance", message: Callable[[Float], str] | None = None
+) -> tuple[Float, Float]:
+    """L and L^-1 for covariance = L L^T: :func:`inverse_cholesky_factor` and the factor."""
     chol = _cholesky(covariance, name, message)
     eye = np.broadcast_to(np.eye(covariance.shape[-1]), covariance.shape)
-    return np.asarray(np.linalg.solve(chol, eye))
+    return chol, np.asarray(np.linalg.solve(chol, eye))
 
 
 def _spd_solve(a: Float, b: Float, name: str) -> Float:
