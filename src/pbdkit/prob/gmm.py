@@ -22,9 +22,9 @@ larger than the whole variance of time over 2 ms (3.3e-7 s^2: one component, a f
 (:func:`scale_aware_floor`): scikit-learn's 1e-6 for every column of variance 1 or more, a floor
 of 0.1 % of the standard deviation for smaller ones, so that the mixture and its regression scale
 with the data (tested to 1e-3 of the motion on LASA, time times 1e-3 and positions times 1e-9). A
-floor given explicitly is kept as given, in the data's units, except that a time floor above
-:data:`MAX_TIME_FLOOR_FRACTION` of the time's variance, or a floor above the variance of every
-other varying column, is refused with a ValueError: either hides the data's structure.
+floor given explicitly is kept as given, in the data's units (a still joint under its floor is
+data: a skill may hold it still), except that a time floor above :data:`MAX_TIME_FLOOR_FRACTION`
+of the time's variance is refused with a ValueError: it would blur every phase of the motion.
 
 Time floor (``min_time_spread``). EM on trajectories has degenerate optima along time: the
 demonstrations are sampled on one shared grid of steps, so a component can take the samples of a
@@ -570,27 +570,21 @@ def scale_aware_floor(X: npt.ArrayLike) -> Float:
     return np.where(floor > 0.0, floor, REG_COVAR)
 
 
-def _check_floor_scale(x: Float, floor: Float, time_dim: int | None) -> None:
-    """Refuse a floor that would hide the data (module docstring, "Floors and scale")."""
-    var = x.var(axis=0)
-    if time_dim is not None and var[time_dim] > 0.0:
-        v, f = float(var[time_dim]), float(floor[time_dim])
-        if f > MAX_TIME_FLOOR_FRACTION * v:
-            raise ValueError(
-                f"reg_covar of the time column X[:, {time_dim}] is {f:.3g}, {f / v:.3g} times "
-                f"its variance ({v:.3g}; at most {MAX_TIME_FLOOR_FRACTION:g} times is allowed): "
-                "no component could be narrower in time than the motion; pass reg_covar=None "
-                f"(scale-aware), a time floor of at most {MAX_TIME_FLOOR_FRACTION * v:.3g}, or "
-                "time in longer units"
-            )
-    cols = [j for j in range(x.shape[1]) if j != time_dim and var[j] > 0.0]
-    if cols and all(floor[j] > var[j] for j in cols):
-        j = max(cols, key=lambda c: float(var[c] / floor[c]))
+def _check_time_floor(x: Float, floor: Float, time_dim: int | None) -> None:
+    """Refuse a time floor that would hide the motion (module docstring, "Floors and scale").
+
+    Only time: a still joint under its floor is data (a skill may hold a joint still).
+    """
+    if time_dim is None:
+        return
+    v, f = float(x[:, time_dim].var()), float(floor[time_dim])
+    if v > 0.0 and f > MAX_TIME_FLOOR_FRACTION * v:
         raise ValueError(
-            f"reg_covar is above the variance of every column but time (X[:, {j}]: "
-            f"{float(floor[j]):.3g} > {float(var[j]):.3g}): the components would model the "
-            "floor, not the data; pass reg_covar=None (scale-aware), a smaller reg_covar, or "
-            "rescale the data"
+            f"reg_covar of the time column X[:, {time_dim}] is {f:.3g}, {f / v:.3g} times "
+            f"its variance ({v:.3g}; at most {MAX_TIME_FLOOR_FRACTION:g} times is allowed): "
+            "no component could be narrower in time than the motion; pass reg_covar=None "
+            f"(scale-aware), a time floor of at most {MAX_TIME_FLOOR_FRACTION * v:.3g}, or "
+            "time in longer units"
         )
 
 
@@ -722,9 +716,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         (module docstring, "Floors and scale"): scikit-learn's 1e-6 for columns of variance 1
         or more, 0.1 % of the standard deviation at smaller scales, so the fit scales with the
         data (milliseconds, nanometres). A given value is taken as is, in the data's units; a
-        time floor above :data:`MAX_TIME_FLOOR_FRACTION` of the time column's variance, or a
-        floor above the variance of every other varying column, is refused (it would hide the
-        data's structure).
+        time floor above :data:`MAX_TIME_FLOOR_FRACTION` of the time column's variance is
+        refused (it would blur every phase of the motion).
     max_iter : int
         Maximum number of EM iterations per fit.
     tol : float
@@ -835,7 +828,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             td = check_int(self.time_dim, "time_dim", minimum=0)
             if td >= n_dims:
                 raise ValueError(f"time_dim must be in [0, {n_dims}) for X with {n_dims} columns")
-        _check_floor_scale(x, floor, None if self.time_dim is None else int(self.time_dim))
+        _check_time_floor(x, floor, None if self.time_dim is None else int(self.time_dim))
         if isinstance(self.n_components, str):
             if self.n_components not in ("auto", "bic"):
                 raise ValueError(
