@@ -135,3 +135,24 @@ def test_log_density_matches_scipy() -> None:
 def test_nan_input_rejected() -> None:
     with pytest.raises(ValueError, match="means must be finite"):
         G.product_information(np.array([[np.nan, 0.0]]), np.eye(2)[None])
+
+
+def test_inverse_cholesky_factor_is_the_inverse_of_the_lower_factor() -> None:
+    rng = np.random.default_rng(6)
+    cov = np.stack([_random_spd(rng, 3, scale) for scale in (1.0, 1e-9, 1e4)])
+    linv = G.inverse_cholesky_factor(cov)
+    upper = np.abs(np.triu(linv, 1)) / np.abs(linv).max(axis=(1, 2), keepdims=True)
+    assert upper.max() < 1e-12  # lower triangular, up to the rounding of the solve
+    np.testing.assert_allclose(
+        linv @ np.linalg.cholesky(cov), np.broadcast_to(np.eye(3), cov.shape), atol=1e-12
+    )
+    # Sigma^-1 = L^-T L^-1, as precision_from_covariance computes it.
+    np.testing.assert_array_equal(
+        G.precision_from_covariance(cov[0]), 0.5 * (linv[0].T @ linv[0] + (linv[0].T @ linv[0]).T)
+    )
+    bad = cov.copy()
+    bad[1] = -bad[1]
+    with pytest.raises(ValueError, match="Sigma is not positive definite; add regularization"):
+        G.inverse_cholesky_factor(bad, "Sigma")
+    with pytest.raises(ValueError, match=r"^3 matrices, shape \(3, 3, 3\)$"):
+        G.inverse_cholesky_factor(bad, message=lambda c: f"{len(c)} matrices, shape {c.shape}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -22,7 +23,9 @@ from pbdkit.learning.datasets import lasa_names, load_lasa
 from pbdkit.prob.gmm import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
+    MAX_COMPONENTS,
     MIN_TIME_SPREAD,
+    REG_COVAR,
     _e_step,
     _Floor,
     _floor_time_variance,
@@ -35,6 +38,7 @@ from pbdkit.prob.gmm import (
     local_spread,
     n_parameters,
     pooled_spread,
+    scale_aware_floor,
     sequences_from_time,
     time_based_init,
 )
@@ -144,7 +148,11 @@ def test_set_params_round_trip_and_repr() -> None:
 def test_scikit_learn_estimator_checks(check: str) -> None:
     if not hasattr(estimator_checks, check):  # added in later scikit-learn versions
         pytest.skip(f"{check} is not in scikit-learn {sklearn.__version__}")
-    getattr(estimator_checks, check)("GMM", GMM())
+    with warnings.catch_warnings():
+        # Some checks pass class labels as the positional y: this release still reads integer
+        # labels there as groups, with the deprecation warning tested below.
+        warnings.filterwarnings("ignore", r"GMM\.fit\(X, groups\) is deprecated", FutureWarning)
+        getattr(estimator_checks, check)("GMM", GMM())
 
 
 _UNFITTED_CALLS: dict[str, Callable[[GMM], Any]] = {
@@ -721,3 +729,89 @@ def test_basin_task_gmr_means_do_not_jump() -> None:
         joints = np.stack([d.joints for d in rescaled])
         step = np.abs(np.diff(c.joint_mean, axis=0)).max()
         assert step <= 1.5 * np.abs(np.diff(joints, axis=1)).max(), seed
+
+
+# ----------------------------------------------------------------------------- API (issue 22)
+def test_max_components_default_is_the_module_cap() -> None:
+    # GMM(max_components=10) used to disagree with MAX_COMPONENTS = 30 (Skill's and the CLI's).
+    assert GMM().max_components is None and repr(GMM()) == "GMM()"
+    x = _trajectories(np.random.default_rng(30), n_demos=3, n_steps=40)
+    gmm = GMM("auto", min_time_spread=0.0).fit(x)
+    assert max(gmm.selection_.candidates) == MAX_COMPONENTS
+    capped = GMM("auto", max_components=5, min_time_spread=0.0).fit(x)
+    assert max(capped.selection_.candidates) == 5
+
+
+def test_fit_has_scikit_learns_signature_and_warns_on_positional_groups() -> None:
+    fit = inspect.signature(GMM.fit).parameters
+    assert list(fit)[:3] == ["self", "X", "y"] and fit["y"].default is None
+    assert fit["groups"].kind is inspect.Parameter.KEYWORD_ONLY
+    two = _piecewise_demos(np.random.default_rng(31), n_demos=2)
+    g = np.tile([0, 1], len(two) // 2)  # interleaved: only explicit groups find them
+    ref = GMM("auto", max_components=4).fit(two, groups=g)
+    # pbdkit 0.1.0's fit(X, groups): still read as groups for one release, with a warning.
+    with pytest.warns(FutureWarning, match=r"GMM\.fit\(X, groups\) is deprecated.*groups="):
+        old = GMM("auto", max_components=4).fit(two, g)
+    assert old.selection_.n_folds == 2
+    np.testing.assert_array_equal(old.means_, ref.means_)
+    # A Pipeline's y (targets, not one integer label per row) is ignored, without a warning.
+    x = _trajectories(np.random.default_rng(32), n_demos=2, n_steps=50)
+    plain = GMM(3).fit(x)
+    for y in (np.linspace(0.0, 1.0, len(x)), np.arange(len(x) - 1), [[1, 2]], "labels"):
+        np.testing.assert_array_equal(GMM(3).fit(x, y).means_, plain.means_)
+    both = GMM(3).fit(x, np.arange(len(x)), groups=np.repeat([0, 1], 50))
+    np.testing.assert_array_equal(both.means_, plain.means_)
+
+
+# ----------------------------------------------------------------------------- floors and scale
+def test_scale_aware_floor_is_scikit_learns_from_unit_variance_up() -> None:
+    rng = np.random.default_rng(33)
+    t = np.linspace(0.0, 20.0, 200)  # seconds
+    x = np.column_stack([t, 2.0 * np.sin(t), rng.normal(0.0, 1.5, 200)])  # variances 33, 2, 2
+    np.testing.assert_array_equal(scale_aware_floor(x), np.full(3, REG_COVAR))
+    # The default is bit-identical to an explicit reg_covar=1e-6 there (scikit-learn's).
+    a, b = GMM(4).fit(x), GMM(4, reg_covar=1e-6).fit(x)
+    np.testing.assert_array_equal(a.covariances_, b.covariances_)
+    small = x * np.array([1e-3, 1e-9, 1.0])
+    small[:, 2] = 5.0  # a constant column takes the largest variance as its scale
+    floor = scale_aware_floor(small)
+    np.testing.assert_array_equal(floor[:2], REG_COVAR * small[:, :2].var(axis=0))
+    assert floor[2] == floor[0]
+    assert scale_aware_floor(np.ones((4, 2))).tolist() == [REG_COVAR, REG_COVAR]
+
+
+def _lasa_rows(time_scale: float, space_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """LASA's G as Skill.learn samples it (100 of 1000 steps per demonstration), time in
+    [0, time_scale], positions times space_scale; and the 1000 query times."""
+    demos = load_lasa("GShape")
+    t = np.linspace(0.0, time_scale, 1000)
+    x = np.vstack([np.column_stack([t[::10], space_scale * d.pos[::10]]) for d in demos])
+    return x, t
+
+
+def test_gmr_scales_with_the_data() -> None:
+    # Issue 22, defect 7: with a 1e-6 floor, time over 1 ms (variance 8e-8) gave one component
+    # and a flat GMR, and positions of nanometres a covariance 1e12 times their variance.
+    x, t = _lasa_rows(1.0, 1.0)
+    xs, ts = _lasa_rows(1e-3, 1e-9)
+    ref = GMM("auto", max_components=12).fit(x)
+    small = GMM("auto", max_components=12).fit(xs)
+    assert small.n_components_ == ref.n_components_ >= 5
+    mean, cov = ref.regress(t[:, None])
+    mean_s, cov_s = small.regress(ts[:, None])
+    spread = np.ptp(mean, axis=0)
+    np.testing.assert_allclose(mean_s / 1e-9, mean, rtol=0, atol=1e-3 * spread.max())
+    np.testing.assert_allclose(cov_s / 1e-18, cov, rtol=1e-2, atol=1e-3 * cov.max())
+
+
+def test_a_time_floor_that_hides_the_motion_is_refused() -> None:
+    x, _ = _lasa_rows(2e-3, 1.0)  # a 2 ms motion: time variance 3.4e-7
+    with pytest.raises(
+        ValueError,
+        match=r"reg_covar of the time column X\[:, 0\] is 1e-06, 2\.\d+ times its variance "
+        r"\(3\.\d+e-07; at most 0\.1 times is allowed\).*reg_covar=None",
+    ):
+        GMM(5, reg_covar=1e-6).fit(x)
+    # A still column under its own floor is data (a skill may hold a joint still).
+    x, _ = _lasa_rows(1.0, 1e-9)
+    assert GMM(2, reg_covar=1e-6).fit(x).n_components_ == 2

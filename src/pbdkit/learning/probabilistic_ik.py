@@ -183,7 +183,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol, runtime_checkable
 
@@ -201,6 +201,7 @@ from ..motion.limits import (
     times_from_durations,
 )
 from ..motion.otg import point_to_point, spline_derivatives
+from ..prob.gaussian import inverse_cholesky_factor
 from ..robots.kinematics import damped_pinv
 
 __all__ = [
@@ -277,18 +278,17 @@ class ReachWarning(UserWarning):
     """An object's constrained target lies beyond the arm's reach (the hand stops short)."""
 
 
-def _chol_inverse_factor(cov: Float, name: str) -> Float:
-    """L^-1 for Sigma = L L^T, batched over the leading axis: (T, d, d) -> (T, d, d)."""
-    try:
-        chol = np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError as exc:
+def _not_positive_definite_at(name: str) -> Callable[[Float], str]:
+    """The error message for covariances ``name`` (T, d, d) not positive definite at some steps."""
+
+    def message(cov: Float) -> str:
         bad = [j for j in range(cov.shape[0]) if np.linalg.eigvalsh(cov[j]).min() <= 0]
-        raise ValueError(
+        return (
             f"{name} must be positive definite at every step; it is not at steps {bad[:5]}; "
             "learn with a larger reg_covar"
-        ) from exc
-    eye = np.broadcast_to(np.eye(cov.shape[-1]), cov.shape)
-    return np.asarray(np.linalg.solve(chol, eye))
+        )
+
+    return message
 
 
 class Constraints:
@@ -352,12 +352,14 @@ class Constraints:
         self.gripper = (
             None if gripper is None else check_array(gripper, "gripper", shape=(n_steps,))
         )
-        linv = _chol_inverse_factor(self.joint_cov, "joint_cov")
+        linv = inverse_cholesky_factor(
+            self.joint_cov, message=_not_positive_definite_at("joint_cov")
+        )
         self.joint_prec: Float = np.swapaxes(linv, -1, -2) @ linv
         self.joint_eta: Float = np.einsum("tij,tj->ti", self.joint_prec, self.joint_mean)
         self.task_prec: dict[str, Float] = {}
         for k, cov in self.task_cov.items():
-            li = _chol_inverse_factor(cov, f"task_cov[{k!r}]")
+            li = inverse_cholesky_factor(cov, message=_not_positive_definite_at(f"task_cov[{k!r}]"))
             self.task_prec[k] = np.swapaxes(li, -1, -2) @ li
 
     @property

@@ -52,6 +52,7 @@ from .._io import NpzArchive, open_npz, save_npz_atomic
 from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
+from ..prob.gmr import CovarianceMode
 from .controller import Controller
 from .demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .probabilistic_ik import (
@@ -100,7 +101,6 @@ MAX_FILE_BYTES = 64 * 2**20
 MIN_STEP_SECONDS = 1e-9
 FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 1
-CovarianceMode = Literal["exact", "paper"]
 
 
 class Skill:

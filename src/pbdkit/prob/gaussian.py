@@ -11,6 +11,8 @@ argument. Nothing here calls ``inv`` on a covariance: Cholesky factors and solve
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
@@ -21,6 +23,7 @@ __all__ = [
     "gaussian_log_density",
     "gaussian_product",
     "information_from_gaussian",
+    "inverse_cholesky_factor",
     "linear_transform",
     "precision_from_covariance",
     "product_information",
@@ -30,14 +33,57 @@ __all__ = [
 Float = NDArray[np.float64]
 
 
-def _cholesky(a: Float, name: str) -> Float:
+def _cholesky(a: Float, name: str, message: Callable[[Float], str] | None = None) -> Float:
+    """Lower Cholesky factor L of a = L L^T (batched), or a ValueError: ``message(a)`` if given."""
     try:
         return np.asarray(np.linalg.cholesky(a), dtype=np.float64)
     except np.linalg.LinAlgError as exc:
+        if message is not None:
+            raise ValueError(message(a)) from None
         raise ValueError(
             f"{name} is not positive definite; add regularization "
             "(regularize_covariance) or check that the constraints together cover every dimension"
         ) from exc
+
+
+def inverse_cholesky_factor(
+    covariance: Float, name: str = "covariance", *, message: Callable[[Float], str] | None = None
+) -> Float:
+    """L^-1 for covariance = L L^T (Cholesky), batched over the leading axes.
+
+    The one route from a covariance to its precision in pbdkit: Sigma^-1 = L^-T L^-1, and the
+    Mahalanobis distance of d is ||L^-1 d||^2 (scikit-learn's ``precisions_cholesky_`` is
+    L^-T). A hot-path helper: the input is not validated (callers pass float64 arrays).
+
+    Parameters
+    ----------
+    covariance : ndarray, shape (..., D, D)
+        Symmetric positive-definite matrices, float64.
+    name : str
+        Names ``covariance`` in the default error message.
+    message : callable, optional
+        ``message(covariance)`` gives the error message instead (to name a step, a component).
+
+    Returns
+    -------
+    inverse_factor : ndarray, shape (..., D, D)
+        Lower triangular L^-1.
+
+    Raises
+    ------
+    ValueError
+        If a matrix is not positive definite.
+    """
+    return _cholesky_with_inverse(covariance, name, message)[1]
+
+
+def _cholesky_with_inverse(
+    covariance: Float, name: str = "covariance", message: Callable[[Float], str] | None = None
+) -> tuple[Float, Float]:
+    """L and L^-1 for covariance = L L^T: :func:`inverse_cholesky_factor` and the factor."""
+    chol = _cholesky(covariance, name, message)
+    eye = np.broadcast_to(np.eye(covariance.shape[-1]), covariance.shape)
+    return chol, np.asarray(np.linalg.solve(chol, eye))
 
 
 def _spd_solve(a: Float, b: Float, name: str) -> Float:
@@ -48,7 +94,10 @@ def _spd_solve(a: Float, b: Float, name: str) -> Float:
 
 
 def precision_from_covariance(covariance: npt.ArrayLike) -> Float:
-    """Inverse of a covariance through its Cholesky factor.
+    """Inverse of a covariance through its Cholesky factor: L^-T L^-1.
+
+    L^-1 comes from :func:`inverse_cholesky_factor`. (pbdkit 0.1.0 solved L^T P = L^-1 instead:
+    the results differ in the last bits only.)
 
     Parameters
     ----------
@@ -61,8 +110,8 @@ def precision_from_covariance(covariance: npt.ArrayLike) -> Float:
         Symmetric inverse.
     """
     cov = check_array(covariance, "covariance", ndim=(2, 3, 4))
-    eye = np.broadcast_to(np.eye(cov.shape[-1]), cov.shape)
-    prec = _spd_solve(cov, eye, "covariance")
+    linv = inverse_cholesky_factor(cov, "covariance")
+    prec = np.swapaxes(linv, -1, -2) @ linv  # Sigma^-1 = L^-T L^-1
     return 0.5 * (prec + np.swapaxes(prec, -1, -2))
 
 

@@ -15,6 +15,17 @@ loops cost 1-3 ms per iteration on these tiny problems. ``reg_covar`` (one value
 dimension) is added to every covariance's diagonal: in the data's units squared, a floor on the
 variability a component can claim.
 
+Floors and scale. A floor in the data's units suits one scale of data only: scikit-learn's 1e-6 is
+larger than the whole variance of time over 2 ms (3.3e-7 s^2: one component, a flat GMR) and
+1e12 times that of positions in nanometres. The default ``reg_covar=None`` is therefore relative,
+:data:`REG_COVAR` (1e-6) times each column's variance, and at most 1e-6 in the data's units
+(:func:`scale_aware_floor`): scikit-learn's 1e-6 for every column of variance 1 or more, a floor
+of 0.1 % of the standard deviation for smaller ones, so that the mixture and its regression scale
+with the data (tested to 1e-3 of the motion on LASA, time times 1e-3 and positions times 1e-9). A
+floor given explicitly is kept as given, in the data's units (a still joint under its floor is
+data: a skill may hold it still), except that a time floor above :data:`MAX_TIME_FLOOR_FRACTION`
+of the time's variance is refused with a ValueError: it would blur every phase of the motion.
+
 Time floor (``min_time_spread``). EM on trajectories has degenerate optima along time: the
 demonstrations are sampled on one shared grid of steps, so a component can take the samples of a
 single step (of one demonstration, or a few) and shrink its time variance to ``reg_covar``'s
@@ -86,6 +97,7 @@ BIC of a subsample of n_eff points (``bic_samples_per_sequence`` per sequence, d
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -99,6 +111,7 @@ from threadpoolctl import threadpool_limits
 
 from .._defaults import MAX_COMPONENTS as MAX_COMPONENTS  # its documented home: pbdkit.prob.gmm
 from .._validation import check_array, check_int, check_positive_float
+from .gaussian import inverse_cholesky_factor
 from .gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 
 __all__ = [
@@ -108,6 +121,7 @@ __all__ = [
     "local_spread",
     "n_parameters",
     "pooled_spread",
+    "scale_aware_floor",
     "sequences_from_time",
     "time_based_init",
 ]
@@ -230,12 +244,8 @@ def _params_from_stats(
 
 def _precision_factors(covariances: Float) -> Float:
     """U_k with Sigma_k^-1 = U_k U_k^T (U_k = L_k^-T for Sigma_k = L_k L_k^T), batched."""
-    try:
-        chol = np.linalg.cholesky(covariances)
-    except np.linalg.LinAlgError:
-        raise ValueError(_not_positive_definite(covariances)) from None
-    eye = np.broadcast_to(np.eye(covariances.shape[-1]), covariances.shape)
-    return np.swapaxes(np.linalg.solve(chol, eye), -1, -2)
+    linv = inverse_cholesky_factor(covariances, "covariances", message=_not_positive_definite)
+    return np.swapaxes(linv, -1, -2)
 
 
 def _not_positive_definite(covariances: Float) -> str:
@@ -528,6 +538,63 @@ LOCAL_SPREAD_FLOOR = 0.01
 #: Default ``min_time_spread``: every component's time standard deviation is at least this
 #: fraction of the components' spacing (the time span over K); module docstring, "Time floor".
 MIN_TIME_SPREAD = 0.2
+#: ``reg_covar=None``: the floor of a column is this fraction of its variance, and at most this
+#: value in the data's units (scikit-learn's default ``reg_covar``).
+REG_COVAR = 1e-6
+#: A time floor (``reg_covar`` of the time column) above this fraction of the time column's
+#: variance is refused: every component would be at least a third of the time's standard
+#: deviation (9 % of the span) wide, too wide for more than about five components to be told
+#: apart along time (LASA's G drawn in 2 ms under a floor of 1e-6 s^2, 3 times the time's
+#: variance: one component, a GMR mean 0.95 of the shape's spread off the demonstrations' mean).
+MAX_TIME_FLOOR_FRACTION = 0.1
+
+
+def scale_aware_floor(X: npt.ArrayLike) -> Float:
+    """The floor of ``reg_covar=None``: per column, REG_COVAR min(1, var), var its variance.
+
+    A constant column takes the largest column variance as its scale (its floor only needs to
+    be positive: every component has the same variance there); all-constant data take
+    :data:`REG_COVAR`.
+
+    Parameters
+    ----------
+    X : array-like, shape (N, D)
+
+    Returns
+    -------
+    reg_covar : ndarray, shape (D,)
+    """
+    var = check_array(X, "X", ndim=2).var(axis=0)
+    scale = np.where(var > 0.0, var, var.max(initial=0.0))
+    floor = REG_COVAR * np.minimum(1.0, scale)
+    return np.where(floor > 0.0, floor, REG_COVAR)
+
+
+def _check_time_floor(x: Float, floor: Float, time_dim: int | None) -> None:
+    """Refuse a time floor that would hide the motion (module docstring, "Floors and scale").
+
+    Only time: a still joint under its floor is data (a skill may hold a joint still).
+    """
+    if time_dim is None:
+        return
+    v, f = float(x[:, time_dim].var()), float(floor[time_dim])
+    if v > 0.0 and f > MAX_TIME_FLOOR_FRACTION * v:
+        raise ValueError(
+            f"reg_covar of the time column X[:, {time_dim}] is {f:.3g}, {f / v:.3g} times "
+            f"its variance ({v:.3g}; at most {MAX_TIME_FLOOR_FRACTION:g} times is allowed): "
+            "no component could be narrower in time than the motion; pass reg_covar=None "
+            f"(scale-aware), a time floor of at most {MAX_TIME_FLOOR_FRACTION * v:.3g}, or "
+            "time in longer units"
+        )
+
+
+def _one_label_per_row(y: object, n_rows: int) -> bool:
+    """Whether fit's positional y looks like pbdkit 0.1.0's groups: integers, shape (N,)."""
+    try:
+        a = np.asarray(y)
+    except (ValueError, TypeError):
+        return False
+    return a.ndim == 1 and a.shape[0] == n_rows and a.dtype.kind in "iu"
 
 
 def _select_by_cv(
@@ -638,12 +705,19 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         Number of components K; ``"auto"`` chooses K in 1..``max_components`` by
         cross-validation over the sequences (module docstring, "Choosing K"; needs a time
         column and at least 2 sequences); ``"bic"`` by the effective-sample-size BIC.
-    max_components : int
-        Largest K tried when K is chosen.
-    reg_covar : float or array-like, shape (D,)
+    max_components : int or None
+        Largest K tried when K is chosen. None (default): :data:`MAX_COMPONENTS`, the cap
+        :class:`pbdkit.Skill` and the command line use too.
+    reg_covar : float, array-like of shape (D,), or None
         Added to the diagonal of every covariance: one value for every dimension, or one per
         dimension. In the units of the data squared, it is a floor on the variability a
-        component can claim (scikit-learn's ``reg_covar``, per dimension).
+        component can claim (scikit-learn's ``reg_covar``, per dimension). None (default):
+        scale-aware, :data:`REG_COVAR` (1e-6) times each column's variance and at most 1e-6
+        (module docstring, "Floors and scale"): scikit-learn's 1e-6 for columns of variance 1
+        or more, 0.1 % of the standard deviation at smaller scales, so the fit scales with the
+        data (milliseconds, nanometres). A given value is taken as is, in the data's units; a
+        time floor above :data:`MAX_TIME_FLOOR_FRACTION` of the time column's variance is
+        refused (it would blur every phase of the motion).
     max_iter : int
         Maximum number of EM iterations per fit.
     tol : float
@@ -704,8 +778,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         n_components: int | Literal["auto", "bic"] = 5,
         *,
-        max_components: int = 10,
-        reg_covar: float | npt.ArrayLike = 1e-6,
+        max_components: int | None = None,
+        reg_covar: float | npt.ArrayLike | None = None,
         max_iter: int = 100,
         tol: float = 1e-3,
         random_state: int | np.random.RandomState | None = None,
@@ -732,10 +806,13 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self.cv_scale = cv_scale
 
     # ------------------------------------------------------------------ fitting
-    def _check_params(self, n_samples: int, n_dims: int) -> tuple[str, list[int], Float]:
-        """Validated (method, candidate Ks, per-dimension floor)."""
+    def _check_params(self, x: Float) -> tuple[str, list[int], Float]:
+        """Validated (method, candidate Ks, per-dimension floor) for the data x (N, D)."""
+        n_samples, n_dims = x.shape
         reg = self.reg_covar
-        if np.ndim(reg) == 0:
+        if reg is None:
+            floor = scale_aware_floor(x)
+        elif np.ndim(reg) == 0:
             floor = np.full(n_dims, check_positive_float(reg, "reg_covar", allow_zero=True))
         else:
             floor = check_array(reg, "reg_covar", shape=(n_dims,))
@@ -751,6 +828,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             td = check_int(self.time_dim, "time_dim", minimum=0)
             if td >= n_dims:
                 raise ValueError(f"time_dim must be in [0, {n_dims}) for X with {n_dims} columns")
+        _check_time_floor(x, floor, None if self.time_dim is None else int(self.time_dim))
         if isinstance(self.n_components, str):
             if self.n_components not in ("auto", "bic"):
                 raise ValueError(
@@ -762,7 +840,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     "n_components='auto' cross-validates a regression on time and needs "
                     "time_dim; use n_components='bic' or an integer"
                 )
-            kmax = check_int(self.max_components, "max_components", minimum=1)
+            kmax = MAX_COMPONENTS if self.max_components is None else self.max_components
+            kmax = check_int(kmax, "max_components", minimum=1)
             kmax = min(kmax, n_samples)
             return self.n_components, list(range(1, kmax + 1)), floor
         k = check_int(self.n_components, "n_components", minimum=1)
@@ -800,16 +879,25 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         resp[np.arange(x.shape[0]), labels] = 1.0
         return resp
 
-    def fit(self, X: npt.ArrayLike, groups: npt.ArrayLike | None = None) -> GMM:
+    def fit(
+        self, X: npt.ArrayLike, y: object = None, *, groups: npt.ArrayLike | None = None
+    ) -> GMM:
         """Fit the mixture to X by EM (choosing K if asked).
 
         Parameters
         ----------
         X : array-like, shape (N, D)
             Samples in rows; column ``time_dim`` (0 by default) holds time.
+        y : ignored
+            Ignored, present for API consistency by convention (scikit-learn's
+            ``fit(X, y)``: a Pipeline passes its targets here). Deprecated: pbdkit 0.1.0 took
+            ``groups`` as the second positional argument, so an integer array of one label per
+            row given here (and no ``groups=``) is still read as ``groups``, with a
+            FutureWarning, for this release.
         groups : array-like, shape (N,), optional
-            Sequence (demonstration) of every row. Default: a new sequence wherever the time
-            column decreases (stacked demonstrations), or one sequence without a time column.
+            Keyword-only. Sequence (demonstration) of every row. Default: a new sequence
+            wherever the time column decreases (stacked demonstrations), or one sequence
+            without a time column.
 
         Returns
         -------
@@ -817,7 +905,15 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         """
         x_raw = check_array(X, "X", ndim=2, min_rows=2)
         n, d = x_raw.shape
-        method, candidates, diag = self._check_params(n, d)
+        if y is not None and groups is None and _one_label_per_row(y, n):
+            warnings.warn(
+                "GMM.fit(X, groups) is deprecated: the second argument is y, ignored as in "
+                "scikit-learn; it is read as groups for this release only: pass groups=...",
+                FutureWarning,
+                stacklevel=2,
+            )
+            groups = np.asarray(y)
+        method, candidates, diag = self._check_params(x_raw)
         spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
         # A constant column with no floor gives every component a zero variance there.
         flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (diag <= 0.0))
@@ -1171,7 +1267,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         X_in: npt.ArrayLike,
         in_dims: Sequence[int] | int = (0,),
-        covariance: Literal["exact", "paper"] = "exact",
+        covariance: CovarianceMode = "exact",
     ) -> tuple[Float, Float]:
         """Gaussian mixture regression: p(xi^O | xi^I = x) for every row of X_in (paper Table I).
 
@@ -1208,7 +1304,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self,
         x_in: npt.ArrayLike,
         in_dims: Sequence[int] | int = (0,),
-        covariance: Literal["exact", "paper"] = "exact",
+        covariance: CovarianceMode = "exact",
     ) -> tuple[Float, Float]:
         """GMR at a single query, with minimal overhead (for a control loop).
 

@@ -38,6 +38,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .gaussian import _cholesky_with_inverse
+
 __all__ = [
     "FAR_SIGMAS",
     "CovarianceMode",
@@ -141,9 +143,7 @@ def gmr_precompute(
     s_ii = covariances[:, i_idx[:, None], i_idx[None, :]]
     s_oi = covariances[:, o_idx[:, None], i_idx[None, :]]
     s_oo = covariances[:, o_idx[:, None], o_idx[None, :]]
-    chol = np.linalg.cholesky(s_ii)  # lower L with Sigma^II = L L^T
-    eye = np.broadcast_to(np.eye(len(in_dims)), s_ii.shape)
-    chol_inv = np.linalg.solve(chol, eye)  # L^-1
+    chol, chol_inv = _cholesky_with_inverse(s_ii, "Sigma^II")  # Sigma^II = L L^T, and L^-1
     prec_chol = np.swapaxes(chol_inv, -1, -2)  # U = L^-T: (x-mu) U = (L^-1 (x-mu))^T
     # A_k = S_oi S_ii^-1 = S_oi L^-T L^-1
     gain = s_oi @ prec_chol @ chol_inv
