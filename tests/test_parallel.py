@@ -365,3 +365,81 @@ def test_the_command_line_reports_a_port_that_is_not_a_scheduler_in_one_line(
         assert line.startswith(f"error: scheduler {address!r}: ") and match in line
         assert elapsed < 10.0  # the simulation's imports, then 1 s
         assert not out.exists()
+
+
+# `--workers 1000` for one trial started 1000 processes on 2 cores (not done after 200 s,
+# 3,594 semaphores leaked): local workers are capped at the cores and at the work.
+
+
+def test_local_workers_are_capped_at_the_cores_and_the_work(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from pbdkit import _forkserver
+
+    monkeypatch.setattr(_forkserver, "cores", lambda: 4)
+    assert _forkserver.local_workers(1000) == 4
+    assert _forkserver.local_workers(3) == 3
+    assert _forkserver.local_workers(1000, work=2) == 2
+    assert _forkserver.local_workers(1000, work=0) == 1
+    for bad in (0, -3, 2.0, True, "2", None):
+        with pytest.raises(ValueError, match=f"workers must be an integer >= 1, got {bad!r}"):
+            _forkserver.local_workers(bad)
+
+
+def test_a_session_of_1000_workers_starts_one_per_core(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    from pbdkit import _forkserver
+    from pbdkit.sim import parallel
+
+    # The cluster the session and connect would start is recorded, not started.
+    started: list[int] = []
+
+    def cluster(n: int) -> tuple[str, None]:
+        started.append(n)
+        return "client", None
+
+    monkeypatch.setattr(parallel, "_local_cluster", cluster)
+    monkeypatch.setattr(_forkserver, "start", lambda: None)
+    monkeypatch.setattr(_forkserver, "cores", lambda: 3)
+    with caplog.at_level("WARNING", logger=parallel.__name__):
+        run = Session(workers=1000)
+        assert run.client == "client"
+        connect(workers=1000)
+        connect(workers=2)
+    assert started == [3, 3, 2]
+    assert (
+        caplog.messages
+        == ["workers=1000: starting 3, one per core (more would only compete for the cores)"] * 2
+    )
+
+
+def test_the_command_line_caps_the_workers_with_a_notice(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    from pbdkit import _forkserver
+    from pbdkit.apps.cli import app
+
+    asked: list[int | None] = []
+
+    def evaluate(*args: Any, workers: int | None = None, **kwargs: Any) -> None:
+        asked.append(workers)
+        raise ValueError("stopped here by the test")
+
+    monkeypatch.setattr(E, "evaluate", evaluate)
+    monkeypatch.setattr(_forkserver, "start", lambda: None)
+    monkeypatch.setattr(_forkserver, "cores", lambda: 2)
+    runner = CliRunner()
+    base = ["evaluate", "--trials", "3", "--workers", "1000"]
+    r = runner.invoke(app, base)
+    assert "--workers 1000: starting 2 (one per core;" in r.output
+    r = runner.invoke(app, [*base, "--trials", "1", "--controller", "fused"])
+    assert "--workers 1000: starting 1 (one per trial and controller;" in r.output
+    r = runner.invoke(app, [*base[:-1], "2"])
+    assert "starting" not in r.output
+    assert asked == [2, 1, 2]
+    for bad in ("0", "-5"):
+        r = runner.invoke(app, ["evaluate", "--workers", bad])
+        assert r.exit_code == 2 and f"must be >= 1, got {bad}" in r.output

@@ -34,6 +34,7 @@ reference, as Python pickles functions): register it in a module the workers can
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import socket
 import struct
@@ -182,6 +183,8 @@ def _control_one(
 #: network; a port silent for this long is not one.
 SCHEDULER_TIMEOUT = 5.0
 
+_log = logging.getLogger(__name__)
+
 
 def connect(
     workers: int | None = None,
@@ -196,9 +199,10 @@ def connect(
     and keeps Dask's setting that workers are forked while the cluster lives; a worker that a
     nanny restarts after this call has returned is spawned, and imports the simulation itself.
 
-    A scheduler's address is checked first with a plain socket, within ``timeout``
-    (``_probe``): an address where nothing listens, nothing answers or something other than a
-    Dask scheduler answers fails at once.
+    Local workers are at most one per core (:func:`pbdkit._forkserver.local_workers`; a
+    warning is logged when fewer than ``workers`` start). A scheduler's address is checked
+    first with a plain socket, within ``timeout`` (``_probe``): an address where nothing
+    listens, nothing answers or something other than a Dask scheduler answers fails at once.
 
     Returns
     -------
@@ -212,21 +216,29 @@ def connect(
         Both or neither given, ``workers`` < 1, or a scheduler that cannot be reached, does not
         answer within ``timeout`` or is not a Dask scheduler (the message names the address).
     """
-    _check_arguments(workers, scheduler)
-    if workers is not None:
+    local = _check_arguments(workers, scheduler)
+    if local is not None:
         _forkserver.start()
         with _local_config():
-            return _local_cluster(workers)
+            return _local_cluster(local)
     return _remote(scheduler, timeout), None
 
 
-def _check_arguments(workers: int | None, scheduler: str | None) -> None:
+def _check_arguments(workers: int | None, scheduler: str | None) -> int | None:
+    """The number of local workers to start (``workers``, capped at the cores, said in a
+    log line), or None for ``scheduler``."""
     if (workers is None) == (scheduler is None):
         raise ValueError("give either workers (local processes) or scheduler (an address)")
-    if workers is not None and (
-        not isinstance(workers, int) or isinstance(workers, bool) or workers < 1
-    ):
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if workers is None:
+        return None
+    local = _forkserver.local_workers(workers)
+    if local < workers:
+        _log.warning(
+            "workers=%d: starting %d, one per core (more would only compete for the cores)",
+            workers,
+            local,
+        )
+    return local
 
 
 def _local_config() -> AbstractContextManager[Any]:
@@ -426,8 +438,7 @@ class Session:
     """
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None) -> None:
-        _check_arguments(workers, scheduler)
-        self._workers = workers
+        self._workers = _check_arguments(workers, scheduler)
         self._stack = ExitStack()
         self._result: tuple[Any, Any] | None = None
         if workers is None:
@@ -465,7 +476,8 @@ def session(
     Open it before teaching and learning: local workers start while the skill is learned, a
     remote cluster's workers import pbdkit meanwhile.
 
-    A scheduler is given :data:`SCHEDULER_TIMEOUT` seconds to answer.
+    Local workers are at most one per core, as in :func:`connect`; a scheduler is given
+    :data:`SCHEDULER_TIMEOUT` seconds to answer.
 
     Raises
     ------
