@@ -443,3 +443,17 @@ def test_the_command_line_caps_the_workers_with_a_notice(
     for bad in ("0", "-5"):
         r = runner.invoke(app, ["evaluate", "--workers", bad])
         assert r.exit_code == 2 and f"must be >= 1, got {bad}" in r.output
+
+
+def test_a_local_cluster_leaves_port_8787_to_others() -> None:
+    # Without a dashboard, the scheduler still served HTTP on port 8787: with another cluster
+    # on the machine Dask warned "Port 8787 is already in use" (an error under pytest).
+    from pbdkit.sim import parallel
+
+    client, cluster = parallel._local_cluster(0)
+    try:
+        http = cluster.scheduler.http_server
+        assert (http.address, http.port != 8787) == ("127.0.0.1", True)
+    finally:
+        client.close()
+        cluster.close()

@@ -261,6 +261,10 @@ def _local_cluster(workers: int) -> tuple[Any, Any]:
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
+        # No dashboard, but the scheduler still serves its health and metrics pages over HTTP,
+        # on port 8787 unless told: with another cluster on this machine, Dask warned "Port
+        # 8787 is already in use" (an error where warnings are). Any free local port serves.
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
     )
     try:
