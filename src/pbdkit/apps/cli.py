@@ -201,7 +201,8 @@ def _check_workers(
         why = "one per core" if work is None or local < work else "one per trial and controller"
         console.print(
             f"--workers {workers}: starting {local} ({why}; more would have nothing to do "
-            "but compete for the cores)"
+            "but compete for the cores)",
+            soft_wrap=True,  # one line, as the errors
         )
     return local
 
