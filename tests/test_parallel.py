@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -199,3 +200,263 @@ def test_sessions_one_after_another_keep_dasks_settings() -> None:
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["True"]
+
+
+# ----------------------------------------------------------------------------- issue 22
+# A scheduler's address that is no scheduler fails within seconds, naming the address: Dask's
+# client waited forever on a port that accepts and stays silent, decoded a garbage reply as
+# a length of exabytes, and retried a refused connection until its timeout.
+
+
+class _FakeServer:
+    """A local TCP port that accepts connections and then stays silent, replies ``reply``, or
+    closes them at once (``reply=None``)."""
+
+    def __init__(self, reply: bytes | None = b"") -> None:
+        import socket
+        import threading
+
+        self._reply = reply
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self._accepted: list[socket.socket] = []
+        self.port = self._listener.getsockname()[1]
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self._listener.accept()
+            except OSError:  # closed: the test is over
+                return
+            if self._reply is None:
+                conn.close()
+                continue
+            self._accepted.append(conn)
+            if self._reply:
+                conn.sendall(self._reply)
+
+    def close(self) -> None:
+        import socket
+
+        self._listener.shutdown(socket.SHUT_RDWR)  # wakes the accept (close alone does not)
+        self._listener.close()
+        for conn in self._accepted:
+            conn.close()
+        self._thread.join(5.0)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as s:
+        port: int = s.getsockname()[1]
+    return port  # closed: nothing listens there now
+
+
+@pytest.mark.parametrize(
+    ("reply", "match"),
+    [
+        (b"", r"cannot reach a Dask scheduler: no answer within 1 s \(the port accepts"),
+        (b"\xff" * 4096, "not a Dask scheduler"),
+        # A length that fits, frames that do not: Dask's client raised "Maximum allowed
+        # dimension exceeded" on such replies.
+        (b"\x20" + b"\x00" * 7 + b"\x07" * 32, "not a Dask scheduler"),
+        (b"HTTP/1.0 400 Bad request\r\n\r\n", "not a Dask scheduler"),
+        (None, "not a Dask scheduler"),  # accepts and closes
+    ],
+    ids=["silent", "0xff", "frames", "http", "closes"],
+)
+def test_connect_fails_fast_on_a_port_that_is_not_a_scheduler(
+    reply: bytes | None, match: str
+) -> None:
+    import threading
+    import time
+
+    server = _FakeServer(reply)
+    address = f"tcp://127.0.0.1:{server.port}"
+    threads = set(threading.enumerate())
+    start = time.perf_counter()
+    try:
+        with pytest.raises(ValueError, match=match) as caught:
+            connect(scheduler=address, timeout=1.0)
+    finally:
+        elapsed = time.perf_counter() - start
+        server.close()
+    assert elapsed < 5.0
+    assert f"scheduler {address!r}: " in str(caught.value)
+    assert "\n" not in str(caught.value)
+    # Nothing left behind that would keep the process alive (Dask's client was not started).
+    assert not [t for t in set(threading.enumerate()) - threads if not t.daemon]
+
+
+def test_connect_and_session_fail_fast_on_a_closed_port() -> None:
+    import time
+
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    start = time.perf_counter()
+    refused = f"scheduler '{address}': cannot reach a Dask scheduler: connection refused"
+    with pytest.raises(ValueError, match=refused):
+        connect(scheduler=address)  # the default timeout: Dask retried until it ran out
+    with pytest.raises(ValueError, match="connection refused"), session(scheduler=address):
+        pass
+    assert time.perf_counter() - start < 5.0
+
+
+@pytest.mark.parametrize(
+    ("address", "match"),
+    [
+        ("tcp://127.0.0.1", "scheduler must be an address tcp://HOST:PORT, got 'tcp://127.0.0.1'"),
+        ("tcp://127.0.0.1:http", "scheduler must be an address tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:70000", "the port must be 1-65535, got 70000"),
+    ],
+)
+def test_connect_refuses_a_malformed_address(address: str, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        connect(scheduler=address)
+
+
+def test_connect_refuses_a_bad_timeout() -> None:
+    with pytest.raises(ValueError, match="timeout must be a number of seconds > 0, got nan"):
+        connect(scheduler="tcp://127.0.0.1:1", timeout=float("nan"))
+
+
+def test_connect_still_reaches_a_real_scheduler() -> None:
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None)
+    try:
+        client, none = connect(scheduler=cluster.scheduler_address, timeout=3.0)
+        try:
+            assert none is None
+            assert client.scheduler_info()["address"] == cluster.scheduler_address
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def test_the_command_line_reports_a_port_that_is_not_a_scheduler_in_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import time
+
+    from typer.testing import CliRunner
+
+    from pbdkit.apps.cli import app
+    from pbdkit.sim import parallel
+
+    monkeypatch.setattr(parallel, "SCHEDULER_TIMEOUT", 1.0)
+    out = tmp_path / "ev.json"
+    for reply, match in ((b"", "no answer within 1 s"), (b"\xff" * 64, "not a Dask scheduler")):
+        server = _FakeServer(reply)
+        address = f"tcp://127.0.0.1:{server.port}"
+        args = ["evaluate", "--trials", "1", "--json", str(out), "--scheduler", address]
+        start = time.perf_counter()
+        try:
+            r = CliRunner().invoke(app, args)
+        finally:
+            elapsed = time.perf_counter() - start
+            server.close()
+        assert r.exit_code == 2, r.output
+        # One line (after the progress bar's), no traceback.
+        assert "Traceback" not in r.output and r.output.count("error:") == 1
+        line = r.output.strip().splitlines()[-1]
+        assert line.startswith(f"error: scheduler {address!r}: ") and match in line
+        assert elapsed < 10.0  # the simulation's imports, then 1 s
+        assert not out.exists()
+
+
+# `--workers 1000` for one trial started 1000 processes on 2 cores (not done after 200 s,
+# 3,594 semaphores leaked): local workers are capped at the cores and at the work.
+
+
+def test_local_workers_are_capped_at_the_cores_and_the_work(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from pbdkit import _forkserver
+
+    monkeypatch.setattr(_forkserver, "cores", lambda: 4)
+    assert _forkserver.local_workers(1000) == 4
+    assert _forkserver.local_workers(3) == 3
+    assert _forkserver.local_workers(1000, work=2) == 2
+    assert _forkserver.local_workers(1000, work=0) == 1
+    for bad in (0, -3, 2.0, True, "2", None):
+        with pytest.raises(ValueError, match=f"workers must be an integer >= 1, got {bad!r}"):
+            _forkserver.local_workers(bad)
+
+
+def test_a_session_of_1000_workers_starts_one_per_core(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    from pbdkit import _forkserver
+    from pbdkit.sim import parallel
+
+    # The cluster the session and connect would start is recorded, not started.
+    started: list[int] = []
+
+    def cluster(n: int) -> tuple[str, None]:
+        started.append(n)
+        return "client", None
+
+    monkeypatch.setattr(parallel, "_local_cluster", cluster)
+    monkeypatch.setattr(_forkserver, "start", lambda: None)
+    monkeypatch.setattr(_forkserver, "cores", lambda: 3)
+    with caplog.at_level("WARNING", logger=parallel.__name__):
+        run = Session(workers=1000)
+        assert run.client == "client"
+        connect(workers=1000)
+        connect(workers=2)
+    assert started == [3, 3, 2]
+    assert (
+        caplog.messages
+        == ["workers=1000: starting 3, one per core (more would only compete for the cores)"] * 2
+    )
+
+
+def test_the_command_line_caps_the_workers_with_a_notice(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    from pbdkit import _forkserver
+    from pbdkit.apps.cli import app
+
+    asked: list[int | None] = []
+
+    def evaluate(*args: Any, workers: int | None = None, **kwargs: Any) -> None:
+        asked.append(workers)
+        raise ValueError("stopped here by the test")
+
+    monkeypatch.setattr(E, "evaluate", evaluate)
+    monkeypatch.setattr(_forkserver, "start", lambda: None)
+    monkeypatch.setattr(_forkserver, "cores", lambda: 2)
+    runner = CliRunner()
+    base = ["evaluate", "--trials", "3", "--workers", "1000"]
+    r = runner.invoke(app, base)
+    assert r.output.startswith(
+        "--workers 1000: starting 2 (one per core; more would have nothing to do but compete "
+        "for the cores)\n"
+    )
+    r = runner.invoke(app, [*base, "--trials", "1", "--controller", "fused"])
+    assert "--workers 1000: starting 1 (one per trial and controller;" in r.output
+    r = runner.invoke(app, [*base[:-1], "2"])
+    assert "starting" not in r.output
+    assert asked == [2, 1, 2]
+    for bad in ("0", "-5"):
+        r = runner.invoke(app, ["evaluate", "--workers", bad])
+        assert r.exit_code == 2 and f"must be >= 1, got {bad}" in r.output
+
+
+def test_a_local_cluster_leaves_port_8787_to_others() -> None:
+    # Without a dashboard, the scheduler still served HTTP on port 8787: with another cluster
+    # on the machine Dask warned "Port 8787 is already in use" (an error under pytest).
+    from pbdkit.sim import parallel
+
+    client, cluster = parallel._local_cluster(0)
+    try:
+        http = cluster.scheduler.http_server
+        assert (http.address, http.port != 8787) == ("127.0.0.1", True)
+    finally:
+        client.close()
+        cluster.close()

@@ -217,11 +217,33 @@ def _check_perturb(perturb: str) -> None:
         )
 
 
-def _check_workers(workers: int | None, scheduler: str | None) -> None:
+def _check_workers(
+    workers: int | None, scheduler: str | None, *, work: int | None = None
+) -> int | None:
+    """The local workers to start for ``--workers``, None for a serial run or ``--scheduler``.
+
+    The count is the library's (:func:`pbdkit._forkserver.local_workers`): at most one per
+    core, and one per item of ``work`` when it is known; a capped count is said on the console.
+    Refuses both options at once, and a count < 1.
+    """
     if workers is not None and scheduler is not None:
         raise typer.BadParameter("give --workers or --scheduler, not both", param_hint="--workers")
-    if workers is not None and workers < 1:
-        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    if workers is None:
+        return None
+    from .._forkserver import local_workers
+
+    try:
+        local = local_workers(workers, work)
+    except ValueError:
+        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers") from None
+    if local < workers:
+        why = "one per core" if work is None or local < work else "one per trial and controller"
+        console.print(
+            f"--workers {workers}: starting {local} ({why}; more would have nothing to do "
+            "but compete for the cores)",
+            soft_wrap=True,  # one line, as the errors
+        )
+    return local
 
 
 def _start_workers_early(workers: int | None) -> None:
@@ -738,7 +760,8 @@ def evaluate(
         int | None,
         typer.Option(
             help="Run the trials in N local worker processes (a Dask LocalCluster); the results "
-            "are those of the serial run.",
+            "are those of the serial run. At most one per core (and, with --controller, one "
+            "per trial and controller): a larger N is capped, with a notice.",
         ),
     ] = None,
     scheduler: Annotated[
@@ -753,7 +776,11 @@ def evaluate(
     if trials < 1:
         raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
     _check_seed(seed)
-    _check_workers(workers, scheduler)
+    # The trials' controller runs are the work items (a trial observes once, then runs its
+    # controllers at once); without --controller their number is known after the learning.
+    workers = _check_workers(
+        workers, scheduler, work=trials * len(controller) if controller else None
+    )
     if controller and len(set(controller)) != len(controller):
         raise typer.BadParameter("a controller is named twice", param_hint="--controller")
     if json_path is not None:
@@ -813,7 +840,11 @@ def study(
         bool, typer.Option("--full", help="The full size (11 x 11 maps, 40 trials per point).")
     ] = False,
     workers: Annotated[
-        int | None, typer.Option(help="Run the trials in N local worker processes.")
+        int | None,
+        typer.Option(
+            help="Run the trials in N local worker processes, at most one per core (a larger "
+            "N is capped, with a notice)."
+        ),
     ] = None,
     scheduler: Annotated[
         str | None, typer.Option(help="Run the trials on the Dask cluster at this address.")
@@ -823,7 +854,7 @@ def study(
     demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
     _check_output(out, "--out", folder=True)
     _check_seed(seed)
-    _check_workers(workers, scheduler)
+    workers = _check_workers(workers, scheduler)
     _start_workers_early(workers)
     spec = _robot_task(task)
     from .study import FULL, SMALL, check_study, run_study

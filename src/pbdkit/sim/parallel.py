@@ -34,7 +34,12 @@ reference, as Python pickles functions): register it in a module the workers can
 from __future__ import annotations
 
 import copy
+import logging
+import math
+import socket
+import struct
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from dataclasses import dataclass, replace
@@ -173,8 +178,12 @@ def _control_one(
         return _own_copy(job).run_controller(seen, index, truth, controller)
 
 
-#: Seconds to wait for a remote scheduler (:func:`connect`, :func:`session`).
-SCHEDULER_TIMEOUT = 10.0
+#: Seconds to wait for a remote scheduler's answer (:func:`connect`, :func:`session`): a
+#: scheduler sends its handshake as soon as it accepts a connection, in milliseconds on a
+#: network; a port silent for this long is not one.
+SCHEDULER_TIMEOUT = 5.0
+
+_log = logging.getLogger(__name__)
 
 
 def connect(
@@ -184,11 +193,16 @@ def connect(
     timeout: float = SCHEDULER_TIMEOUT,
 ) -> tuple[Any, Any]:
     """A Dask client: to a new local cluster of ``workers`` processes, or to ``scheduler``
-    (waiting at most ``timeout`` seconds for it).
+    (waiting at most ``timeout`` seconds for its answer).
 
     :func:`session` is the usual way: it starts the local workers' server before the learning
     and keeps Dask's setting that workers are forked while the cluster lives; a worker that a
     nanny restarts after this call has returned is spawned, and imports the simulation itself.
+
+    Local workers are at most one per core (:func:`pbdkit._forkserver.local_workers`; a
+    warning is logged when fewer than ``workers`` start). A scheduler's address is checked
+    first with a plain socket, within ``timeout`` (``_probe``): an address where nothing
+    listens, nothing answers or something other than a Dask scheduler answers fails at once.
 
     Returns
     -------
@@ -199,23 +213,32 @@ def connect(
     Raises
     ------
     ValueError
-        Both or neither given, ``workers`` < 1, or a scheduler that cannot be reached.
+        Both or neither given, ``workers`` < 1, or a scheduler that cannot be reached, does not
+        answer within ``timeout`` or is not a Dask scheduler (the message names the address).
     """
-    _check_arguments(workers, scheduler)
-    if workers is not None:
+    local = _check_arguments(workers, scheduler)
+    if local is not None:
         _forkserver.start()
         with _local_config():
-            return _local_cluster(workers)
+            return _local_cluster(local)
     return _remote(scheduler, timeout), None
 
 
-def _check_arguments(workers: int | None, scheduler: str | None) -> None:
+def _check_arguments(workers: int | None, scheduler: str | None) -> int | None:
+    """The number of local workers to start (``workers``, capped at the cores, said in a
+    log line), or None for ``scheduler``."""
     if (workers is None) == (scheduler is None):
         raise ValueError("give either workers (local processes) or scheduler (an address)")
-    if workers is not None and (
-        not isinstance(workers, int) or isinstance(workers, bool) or workers < 1
-    ):
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if workers is None:
+        return None
+    local = _forkserver.local_workers(workers)
+    if local < workers:
+        _log.warning(
+            "workers=%d: starting %d, one per core (more would only compete for the cores)",
+            workers,
+            local,
+        )
+    return local
 
 
 def _local_config() -> AbstractContextManager[Any]:
@@ -238,6 +261,10 @@ def _local_cluster(workers: int) -> tuple[Any, Any]:
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
+        # No dashboard, but the scheduler still serves its health and metrics pages over HTTP,
+        # on port 8787 unless told: with another cluster on this machine, Dask warned "Port
+        # 8787 is already in use" (an error where warnings are). Any free local port serves.
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         silence_logs=40,  # logging.ERROR: a restarted worker is reported by the result
     )
     try:
@@ -251,16 +278,142 @@ def _local_cluster(workers: int) -> tuple[Any, Any]:
 def _remote(scheduler: str | None, timeout: float) -> Any:
     from distributed import Client
 
+    if not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
+        raise ValueError(f"timeout must be a number of seconds > 0, got {timeout!r}")
+    if not isinstance(scheduler, str):
+        raise ValueError(f"scheduler must be an address tcp://HOST:PORT, got {scheduler!r}")
+    _probe(scheduler, timeout)
     try:
         client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
-    except (OSError, TimeoutError) as exc:
-        raise ValueError(
-            f"scheduler: cannot reach a Dask scheduler at {scheduler!r}: {exc}"
-        ) from exc
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ValueError(f"scheduler {scheduler!r}: cannot reach a Dask scheduler: {exc}") from exc
     # A cluster of the user's imports pbdkit in each worker: have it start now, without
     # waiting, so that the imports overlap the teaching and the learning.
     _warm_up(client)
     return client
+
+
+#: The largest first message a Dask scheduler may announce: its handshake (compression,
+#: Python version, pickle protocol) is about 60 bytes. Garbage read as Dask's 8-byte length
+#: announced exabytes, which Dask's own client tried to allocate.
+_HANDSHAKE_BYTES = 1 << 16
+
+#: Schemes whose servers are reached over TCP: the connection is tested for all of them, the
+#: handshake only for plain ``tcp`` (in ``tls``, ``ws`` and ``wss`` it is inside the
+#: encryption or the web socket).
+_TCP_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
+def _probe(scheduler: str, timeout: float) -> None:
+    """Fail unless a Dask scheduler answers at ``scheduler`` within ``timeout`` seconds.
+
+    Dask's client retries a refused connection until its timeout, then waits for the
+    scheduler's handshake with no deadline (a port that accepts and stays silent, such as a web
+    server waiting for a request, hung it for good) and decodes whatever comes back (garbage
+    made it allocate exabytes). Here one blocking socket, with one deadline for connecting and
+    reading: a Dask server writes its handshake as soon as it accepts (``distributed.comm``:
+    an 8-byte length, then frames, the first a msgpack map), so the answer is read without
+    sending anything, and decoded without pickle. No thread is started.
+
+    Raises
+    ------
+    ValueError
+        Naming the address: malformed, refused, no answer within ``timeout``, or not a Dask
+        scheduler.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(scheduler)
+        host, port = parse_host_port(location) if scheme in _TCP_SCHEMES else ("", 0)
+    except ValueError as exc:
+        raise ValueError(
+            f"scheduler must be an address tcp://HOST:PORT, got {scheduler!r} ({exc})"
+        ) from None
+    if scheme not in _TCP_SCHEMES:
+        return  # Dask's other transports (inproc, ucx) are its own to check.
+    if not 0 < port < 65536:
+        raise ValueError(f"scheduler {scheduler!r}: the port must be 1-65535, got {port}")
+    deadline = time.monotonic() + timeout
+    failed = f"scheduler {scheduler!r}: cannot reach a Dask scheduler:"
+    try:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except ConnectionRefusedError:
+        raise ValueError(
+            f"{failed} connection refused (nothing listens there; start a scheduler with "
+            "`dask scheduler`)"
+        ) from None
+    except TimeoutError:
+        raise ValueError(f"{failed} no answer within {timeout:g} s") from None
+    except OSError as exc:
+        raise ValueError(f"{failed} {exc}") from None
+    with sock:
+        if scheme != "tcp":
+            return
+        try:
+            reply = _handshake(sock, deadline)
+        except TimeoutError:
+            raise ValueError(
+                f"{failed} no answer within {timeout:g} s (the port accepts connections, but a "
+                "Dask scheduler answers at once)"
+            ) from None
+        except OSError as exc:
+            raise ValueError(
+                f"{failed} not a Dask scheduler (the connection failed before a handshake: {exc})"
+            ) from None
+    if reply is None:
+        raise ValueError(f"{failed} not a Dask scheduler (its answer is not Dask's handshake)")
+
+
+def _handshake(sock: socket.socket, deadline: float) -> dict[str, Any] | None:
+    """The handshake a Dask server sends on ``sock``, or None if what arrives is not one.
+
+    Raises
+    ------
+    TimeoutError
+        Nothing complete before ``deadline`` (``time.monotonic()``).
+    OSError
+        The connection was closed or reset.
+    """
+    import msgpack
+
+    # distributed.comm.tcp: the length of what follows (native "Q", as Dask writes it), then
+    # the frames' count, their lengths and their bytes (distributed.protocol.utils); the
+    # first frame is the message.
+    (size,) = struct.unpack("Q", _receive(sock, 8, deadline))
+    if not 16 < size <= _HANDSHAKE_BYTES:
+        return None
+    data = _receive(sock, size, deadline)
+    (count,) = struct.unpack_from("Q", data)
+    if count < 1 or 8 + 8 * count >= size:
+        return None
+    lengths = struct.unpack_from(f"{count}Q", data, 8)
+    start = 8 + 8 * count
+    if sum(lengths) != size - start:
+        return None
+    try:
+        message = msgpack.unpackb(data[start : start + lengths[0]], use_list=False, raw=False)
+    except Exception:  # any decoding error: not Dask's
+        return None
+    if not isinstance(message, dict) or "pickle-protocol" not in message:
+        return None
+    return message
+
+
+def _receive(sock: socket.socket, n: int, deadline: float) -> bytes:
+    """``n`` bytes from ``sock`` before ``deadline`` (TimeoutError), or OSError if the peer
+    closes first."""
+    chunks = bytearray()
+    while len(chunks) < n:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError
+        sock.settimeout(left)
+        chunk = sock.recv(n - len(chunks))
+        if not chunk:
+            raise ConnectionResetError("closed by the other side")
+        chunks += chunk
+    return bytes(chunks)
 
 
 def _import_sim() -> None:
@@ -289,8 +442,7 @@ class Session:
     """
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None) -> None:
-        _check_arguments(workers, scheduler)
-        self._workers = workers
+        self._workers = _check_arguments(workers, scheduler)
         self._stack = ExitStack()
         self._result: tuple[Any, Any] | None = None
         if workers is None:
@@ -328,11 +480,14 @@ def session(
     Open it before teaching and learning: local workers start while the skill is learned, a
     remote cluster's workers import pbdkit meanwhile.
 
+    Local workers are at most one per core, as in :func:`connect`; a scheduler is given
+    :data:`SCHEDULER_TIMEOUT` seconds to answer.
+
     Raises
     ------
     ValueError
         Both ``workers`` and ``scheduler`` given, ``workers`` < 1, or a scheduler that cannot
-        be reached.
+        be reached, does not answer in time or is not a Dask scheduler.
     """
     if workers is None and scheduler is None:
         return nullcontext(None)
