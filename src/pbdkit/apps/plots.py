@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -210,16 +211,15 @@ def _space_color(skill: Skill, name: str) -> str:
 
 
 def space_data(skill: Skill, demos: Sequence[Demonstration]) -> dict[str, Float]:
-    """The data each GMM of ``skill`` was fitted on, recomputed from the demonstrations.
-
-    Returns
-    -------
-    data : dict str -> ndarray, shape (M, T, D)
-        ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of T steps.
-    """
-    from ..learning.skill import space_data as skill_space_data
-
-    return skill_space_data(list(demos), skill.robot, skill.object_names, skill.n_steps)
+    """Deprecated spelling of :meth:`pbdkit.Skill.training_data` (it shared its name with
+    :func:`pbdkit.learning.skill.space_data`, of another signature); goes in pbdkit 0.3."""
+    warnings.warn(
+        "pbdkit.apps.plots.space_data(skill, demos) is now skill.training_data(demos); the "
+        "old name goes in pbdkit 0.3",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return skill.training_data(demos)
 
 
 def _dim_labels(skill: Skill, name: str) -> list[str]:
@@ -245,7 +245,7 @@ def plot_constraints(
     One column per space (each object's frame, then joint space), one row per dimension. A
     narrow tube means the demonstrations agreed: that constraint matters at that time.
     """
-    data = space_data(skill, demos)
+    data = skill.training_data(demos)
     names = [*skill.object_names, "joint"]
     n_rows = max(d.shape[2] - 1 for d in data.values())
     fig = new_figure(figsize=(4.2 * len(names), 1.9 * n_rows))

@@ -349,6 +349,25 @@ class Skill:
             duration=duration,
         )
 
+    def training_data(self, demos: Sequence[Demonstration]) -> dict[str, Float]:
+        """The data each GMM of the skill was fitted on, recomputed from ``demos`` at every
+        step (what the paper's Figs. 4-5 draw).
+
+        Parameters
+        ----------
+        demos : sequence of Demonstration
+            The demonstrations the skill was learned from (or others with the same
+            structure).
+
+        Returns
+        -------
+        data : dict str -> ndarray, shape (M, T, D)
+            ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of
+            T = :attr:`n_steps` steps.
+        """
+        items = check_demonstrations(demos, min_demos=1)
+        return space_data(items, self.robot, self.object_names, self.n_steps)
+
     # ------------------------------------------------------------------ generalization
     def constraints(self, covariance: CovarianceMode = "exact") -> Constraints:
         """GMR of every space over the time grid (cached per covariance mode).
