@@ -37,6 +37,8 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
+# Keep "--" as typed: the docstrings and the README name command-line options in plain text.
+smartquotes_action = "qe"
 exclude_patterns = ["_build"]
 
 # --- autodoc: numpy docstrings, members in source order

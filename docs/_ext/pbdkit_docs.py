@@ -229,14 +229,20 @@ def _resolve_alias(
     return contnode if exists else None
 
 
+def _summary(obj: Any) -> str:
+    """The first paragraph of an object's docstring, on one line."""
+    doc = inspect.getdoc(obj) or ""
+    return " ".join(doc.split("\n\n", 1)[0].split())
+
+
 def _first_paragraph(package: ModuleType, name: str) -> str:
     obj = getattr(package, name)
     if isinstance(obj, ModuleType) or inspect.isclass(obj) or inspect.isroutine(obj):
-        doc = inspect.getdoc(obj) or ""
-    else:  # data: its ``#:`` comment in the module that assigns it
-        homes = [package.__name__, *_public_modules(package)]
-        home = next((m for m in homes if _assigns(m, name)), package.__name__)
-        doc = "\n".join(ModuleAnalyzer.for_module(home).find_attr_docs().get(("", name), []))
+        return _summary(obj)
+    # data: its ``#:`` comment in the module that assigns it
+    homes = [package.__name__, *_public_modules(package)]
+    home = next((m for m in homes if _assigns(m, name)), package.__name__)
+    doc = "\n".join(ModuleAnalyzer.for_module(home).find_attr_docs().get(("", name), []))
     return " ".join(doc.split("\n\n", 1)[0].split())
 
 
@@ -279,6 +285,26 @@ class PublicNames(SphinxDirective):
         nested_parse_with_titles(
             self.state, StringList(rows, source=self.get_source_info()[0]), container
         )
+        return container.children
+
+
+class ModuleTable(SphinxDirective):
+    """``.. pbdkit-modules:: MODULE...``: a table of the modules (each linked to its page, with
+    its docstring's first paragraph) and their pages in the toctree; :data:`LAYERS` if none."""
+
+    optional_arguments = 100
+
+    def run(self) -> list[nodes.Node]:
+        names = self.arguments or list(LAYERS)
+        rows = [".. toctree::", "   :hidden:", ""]
+        rows += [f"   /{GENERATED}/{name}" for name in names]
+        rows += ["", ".. list-table::", "   :widths: 30 70", ""]
+        for name in names:
+            module = importlib.import_module(name)
+            rows += [f"   * - :py:mod:`{name}`", f"     - {_summary(module)}"]
+        container = nodes.container()
+        source = self.get_source_info()[0]
+        nested_parse_with_titles(self.state, StringList(rows, source=source), container)
         return container.children
 
 
@@ -397,8 +423,7 @@ def module_page(name: str) -> tuple[str, list[str]]:
         # a package's own page documents what it defines; what it re-exports from its modules
         # is in the table, and documented on their pages
         lines += ["   :ignore-module-all:", "", f".. pbdkit-names:: {name}", ""]
-        lines += [".. rubric:: Modules", "", ".. toctree::", "   :maxdepth: 1", ""]
-        lines += [f"   {child}" for child in children]
+        lines += [".. rubric:: Modules", "", f".. pbdkit-modules:: {' '.join(children)}"]
     return "\n".join(lines) + "\n", children
 
 
@@ -447,4 +472,5 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.connect("missing-reference", _resolve_alias)
     app.connect("env-check-consistency", _check_public)
     app.add_directive("pbdkit-names", PublicNames)
+    app.add_directive("pbdkit-modules", ModuleTable)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
