@@ -8,7 +8,9 @@
   module: ``pbdkit.Skill`` to ``pbdkit.learning.skill.Skill``, ``pbdkit.sim.register_task`` to
   ``pbdkit.sim.tasks.register_task``, and a short name to what the current module imports.
 - ``.. pbdkit-names:: PACKAGE`` is a table of a package's ``__all__``: each name, where it lives
-  and the first paragraph of its docstring.
+  and the first paragraph of its docstring; ``.. pbdkit-modules::`` a table of modules;
+  ``.. pbdkit-cli::`` the ``--help`` of every ``pbdkit`` command. The module pages are
+  generated (:func:`_generate_pages`).
 - Every name in the ``__all__`` of :data:`PUBLIC_PACKAGES` must be documented somewhere: a new
   public name without a page fails the build.
 """
@@ -17,8 +19,12 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
+import os
 import pkgutil
 import re
+import subprocess
+import sys
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -40,6 +46,7 @@ logger = logging.getLogger(__name__)
 PUBLIC_PACKAGES = ("pbdkit", "pbdkit.robots", "pbdkit.sim", "pbdkit.vision")
 
 README = Path(__file__).resolve().parents[2] / "README.md"
+SRC = README.parent / "src"
 _MARKER = re.compile(r"^% readme-section: (?P<heading>.+?)\s*$", re.MULTILINE)
 _HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*$")
 _LINK = re.compile(r"(\]\()([^)\s]+)(\))")
@@ -308,6 +315,49 @@ class ModuleTable(SphinxDirective):
         return container.children
 
 
+# Run in a process of its own: autodoc rewrites the signatures of the functions it documents
+# (autodoc_preserve_defaults), and typer builds the command's options from those signatures.
+_HELP_SCRIPT = """
+import json, sys
+import typer.main
+from typer.testing import CliRunner
+from pbdkit.apps.cli import app
+names = list(getattr(typer.main.get_command(app), "commands", {}))
+env = {"COLUMNS": "96", "NO_COLOR": "1", "TERM": "dumb"}
+out = {}
+for args in [[], *([name] for name in names)]:
+    result = CliRunner().invoke(app, [*args, "--help"], prog_name="pbdkit", env=env)
+    if result.exit_code != 0:
+        sys.exit(f"pbdkit {' '.join(args)} --help failed: {result.output}")
+    out[" ".join(args)] = result.output
+print(json.dumps(out))
+"""
+
+
+class CommandHelp(SphinxDirective):
+    """``.. pbdkit-cli::``: the ``--help`` of the ``pbdkit`` command and of each subcommand, as
+    a terminal 96 columns wide shows it, a section per subcommand."""
+
+    def run(self) -> list[nodes.Node]:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), *sys.path])}
+        proc = subprocess.run(
+            [sys.executable, "-c", _HELP_SCRIPT], env=env, capture_output=True, text=True
+        )
+        if proc.returncode != 0:
+            raise self.error(f"the pbdkit command's help failed: {proc.stderr.strip()}")
+        rows: list[str] = []
+        for command, output in json.loads(proc.stdout).items():
+            if command:
+                title = f"pbdkit {command}"
+                rows += [title, "-" * len(title), ""]
+            text = "\n".join(line.rstrip() for line in output.splitlines()).strip("\n")
+            rows += ["::", "", *("   " + line for line in text.splitlines()), ""]
+        container = nodes.container()
+        source = self.get_source_info()[0]
+        nested_parse_with_titles(self.state, StringList(rows, source=source), container)
+        return container.children
+
+
 def _check_public(app: Sphinx, env: BuildEnvironment) -> None:
     for package_name in PUBLIC_PACKAGES:
         package = importlib.import_module(package_name)
@@ -473,4 +523,5 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.connect("env-check-consistency", _check_public)
     app.add_directive("pbdkit-names", PublicNames)
     app.add_directive("pbdkit-modules", ModuleTable)
+    app.add_directive("pbdkit-cli", CommandHelp)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
