@@ -382,11 +382,25 @@ def _skip_member(
         # scikit-learn, with references into its own docs
         if getattr(obj, "__module__", "").startswith("sklearn"):
             return True
-        # a class member without a docstring is listed in the class's "Attributes" section, or
-        # is not API (undoc-members is for the modules' __all__)
-        if not inspect.getdoc(obj) or inspect.getdoc(obj) == inspect.getdoc(type(obj)):
+        # a class member without a docstring or a ``#:`` comment is listed in the class's
+        # "Attributes" section, or is not API (undoc-members is for the modules' __all__)
+        own = inspect.getdoc(obj)
+        if (not own or own == inspect.getdoc(type(obj))) and not _has_attr_doc(app, name):
             return True
     return None
+
+
+def _has_attr_doc(app: Sphinx, name: str) -> bool:
+    """Whether the class autodoc is documenting has a ``#:`` comment for attribute ``name``."""
+    current = getattr(app.env, "current_document", None)
+    if current is not None and hasattr(current, "autodoc_module"):  # Sphinx >= 8.2
+        module, cls = current.autodoc_module, current.autodoc_class
+    else:
+        temp = app.env.temp_data
+        module, cls = temp.get("autodoc:module"), temp.get("autodoc:class")
+    if not module or not cls:
+        return False
+    return (cls, name) in ModuleAnalyzer.for_module(module).find_attr_docs()
 
 
 _SECTION = re.compile(r"^-{3,}\s*$")
