@@ -1,4 +1,5 @@
-# One entry point for a fresh machine: `make demo` runs the main job, `make test` runs every check.
+# One entry point for a fresh machine: `make demo` runs the main job, `make test` runs every check,
+# `make docs` builds the API reference and the walkthroughs (docs/_build/html/index.html).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -6,7 +7,7 @@ STAMP := $(VENV)/.installed
 TASK ?= coaster
 OUT ?= demo-output
 
-.PHONY: demo test lint bench clean system-deps
+.PHONY: demo test docs lint bench clean system-deps
 
 # Debian packages for headless rendering (EGL, with OSMesa as fallback); skipped when not root.
 SYSTEM_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
@@ -21,20 +22,30 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(BIN)/python system-deps
-	$(BIN)/python -m pip install --quiet -e ".[sim,test]"
+	$(BIN)/python -m pip install --quiet -e ".[sim,test,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/pbdkit demo --out $(OUT)
 
+# Warnings are errors (a broken docstring or reference fails), -E rereads every page (an
+# incremental build would not repeat the warnings of pages it does not reread), offline.
+SPHINX := $(BIN)/python -m sphinx -E -W --keep-going -q -b html docs docs/_build/html
+
 test: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples
-	$(BIN)/ruff format --check src tests benchmarks examples
+	$(BIN)/ruff check src tests benchmarks examples docs
+	$(BIN)/ruff format --check src tests benchmarks examples docs
 	$(BIN)/mypy
+	$(SPHINX)
 	$(BIN)/python -m pytest -q
+
+docs: $(STAMP)
+	$(SPHINX)
+	@echo "open docs/_build/html/index.html"
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .mypy_cache .ruff_cache \
+	  docs/_build docs/api/generated

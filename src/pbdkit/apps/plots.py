@@ -529,7 +529,7 @@ def plot_motion_limits(
         n joints.
     joint : int, optional
         The joint to show; default: the one closest to its acceleration limit (largest peak
-        |acceleration| / limit).
+        ``|acceleration|`` / limit).
     joint_names : sequence of str, optional
         n names for the labels (default theta1 ... thetan).
     position_limits : (array-like (n,), array-like (n,)), optional

@@ -121,6 +121,8 @@ class Demonstration:
         Gripper signal (0 open, 1 closed; booleans accepted), one value per time stamp, within
         [0, 1] (a value in between is a partly closed gripper, or a resampled transition).
 
+    Notes
+    -----
     Joint limits are not checked here (a demonstration does not know its robot):
     :meth:`pbdkit.Skill.learn` warns (:class:`LimitWarning`) about angles outside the robot's
     limits by more than :data:`LIMIT_TOLERANCE`.

@@ -42,7 +42,7 @@ the limit allows (the next steps correct from the clipped posture, the loop bein
 Step size. Table II takes the full linearized step, however far the target. Two bounds scale a
 step down, both uniformly (the step keeps its direction, only its length shrinks):
 
-- ``step_limit`` (rad per step, per joint): |dtheta_i| <= step_limit_i for every joint i. A
+- ``step_limit`` (rad per step, per joint): ``|dtheta_i| <= step_limit_i`` for every joint i. A
   :class:`pbdkit.Skill` derives it from the arm's velocity limits v_i in rad/s (the URDF's, by
   default) and the time a step takes when the reproduction is executed,
   dt = duration / (T - 1) (:meth:`pbdkit.Skill.times`): step_limit_i = v_i dt (1 - 1e-6), the
@@ -68,7 +68,7 @@ caught up with the constraints; after that the bound binds only where the constr
 themselves move faster than the arm can.
 ``ReproductionResult.limited`` marks the steps that were scaled down.
 
-Stability. Each step of the fused loop is one Gauss-Newton step on the fused energy of that step,
+Stability. Each step of the fused loop is one Gauss-Newton step on the fused energy of that step::
 
     E_j(theta) = 1/2 |theta - theta_hat_j|^2_(Lambda_theta)
                  + 1/2 sum_n |f(theta) - o(n) - x_hat^(n)_j|^2_(P_n),
@@ -682,7 +682,7 @@ def solve(
         ``RunOptions()``: every constraint fused, from theta_hat_0).
     step_limit : float or array-like, shape (n,), optional
         Largest step of each joint (rad per step; a number applies to every joint, inf leaves a
-        joint unbounded): a step with |dtheta_i| > step_limit_i for some joint is scaled down
+        joint unbounded): a step with ``|dtheta_i| > step_limit_i`` for some joint is scaled down
         uniformly, keeping its direction, before ``max_step`` applies. Velocity limits v (rad/s)
         give v dt (:func:`step_limit_from_velocity`). None (default): no per-joint bound.
         Not used with ``limits`` (the timing bounds the speed there).

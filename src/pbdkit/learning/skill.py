@@ -567,10 +567,11 @@ class Skill:
 
         Parameters
         ----------
-        objects, q0, use, alpha, covariance, max_step, on_unreachable, velocity_limit,
-        acceleration_limit, jerk_limit, line_search, newton
+        objects, q0, use, alpha, covariance, max_step, on_unreachable
             As :meth:`reproduce` (``q0``: only without limits, the posture the first step
             starts from; with limits the first measured posture is).
+        velocity_limit, acceleration_limit, jerk_limit, line_search, newton
+            As :meth:`reproduce`.
         max_lag : float
             The phase holds while the measured posture is more than this many steps (at the
             joints' top speed) behind the last command.

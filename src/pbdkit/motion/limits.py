@@ -285,7 +285,7 @@ class MotionPeaks:
     Attributes
     ----------
     velocity, acceleration, jerk : float
-        max over the samples and joints of |derivative| / limit (0 where nothing is limited);
+        max over the samples and joints of ``|derivative|`` / limit (0 where nothing is limited);
         <= 1 means within the limits.
     velocity_abs, acceleration_abs, jerk_abs : float
         The largest absolute values (rad/s, rad/s^2, rad/s^3), over every joint.

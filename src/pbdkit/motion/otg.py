@@ -60,8 +60,8 @@ def _ruckig() -> Any:
 
 
 def valid_target(velocity: Float, acceleration: Float, limits: MotionLimits) -> tuple[Float, Float]:
-    """A target velocity and acceleration Ruckig accepts: |v| <= V, |a| <= A and
-    |v| + a^2 / (2 J) <= V (a state with an acceleration must have come from, and must go
+    """A target velocity and acceleration Ruckig accepts: ``|v| <= V``, ``|a| <= A`` and
+    ``|v| + a^2 / (2 J) <= V`` (a state with an acceleration must have come from, and must go
     to, velocities within the limit while its acceleration ramps at the jerk limit)."""
     vmax, amax, jmax = limits.velocity, limits.acceleration, limits.jerk
     v = np.clip(velocity, -vmax, vmax)

@@ -25,9 +25,9 @@ came out indefinite. So a query more than :data:`FAR_SIGMAS` standard deviations
 component (outside ``[GMRModel.near_lo, GMRModel.near_hi]``, two comparisons) takes the centred
 formulation of the multi-input path instead, sum_k beta_k (C_k + d_k d_k^T) with d_k = m_k - m,
 which is positive semi-definite by construction. Where even (x - mu)^2 / sigma^2 overflows
-(|x| > ~1e154), the responsibilities are computed from (x - mu) / r with r = max |x - mu|, the
-differences of the log-densities formed before multiplying by r^2: the result stays finite for
-any finite query whose conditional mean is representable.
+(``|x|`` > ~1e154), the responsibilities are computed from (x - mu) / r with
+``r = max |x - mu|``, the differences of the log-densities formed before multiplying by r^2: the
+result stays finite for any finite query whose conditional mean is representable.
 """
 
 from __future__ import annotations

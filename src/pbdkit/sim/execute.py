@@ -1,7 +1,7 @@
 """Play a joint trajectory on the simulated arm under physics, record the run and judge the outcome.
 
 The arm's servos follow a stream of targets at the physics rate (500 Hz) that a real arm's drives
-would accept: a jerk-limited follower (:class:`pbdkit.motion.otg.KnotFollower`, Ruckig) through the
+would accept: a jerk-limited follower (:func:`pbdkit.motion.otg.follow`, Ruckig) through the
 trajectory's samples, each aimed for, with its velocity and acceleration, at its time, within the
 arm's velocity, acceleration and jerk limits (:func:`servo_stream`); the follower's velocity is
 the velocity feed-forward. Without limits the targets are the samples interpolated linearly, with

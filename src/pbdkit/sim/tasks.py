@@ -118,6 +118,7 @@ if TYPE_CHECKING:
 __all__ = [
     "GLASS_PATCH_PREFIX",
     "GRASP_OFFSET",
+    "ObjectMove",
     "PlacementRange",
     "TaskSpec",
     "fixed_objects",

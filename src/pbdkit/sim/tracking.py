@@ -14,7 +14,7 @@ the simulator's renders, calibrated the way a real session would be, with nothin
 - bias: a per-object offset measured once at the same calibration placement (see below).
 
 Bias correction: why an offset, and not tracked positions in the demonstrations
-------------------------------------------------------------------------------
+-------------------------------------------------------------------------------
 The cameras measure the centroid of what they see of a patch, which is not the object's reference
 point (:mod:`pbdkit.sim.tasks`): they see the front half of the glass's red band, and the top face
 plus the near rim of the coaster. Measured over 100 random placements per task

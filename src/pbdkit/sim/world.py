@@ -57,6 +57,7 @@ Float = NDArray[np.float64]
 
 ARM_JOINTS = ("pan", "lift1", "lift2", "lift3", "wrist_roll")
 FINGER_JOINTS = ("finger_left", "finger_right")
+#: The scene's two cameras (MuJoCo camera names), left and right of the stereo pair.
 CAMERAS = ("cam_left", "cam_right")
 IMAGE_WIDTH = 320
 IMAGE_HEIGHT = 240

@@ -30,6 +30,7 @@ from .._validation import check_int, check_positive_float
 
 __all__ = ["Blob", "BlobStatus", "find_blob"]
 
+#: What :func:`find_blob` found: a blob (``"ok"``), or why it gives none.
 BlobStatus = Literal["ok", "not_visible", "ambiguous", "clipped"]
 
 

@@ -20,6 +20,8 @@ __all__ = ["StereoTracker", "Track", "TrackStatus", "reprojection_error", "trian
 
 Float = NDArray[np.float64]
 
+#: What the stereo pair found for an object: a position (``"ok"``), or why it gives none
+#: (``_a`` / ``_b``: in the first / second view, ``_ab``: in both).
 TrackStatus = Literal[
     "ok",
     "inconsistent",
