@@ -39,14 +39,17 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
     ) from exc
 
 from . import taskdefs  # noqa: F401  (registers the built-in tasks)
-from .execute import ExecutionResult, Outcome, RunStats, evaluate_outcome, execute
+from .execute import ExecutionResult, evaluate_outcome, execute
 from .online import OnlineRun, execute_online
 from .perturb import PERTURBATIONS, Disturbance, PushArm, SlideObject
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
 from .tasks import (
     ObjectMove,
+    Outcome,
     PlacementRange,
+    RunStats,
     TaskSpec,
+    ViaPoint,
     fixed_objects,
     full_placement,
     get_task,
@@ -57,7 +60,7 @@ from .tasks import (
     tracked_objects,
     unregister_task,
 )
-from .teacher import ViaPoint, solve_ik, teach, teach_one, tool_pitch
+from .teacher import solve_ik, teach, teach_one, tool_pitch
 from .video import save_video
 
 __all__ = [

@@ -36,40 +36,9 @@ from ..motion.otg import follow
 from ..robots import katana
 from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
+from .tasks import Outcome, RunStats
 
 Float = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """Success of a run and its measurements.
-
-    Attributes
-    ----------
-    success : bool
-    metrics : dict str -> float
-        The task's measurements, named with their unit (e.g. ``placement_error_mm``,
-        ``tilt_deg``); see the task's judge.
-    """
-
-    success: bool
-    metrics: dict[str, float]
-
-
-@dataclass(frozen=True)
-class RunStats:
-    """What a judge may need beyond the final state: measured while the trajectory played.
-
-    Attributes
-    ----------
-    held_at_end : bool
-        Both fingers touched the glass at the end of the trajectory (before the settling time).
-    max_tilt : float
-        Largest tilt of the glass's axis from the vertical during the run (rad).
-    """
-
-    held_at_end: bool
-    max_tilt: float
 
 
 @dataclass(frozen=True)

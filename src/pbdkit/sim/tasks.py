@@ -48,7 +48,7 @@ before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A sp
   (building blocks in :mod:`pbdkit.sim.teacher`: :class:`~pbdkit.sim.teacher.Person`,
   :func:`~pbdkit.sim.teacher.grasp_via_points`);
 - ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
-  what was measured during the run (:class:`pbdkit.sim.execute.RunStats`);
+  what was measured during the run (:class:`RunStats`);
 - ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
   patch (default: the glass's red band only); ``n_liquid``: spheres in the glass (default 0);
   ``move``: the object that ``--perturb move`` slides (:class:`ObjectMove`, optional).
@@ -102,7 +102,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -110,17 +110,15 @@ from numpy.typing import NDArray
 
 from .._validation import check_positions
 
-if TYPE_CHECKING:
-    from .execute import Outcome, RunStats
-    from .scene import Simulation
-    from .teacher import ViaPoint
-
 __all__ = [
     "GLASS_PATCH_PREFIX",
     "GRASP_OFFSET",
     "ObjectMove",
+    "Outcome",
     "PlacementRange",
+    "RunStats",
     "TaskSpec",
+    "ViaPoint",
     "fixed_objects",
     "full_placement",
     "get_task",
@@ -188,12 +186,78 @@ class PlacementRange:
         return bool(np.all(p >= self.low - tol) and np.all(p <= self.high + tol))
 
 
+@dataclass(frozen=True)
+class ViaPoint:
+    """A waypoint of the teacher's hand (what a task's ``via_points`` returns).
+
+    Attributes
+    ----------
+    duration : float
+        Time (s) to reach it from the previous via point (minimum-jerk profile).
+    x : ndarray, shape (3,)
+        Tool point.
+    pitch, roll : float
+        Tool pitch and wrist roll (rad).
+    gripper : bool
+        Gripper state (closed if True) during the motion to this via point.
+    free_pitch : bool
+        The pitch is a preference only: if the arm cannot reach ``x`` with it, the nearest
+        reachable pitch is used (a person adapts the posture; the glass is not held then).
+    joint_space : bool
+        Interpolate the segment to this via point in joint space (a free gesture) instead of
+        in task space (a controlled hand path).
+    """
+
+    duration: float
+    x: Float
+    pitch: float
+    roll: float
+    gripper: bool
+    free_pitch: bool = False
+    joint_space: bool = False
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Success of a run and its measurements (what a task's ``judge`` returns).
+
+    Attributes
+    ----------
+    success : bool
+    metrics : dict str -> float
+        The task's measurements, named with their unit (e.g. ``placement_error_mm``,
+        ``tilt_deg``); see the task's judge.
+    """
+
+    success: bool
+    metrics: dict[str, float]
+
+
+@dataclass(frozen=True)
+class RunStats:
+    """What a judge may need beyond the final state: measured while the trajectory played.
+
+    Attributes
+    ----------
+    held_at_end : bool
+        Both fingers touched the grasped object at the end of the trajectory (before the
+        settling time).
+    max_tilt : float
+        Largest tilt of the grasped object's axis from the vertical during the run (rad).
+    """
+
+    held_at_end: bool
+    max_tilt: float
+
+
 #: ``add_objects(world, objects, rng)``: add the task's bodies to the MjSpec worldbody.
 AddObjects = Callable[[Any, Mapping[str, Float], np.random.Generator], None]
 #: ``via_points(objects, rng, speed)``: the teacher's via points for a placement.
-ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], "list[ViaPoint]"]
-#: ``judge(sim, run)``: the outcome of a run, from the final state and the run's measurements.
-Judge = Callable[["Simulation", "RunStats"], "Outcome"]
+ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], list[ViaPoint]]
+#: ``judge(sim, run)``: the outcome of a run, from the final state of the simulation
+#: (a :class:`pbdkit.sim.scene.Simulation`, which builds on this module) and the run's
+#: measurements.
+Judge = Callable[[Any, RunStats], Outcome]
 
 
 def _glass_patch() -> dict[str, str]:
@@ -250,7 +314,7 @@ class TaskSpec:
         for a placement (durations scaled by 1 / speed).
     judge : callable
         ``judge(sim, run) -> Outcome``: success and metrics of a run, from the simulation after
-        it and its :class:`pbdkit.sim.execute.RunStats`.
+        it and its :class:`RunStats`.
     patches : dict str -> str
         For each object the cameras can track, the name prefix of its patch's geoms.
     n_liquid : int

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -47,7 +46,7 @@ from ..learning.demonstration import Demonstration
 from ..robots import katana
 from ..robots.model import Robot
 from . import tasks as T
-from .tasks import TaskSpec
+from .tasks import TaskSpec, ViaPoint
 
 Float = NDArray[np.float64]
 
@@ -132,37 +131,6 @@ def solve_ik(
             f"(error {err:.2e}); the point is out of reach or beyond a joint limit"
         )
     return q
-
-
-@dataclass(frozen=True)
-class ViaPoint:
-    """A waypoint of the teacher's hand.
-
-    Attributes
-    ----------
-    duration : float
-        Time (s) to reach it from the previous via point (minimum-jerk profile).
-    x : ndarray, shape (3,)
-        Tool point.
-    pitch, roll : float
-        Tool pitch and wrist roll (rad).
-    gripper : bool
-        Gripper state (closed if True) during the motion to this via point.
-    free_pitch : bool
-        The pitch is a preference only: if the arm cannot reach ``x`` with it, the nearest
-        reachable pitch is used (a person adapts the posture; the glass is not held then).
-    joint_space : bool
-        Interpolate the segment to this via point in joint space (a free gesture) instead of
-        in task space (a controlled hand path).
-    """
-
-    duration: float
-    x: Float
-    pitch: float
-    roll: float
-    gripper: bool
-    free_pitch: bool = False
-    joint_space: bool = False
 
 
 def _min_jerk(tau: Float) -> Float:

@@ -23,10 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import tasks as T
-from ..execute import Outcome, RunStats
 from ..scene import Simulation
-from ..tasks import ObjectMove, PlacementRange, TaskSpec
-from ..teacher import UP, Person, ViaPoint, between, grasp_via_points, radial
+from ..tasks import ObjectMove, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint
+from ..teacher import UP, Person, between, grasp_via_points, radial
 from ..world import LIQUID, SOLID, add_glass, add_liquid
 
 __all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
