@@ -53,7 +53,7 @@ from ..prob.gmm import MAX_COMPONENTS
 from ..robots import katana
 from . import tasks as T
 from .execute import ExecutionResult, execute, stream_peaks
-from .online import GRASPED, Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
+from .online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
 from .parallel import TrialJob, session
 from .perturb import Disturbance, check_perturb, make_disturbance
 from .scene import Simulation
@@ -823,7 +823,7 @@ def trial_disturbance(
     grid = np.arange(ts.skill.n_steps, dtype=np.float64) * _step_seconds(ts)
     gripper = ts.skill.constraints().gripper
     rng = np.random.default_rng([seed, 2, index])
-    return make_disturbance(perturb, ts.task, truth, grid, gripper, truth[GRASPED], rng)
+    return make_disturbance(perturb, ts.task, truth, grid, gripper, truth[ts.task.grasped], rng)
 
 
 def _step_seconds(ts: TaskSkill) -> float:

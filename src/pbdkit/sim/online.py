@@ -17,10 +17,11 @@ Object positions reach the controller from an :class:`Observer`, at 15 Hz (the p
   patch, refuses implausible jumps and says which;
 - :class:`TruthObserver`: the simulator's true positions (``--ground-truth``).
 
-Both follow one rule for the grasped glass: from the first command that closes the gripper on,
-the glass's position stays where it was grasped. The skill's glass-relative constraint is
-relative to the glass's place before it is moved (as in the demonstrations); a controller told
-the carried glass's position would chase its own hand.
+Both follow one rule for the grasped object (the task's
+:attr:`~pbdkit.sim.tasks.TaskSpec.grasped`, the glass): from the first command that closes the
+gripper on, its position stays where it was grasped. The skill's constraint relative to it is
+relative to its place before it is moved (as in the demonstrations); a controller told the
+carried object's position would chase its own hand.
 """
 
 from __future__ import annotations
@@ -54,12 +55,9 @@ Float = NDArray[np.float64]
 #: Rate of the object observations (Hz): the paper's cameras ran at 15 Hz.
 OBSERVE_RATE = 15.0
 
-#: The object the gripper holds (every task's, :mod:`pbdkit.sim.tasks`).
-GRASPED = "glass"
-
 
 class Observer:
-    """Object positions for a running controller (base class: the grasped-glass rule).
+    """Object positions for a running controller (base class: the grasped-object rule).
 
     Parameters
     ----------
@@ -80,7 +78,7 @@ class Observer:
         """New positions (a subset of ``names``) observed on ``sim`` at run time ``t``."""
         self.grasped = self.grasped or gripper_closed
         sim.refresh()
-        held = (GRASPED,) if self.grasped else ()
+        held = (sim.info.spec.grasped,) if self.grasped else ()
         return self.observe(sim, t, held)
 
     def observe(self, sim: Simulation, t: float, held: tuple[str, ...]) -> dict[str, Float]:

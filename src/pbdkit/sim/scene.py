@@ -37,6 +37,8 @@ from .world import (
     TIMESTEP,
     SceneInfo,
     build_scene,
+    free_joint,
+    wall_prefix,
 )
 
 __all__ = [
@@ -97,7 +99,10 @@ class Simulation:
         self._finger_act = np.array([m.actuator(f"pos_{j}").id for j in FINGER_JOINTS])
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(j).id] for j in FINGER_JOINTS])
         self._tool_site = m.site("tool").id
-        self._glass_body = m.body("glass").id
+        # The object the gripper holds (the task's glass, TaskSpec.grasped).
+        self._held = info.spec.grasped
+        self._held_wall = wall_prefix(self._held)
+        self._glass_body = m.body(self._held).id
         self._liquid_bodies = np.array(
             [m.body(f"liquid{i}").id for i in range(info.n_liquid)], dtype=np.intp
         )
@@ -109,8 +114,8 @@ class Simulation:
             if bid >= 0 and m.body_mocapid[bid] >= 0:
                 mid = int(m.body_mocapid[bid])
                 self._mocap[name] = (mid, np.asarray(pos - m.body_pos[bid], dtype=np.float64))
-        self._glass_qadr = int(m.jnt_qposadr[m.joint("glass_free").id])
-        self._glass_vadr = int(m.jnt_dofadr[m.joint("glass_free").id])
+        self._glass_qadr = int(m.jnt_qposadr[m.joint(free_joint(self._held)).id])
+        self._glass_vadr = int(m.jnt_dofadr[m.joint(free_joint(self._held)).id])
         self._renderer: Any = None
         # The servos' controls as slices where the actuators are evenly spaced (they are:
         # pos_j, vel_j alternate), else index arrays: set at every physics step.
@@ -229,15 +234,15 @@ class Simulation:
     def object_positions(self) -> dict[str, Float]:
         """Ground-truth object positions o (base frame), name -> (3,), as the cameras define them.
 
-        The glass's point is on its axis at the height of the red band's centre; the other
-        objects are static bodies, at their build positions, or mocap bodies where they are
-        now (:meth:`place_object`).
+        The grasped glass's point (:attr:`pbdkit.sim.tasks.TaskSpec.grasped`) is on its axis at
+        the height of the red band's centre; the other objects are static bodies, at their
+        build positions, or mocap bodies where they are now (:meth:`place_object`).
         """
         out = {k: v.copy() for k, v in self.info.objects.items()}
         for name, (mid, offset) in self._mocap.items():
             out[name] = np.asarray(self.data.mocap_pos[mid] + offset, dtype=np.float64)
         bottom, rot = self.glass_pose()
-        out["glass"] = bottom + rot[:, 2] * T.GLASS_PATCH_CENTER
+        out[self._held] = bottom + rot[:, 2] * T.GLASS_PATCH_CENTER
         return out
 
     def place_object(
@@ -266,21 +271,21 @@ class Simulation:
             raise ValueError(
                 f"position and velocity must be finite (3,) vectors, got {position!r}, {velocity!r}"
             )
-        if name == "glass":
+        if name == self._held:
             a, d = self._glass_qadr, self._glass_vadr
             # Upright (the glass is built with the identity orientation), as a hand sliding it
             # would hold it; its reference point is then on the vertical through its bottom.
             self.data.qpos[a + 3 : a + 7] = (1.0, 0.0, 0.0, 0.0)
             self.data.qvel[d + 3 : d + 6] = 0.0
             mujoco.mj_kinematics(self.model, self.data)
-            now = self.object_positions()["glass"]
+            now = self.object_positions()[self._held]
             self.data.qpos[a : a + 3] += p - now
             self.data.qvel[d : d + 3] = v
         elif name in self._mocap:
             mid, offset = self._mocap[name]
             self.data.mocap_pos[mid] = p - offset
         else:
-            movable = ["glass", *self._mocap]
+            movable = [self._held, *self._mocap]
             raise ValueError(f"object {name!r} cannot move; movable objects: {movable}")
         mujoco.mj_kinematics(self.model, self.data)
 
@@ -307,16 +312,16 @@ class Simulation:
         return int(np.count_nonzero(hits))
 
     def glass_grasped(self) -> bool:
-        """True if both fingers touch the glass."""
+        """True if both fingers touch the grasped glass."""
         return (
-            self.contacts("finger_left", "glass_wall") > 0
-            and self.contacts("finger_right", "glass_wall") > 0
+            self.contacts("finger_left", self._held_wall) > 0
+            and self.contacts("finger_right", self._held_wall) > 0
         )
 
     def glass_released(self) -> bool:
-        """True if no finger touches the glass."""
-        left = self.contacts("finger_left", "glass_wall")
-        return not (left or self.contacts("finger_right", "glass_wall"))
+        """True if no finger touches the grasped glass."""
+        left = self.contacts("finger_left", self._held_wall)
+        return not (left or self.contacts("finger_right", self._held_wall))
 
     # -- cameras -----------------------------------------------------------------------------
     def camera_id(self, camera: str) -> int:

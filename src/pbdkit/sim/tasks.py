@@ -12,9 +12,11 @@ Frames and reference points
 All positions are in the robot's base frame (the frame of the URDF root, ``base_link``), in metres:
 x points away from the robot across the table, z up, and the table top is the plane z = 0 (the arm's
 base column stands on it). An object's position ``o`` is the point a camera measures; each task
-says which point that is for its objects. Every task has a ``glass``, the object the gripper holds
-(the simulation, the execution record and the teacher's grasp rely on it), whose point is on its
-axis at the height of the centre of its red band.
+says which point that is for its objects. Every task has one object the gripper holds, its
+:attr:`TaskSpec.grasped` (``"glass"`` unless the task names another): a glass built by
+:func:`pbdkit.sim.world.add_glass` under that name, on which the simulation, the execution record,
+the disturbances and the teacher's grasp rely, whose point is on its axis at the height of the
+centre of its red band.
 
 The Katana holds the glass from the side with its long wrist (0.30 m from the wrist pitch joint to
 the tool point) nearly horizontal, which folds the elbow beyond its limit closer than about 0.45 m
@@ -37,8 +39,9 @@ Write one module that builds a :class:`TaskSpec` and calls :func:`register_task`
 before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A spec needs:
 
 - ``name`` and ``description`` (the report's one-line text);
-- ``ranges``: object name -> :class:`PlacementRange`, with a ``"glass"``; z is the height at
-  which the object rests on its support (scenes refuse other heights);
+- ``ranges``: object name -> :class:`PlacementRange`, with the grasped object (``grasped``,
+  default ``"glass"``); z is the height at which the object rests on its support (scenes refuse
+  other heights);
 - ``add_objects(world, objects, rng)``: adds the task's bodies to the MuJoCo world
   (``world`` is the ``MjSpec``'s worldbody, ``objects`` a full placement name -> (3,)), the glass
   included (:func:`pbdkit.sim.world.add_glass`, and :func:`pbdkit.sim.world.add_liquid` for a
@@ -50,8 +53,10 @@ before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A sp
 - ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
   what was measured during the run (:class:`RunStats`);
 - ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
-  patch (default: the glass's red band only); ``n_liquid``: spheres in the glass (default 0);
-  ``move``: the object that ``--perturb move`` slides (:class:`ObjectMove`, optional).
+  patch (default: the grasped glass's red band only); ``n_liquid``: spheres in the glass
+  (default 0); ``move``: the object that ``--perturb move`` slides (:class:`ObjectMove`,
+  optional); ``grasped``: the name of the glass the gripper holds (default ``"glass"``; its
+  bodies and geoms are named after it, :func:`pbdkit.sim.world.add_glass`).
 
 For example, a third task, "put the glass from the table on a green mark on the table"
 (``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
@@ -123,6 +128,7 @@ __all__ = [
     "full_placement",
     "get_task",
     "nominal_objects",
+    "patch_prefix",
     "register_task",
     "sample_objects",
     "task_names",
@@ -140,8 +146,16 @@ GLASS_BOTTOM = 0.006  # thickness of the bottom disk (m)
 GLASS_PATCH_LOW = 0.065  # red band, height above the glass's bottom face (m)
 GLASS_PATCH_HIGH = 0.085
 GLASS_PATCH_CENTER = 0.5 * (GLASS_PATCH_LOW + GLASS_PATCH_HIGH)
+
+
+def patch_prefix(name: str) -> str:
+    """Name prefix of the geoms of the red band of the glass ``name`` (``NAME_patch0..11``,
+    :func:`pbdkit.sim.world.add_glass`), for the cameras."""
+    return f"{name}_patch"
+
+
 #: Name prefix of the geoms of the glass's red band (``glass_patch0..11``), for the cameras.
-GLASS_PATCH_PREFIX = "glass_patch"
+GLASS_PATCH_PREFIX = patch_prefix("glass")
 # Height above the glass's bottom face at which the fingers hold it (centre of the finger pads).
 GLASS_GRASP_HEIGHT = 0.045
 # Tool point minus glass position when the glass is held upright with the tool on its axis.
@@ -260,8 +274,8 @@ ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], list[Via
 Judge = Callable[[Any, RunStats], Outcome]
 
 
-def _glass_patch() -> dict[str, str]:
-    return {"glass": GLASS_PATCH_PREFIX}
+class _GraspedPatch(dict[str, str]):
+    """``TaskSpec.patches`` left out: filled in with the grasped glass's red band only."""
 
 
 @dataclass(frozen=True)
@@ -304,9 +318,10 @@ class TaskSpec:
         What the task is, in a few sentences (the report's first paragraph).
     ranges : dict str -> PlacementRange
         Object name -> placement range, in a fixed order (the order of every placement dict);
-        must contain ``"glass"``. A range with ``low == high`` is a fixed object.
+        must contain the grasped object. A range with ``low == high`` is a fixed object.
     add_objects : callable
-        ``add_objects(world, objects, rng)``: adds the task's bodies, the glass included, to
+        ``add_objects(world, objects, rng)``: adds the task's bodies, the grasped glass
+        included (:func:`pbdkit.sim.world.add_glass` with ``name=grasped``), to
         the worldbody of the MuJoCo ``MjSpec``; ``objects`` holds every object's position
         (3,), ``rng`` seeds any jitter (the liquid's).
     via_points : callable
@@ -316,11 +331,16 @@ class TaskSpec:
         ``judge(sim, run) -> Outcome``: success and metrics of a run, from the simulation after
         it and its :class:`RunStats`.
     patches : dict str -> str
-        For each object the cameras can track, the name prefix of its patch's geoms.
+        For each object the cameras can track, the name prefix of its patch's geoms; default:
+        the grasped glass's red band only (``{grasped: patch_prefix(grasped)}``).
     n_liquid : int
         Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
     move : ObjectMove, optional
         The task's ``move`` disturbance (``--perturb move``); None: the task has none.
+    grasped : str
+        The object the gripper holds, a glass built with ``add_glass(..., name=grasped)``: the
+        simulation's grasp, tilt and release checks, the record of a run, the online loop's
+        held object and the push's direction are about it.
     """
 
     name: str
@@ -329,19 +349,22 @@ class TaskSpec:
     add_objects: AddObjects
     via_points: ViaPoints
     judge: Judge
-    patches: Mapping[str, str] = field(default_factory=_glass_patch)
+    patches: Mapping[str, str] = field(default_factory=_GraspedPatch)
     n_liquid: int = 0
     move: ObjectMove | None = None
+    grasped: str = "glass"
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise ValueError(f"name must be a non-empty string, got {self.name!r}")
         ranges = dict(self.ranges)
-        if "glass" not in ranges:
+        if not isinstance(self.grasped, str) or self.grasped not in ranges:
             raise ValueError(
-                f"ranges of task {self.name!r} must include 'glass' (the object the gripper "
-                f"holds), got {list(ranges)}"
+                f"ranges of task {self.name!r} must include {self.grasped!r} (the object the "
+                f"gripper holds, TaskSpec.grasped), got {list(ranges)}"
             )
+        if isinstance(self.patches, _GraspedPatch):
+            object.__setattr__(self, "patches", {self.grasped: patch_prefix(self.grasped)})
         for obj, r in ranges.items():
             if not isinstance(r, PlacementRange):
                 raise ValueError(f"ranges[{obj!r}] must be a PlacementRange, got {r!r}")

@@ -51,6 +51,8 @@ __all__ = [
     "add_glass",
     "add_liquid",
     "build_scene",
+    "free_joint",
+    "wall_prefix",
 ]
 
 Float = NDArray[np.float64]
@@ -172,8 +174,19 @@ def _add_table(world: Any) -> None:
     )
 
 
-def add_glass(world: Any, bottom: Float, n_walls: int = 12) -> None:
-    """Add the glass (body ``glass``, free) standing upright with its bottom face centred at
+def wall_prefix(name: str) -> str:
+    """Name prefix of the wall geoms of the glass ``name`` (``NAME_wall0..``): what the fingers
+    touch when they hold it."""
+    return f"{name}_wall"
+
+
+def free_joint(name: str) -> str:
+    """Name of the free joint of the glass ``name``."""
+    return f"{name}_free"
+
+
+def add_glass(world: Any, bottom: Float, n_walls: int = 12, *, name: str = "glass") -> None:
+    """Add a glass (body ``name``, free) standing upright with its bottom face centred at
     ``bottom``.
 
     Parameters
@@ -185,10 +198,15 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12) -> None:
         point is ``bottom + (0, 0, GLASS_PATCH_CENTER)``.
     n_walls : int
         Number of wall boxes around the axis.
+    name : str
+        The body's name, the task's :attr:`~pbdkit.sim.tasks.TaskSpec.grasped` (default
+        ``"glass"``); its geoms are ``NAME_wall0..``, ``NAME_patch0..`` (the red band,
+        :func:`pbdkit.sim.tasks.patch_prefix`) and ``NAME_bottom``, its free joint
+        ``NAME_free``.
     """
     # Body frame: centre of the bottom face, z along the glass's axis.
-    body = world.add_body(name="glass", pos=bottom.tolist())
-    body.add_freejoint(name="glass_free")
+    body = world.add_body(name=name, pos=bottom.tolist())
+    body.add_freejoint(name=free_joint(name))
     r_out, wt, h = T.GLASS_RADIUS, T.GLASS_WALL, T.GLASS_HEIGHT
     r_mid = r_out - wt / 2
     # Facets slightly wider than the polygon's side so that neighbouring boxes overlap: no gap
@@ -199,7 +217,7 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12) -> None:
         a = 2.0 * math.pi * i / n_walls
         quat = [math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]
         body.add_geom(
-            name=f"glass_wall{i}",
+            name=f"{wall_prefix(name)}{i}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=[wt / 2, width / 2, h / 2],
             pos=[r_mid * math.cos(a), r_mid * math.sin(a), h / 2],
@@ -213,7 +231,7 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12) -> None:
         )
         # Red band, visual only, just outside the wall.
         body.add_geom(
-            name=f"{T.GLASS_PATCH_PREFIX}{i}",
+            name=f"{T.patch_prefix(name)}{i}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=[0.0005, width / 2, (T.GLASS_PATCH_HIGH - T.GLASS_PATCH_LOW) / 2],
             pos=[
@@ -228,7 +246,7 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12) -> None:
             density=0.0,
         )
     body.add_geom(
-        name="glass_bottom",
+        name=f"{name}_bottom",
         type=mujoco.mjtGeom.mjGEOM_CYLINDER,
         size=[r_out - wt, T.GLASS_BOTTOM / 2, 0.0],
         pos=[0.0, 0.0, T.GLASS_BOTTOM / 2],
@@ -456,11 +474,12 @@ def build_scene(
     model = mj.compile()
     names = [model.body(i).name for i in range(model.nbody)]
     n_liquid = sum(name.startswith("liquid") for name in names)
-    if "glass" not in names or n_liquid != spec.n_liquid:
+    held = spec.grasped
+    if held not in names or n_liquid != spec.n_liquid:
         raise ValueError(
-            f"task {spec.name!r}: add_objects must add the glass (add_glass) and n_liquid = "
-            f"{spec.n_liquid} liquid spheres (add_liquid); it added "
-            f"{'a' if 'glass' in names else 'no'} glass and {n_liquid} spheres"
+            f"task {spec.name!r}: add_objects must add the {held} (add_glass(..., "
+            f"name={held!r})) and n_liquid = {spec.n_liquid} liquid spheres (add_liquid); it "
+            f"added {'the' if held in names else 'no'} {held} and {n_liquid} spheres"
         )
     info = SceneInfo(spec=spec, objects={k: v.copy() for k, v in objs.items()}, n_liquid=n_liquid)
     return model, info
