@@ -8,13 +8,18 @@ import pytest
 
 pytest.importorskip("mujoco")
 
+from typer.testing import CliRunner
+
 from pbdkit import Skill
+from pbdkit.apps.cli import app
 from pbdkit.motion.limits import MotionLimits, motion_peaks
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
+from pbdkit.sim import perturb as P
 from pbdkit.sim.online import OnlineRun, TruthObserver, execute_online
-from pbdkit.sim.perturb import Disturbance, PushArm, SlideObject, grasp_time
+from pbdkit.sim.perturb import Disturbance, DisturbanceSetup, PushArm, SlideObject, grasp_time
 from pbdkit.sim.scene import TIMESTEP, Simulation
+from pbdkit.sim.tasks import TaskSpec
 from pbdkit.sim.teacher import teach
 
 
@@ -180,6 +185,73 @@ def test_evaluate_records_the_perturbation(
     assert {"phase_held_steps", "peak_speed_ratio", "following_error_rad"} <= set(row)
     with pytest.raises(ValueError, match="perturb must be one of"):
         E.evaluate("coaster", 1, 0, task_skill=coaster, perturb="shake")
+
+
+class Tap(Disturbance):
+    """A test's own disturbance: a light horizontal force on the gripper, from the grasp on."""
+
+    name = "tap"
+
+    def __init__(self, force: np.ndarray, start: float) -> None:
+        self.force, self.start = force, start
+
+    def apply(self, sim: Simulation, t: float) -> None:
+        bid = sim.model.body("gripper").id
+        sim.data.xfrc_applied[bid, :3] = self.force if self.start <= t < self.start + 0.1 else 0.0
+
+    def as_dict(self) -> dict[str, object]:
+        return {"name": self.name, "force_n": self.force.tolist(), "start_s": self.start}
+
+
+def _tap(setup: DisturbanceSetup) -> Disturbance:
+    seen.append(setup)
+    return Tap(setup.rng.normal(0.0, 1.0, 3) * [1.0, 1.0, 0.0], setup.grasp_time())
+
+
+seen: list[DisturbanceSetup] = []
+
+
+def _refuse_basin(task: TaskSpec) -> None:
+    if task.name == "basin":
+        raise ValueError("tap: the basin task is not tapped")
+
+
+def test_a_perturbation_is_one_registry_entry(coaster: E.TaskSkill) -> None:
+    assert P.perturbation_names()[:3] == ("none", "move", "push")
+    assert list(P.PERTURBATIONS) == list(P.perturbation_names())
+    tap = P.Perturbation("tap", "a 1 N tap on the gripper at the grasp", _tap, check=_refuse_basin)
+    with pytest.raises(ValueError, match="perturb must be one of \\['none', 'move', 'push'"):
+        P.get_perturbation("tap")
+    with pytest.raises(ValueError, match="'push' is already registered"):
+        P.register_perturbation(P.Perturbation("push", "again", _tap))
+    with pytest.raises(ValueError, match="help of perturbation 'x' must be a non-empty string"):
+        P.Perturbation("x", " ", _tap)
+    P.register_perturbation(tap)
+    try:
+        assert P.get_perturbation("tap") is tap and "tap" in P.PERTURBATIONS
+        # The command line's choices and help come from the registry.
+        r = CliRunner().invoke(app, ["evaluate", "--perturb", "shake"])
+        assert r.exit_code == 2 and "must be one of none, move, push, tap" in r.output
+        r = CliRunner().invoke(app, ["evaluate", "--help"])
+        words = " ".join(r.output.replace("│", " ").split())  # the help's lines wrap
+        assert "or tap (a 1 N tap on the gripper at the grasp)." in words
+        assert "push (a 0.3 s shove on the arm halfway to the grasp)" in words
+        assert "{perturbations}" not in words
+        # A trial runs it, drawn from the trial's own stream, with what it needs to know.
+        ev = E.evaluate("coaster", 1, 0, task_skill=coaster, controllers=["fused"],
+                        ground_truth=True, perturb="tap")  # fmt: skip
+        (p,) = ev.as_dict()["perturbations"]
+        assert p["name"] == "tap" and ev.perturb == "tap"
+        setup = seen[-1]
+        assert setup.task is coaster.task and set(setup.objects) == {"glass", "coaster"}
+        assert p["start_s"] == pytest.approx(setup.grasp_time())
+        again = E.trial_disturbance(coaster, "tap", ev.trials[0].truth, seed=0).as_dict()
+        assert again == p
+        with pytest.raises(ValueError, match="the basin task is not tapped"):
+            E.evaluate("basin", 1, 0, perturb="tap")
+    finally:
+        assert P.unregister_perturbation("tap") is tap
+    assert "tap" not in P.perturbation_names()
 
 
 def test_objects_slide_and_static_ones_refuse() -> None:

@@ -19,6 +19,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperCommand
 
 from .._defaults import MAX_COMPONENTS
 from .._io import write_json
@@ -198,22 +199,34 @@ OnlineOption = Annotated[
         "trajectory).",
     ),
 ]
-PerturbOption = Annotated[
-    str,
-    typer.Option(
-        help="Disturbance: none, move (the coaster slides 5 cm while the glass is carried; "
-        "basin task: the glass slides 4 cm before the grasp) or push (a 0.3 s shove on the arm "
-        "halfway to the grasp).",
-    ),
-]
+# Where a --perturb help lists the registered perturbations (pbdkit.sim.register_perturbation).
+_PERTURBATIONS = "{perturbations}"
+PerturbOption = Annotated[str, typer.Option(help=f"Disturbance: {_PERTURBATIONS}.")]
+
+
+class _PerturbHelp(TyperCommand):
+    """A command whose ``--perturb`` help lists the registered perturbations with their help
+    texts (:func:`pbdkit.sim.perturb.perturbation_help`). They are read when the help is shown:
+    the registry lives with the simulator, which the command line imports only to run a
+    command."""
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        from ..sim.perturb import perturbation_help
+
+        for param in self.params:
+            text = getattr(param, "help", None)
+            if param.name == "perturb" and isinstance(text, str):
+                cast(Any, param).help = text.replace(_PERTURBATIONS, perturbation_help())
+        super().format_help(ctx, formatter)
 
 
 def _check_perturb(perturb: str) -> None:
-    from ..sim.perturb import PERTURBATIONS
+    from ..sim.perturb import perturbation_names
 
-    if perturb not in PERTURBATIONS:
+    if perturb not in perturbation_names():
         raise typer.BadParameter(
-            f"must be one of {', '.join(PERTURBATIONS)}, got {perturb!r}", param_hint="--perturb"
+            f"must be one of {', '.join(perturbation_names())}, got {perturb!r}",
+            param_hint="--perturb",
         )
 
 
@@ -280,7 +293,7 @@ def _check_lasa_shape(shape: str) -> None:
         _fail(f"--shape must be a LASA shape, one of {', '.join(names)}; got {shape!r}")
 
 
-@app.command()
+@app.command(cls=_PerturbHelp)
 @_reports_errors
 def demo(
     out: Annotated[Path, typer.Option(help="Folder for the results.")] = Path("demo-output"),
@@ -295,9 +308,7 @@ def demo(
     perturb: Annotated[
         str,
         typer.Option(
-            help="Disturbance of the online run (with --online): none, move or push; default "
-            "move (the coaster slides 5 cm while the glass is carried; basin task: the glass "
-            "slides 4 cm before the grasp).",
+            help=f"Disturbance of the online run (with --online): {_PERTURBATIONS}; default move.",
         ),
     ] = "move",
 ) -> None:
@@ -737,7 +748,7 @@ def _bag_timing(skill: Skill, res: ReproductionResult, bag: Path) -> tuple[np.nd
     return t, names
 
 
-@app.command()
+@app.command(cls=_PerturbHelp)
 @_reports_errors
 def evaluate(
     task: Annotated[str, typer.Option(help=f"{_TASK_HELP}.")] = "coaster",

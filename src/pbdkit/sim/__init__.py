@@ -18,8 +18,9 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
 - :func:`execute_online` (:mod:`pbdkit.sim.online`): runs a :class:`pbdkit.Controller` in the
   physics loop, told object positions at 15 Hz by the cameras (through a
   :class:`pbdkit.vision.TrackFilter`) or the truth.
-- :mod:`pbdkit.sim.perturb`: disturbances for both ways of running (``move``: an object slides;
-  ``push``: a shove on the arm).
+- :mod:`pbdkit.sim.perturb`: disturbances for both ways of running, a registry like the tasks'
+  (:func:`register_perturbation`, :func:`perturbation_names`; built in: ``move``, an object
+  slides; ``push``, a shove on the arm).
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
 
@@ -41,7 +42,18 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
 from . import taskdefs  # noqa: F401  (registers the built-in tasks)
 from .execute import ExecutionResult, evaluate_outcome, execute
 from .online import OnlineRun, execute_online
-from .perturb import PERTURBATIONS, Disturbance, PushArm, SlideObject
+from .perturb import (
+    PERTURBATIONS,
+    Disturbance,
+    DisturbanceSetup,
+    Perturbation,
+    PushArm,
+    SlideObject,
+    get_perturbation,
+    perturbation_names,
+    register_perturbation,
+    unregister_perturbation,
+)
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
 from .tasks import (
     ObjectMove,
@@ -67,10 +79,12 @@ __all__ = [
     "CAMERAS",
     "PERTURBATIONS",
     "Disturbance",
+    "DisturbanceSetup",
     "ExecutionResult",
     "ObjectMove",
     "OnlineRun",
     "Outcome",
+    "Perturbation",
     "PlacementRange",
     "PushArm",
     "RunStats",
@@ -85,8 +99,11 @@ __all__ = [
     "execute_online",
     "fixed_objects",
     "full_placement",
+    "get_perturbation",
     "get_task",
     "nominal_objects",
+    "perturbation_names",
+    "register_perturbation",
     "register_task",
     "sample_objects",
     "save_video",
@@ -96,5 +113,6 @@ __all__ = [
     "teach_one",
     "tool_pitch",
     "tracked_objects",
+    "unregister_perturbation",
     "unregister_task",
 ]

@@ -55,7 +55,7 @@ from . import tasks as T
 from .execute import ExecutionResult, execute, stream_peaks
 from .online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
 from .parallel import TrialJob, session
-from .perturb import Disturbance, check_perturb, make_disturbance
+from .perturb import Disturbance, DisturbanceSetup, check_perturb, make_disturbance
 from .scene import Simulation
 from .tasks import TaskSpec
 from .teacher import teach
@@ -823,7 +823,7 @@ def trial_disturbance(
     grid = np.arange(ts.skill.n_steps, dtype=np.float64) * _step_seconds(ts)
     gripper = ts.skill.constraints().gripper
     rng = np.random.default_rng([seed, 2, index])
-    return make_disturbance(perturb, ts.task, truth, grid, gripper, truth[ts.task.grasped], rng)
+    return make_disturbance(perturb, DisturbanceSetup(ts.task, truth, grid, gripper, rng))
 
 
 def _step_seconds(ts: TaskSkill) -> float:

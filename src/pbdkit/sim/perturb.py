@@ -5,8 +5,13 @@ time t (seconds from the start of the trajectory, the first command). Both ways 
 skill take one: the offline playback (:func:`pbdkit.sim.execute.execute`) and the online loop
 (:func:`pbdkit.sim.online.execute_online`), so the two meet the same disturbance.
 
-The named disturbances (:func:`make_disturbance`) are timed from the skill itself: ``t_grasp``
-is the time of the first step where the skill's generalized gripper command closes.
+The named disturbances are a registry, like the tasks: a :class:`Perturbation` (a name, a help
+text and a factory) per name, :func:`register_perturbation`, :func:`get_perturbation`,
+:func:`perturbation_names`; ``pbdkit evaluate --perturb``'s choices and help come from it. A new
+one is one :func:`register_perturbation` call (in a module the Dask workers import too, when the
+trials run there). :func:`make_disturbance` builds the disturbance of a trial from its
+:class:`DisturbanceSetup`. The built-in ones are timed from the skill itself: ``t_grasp`` is the
+time of the first step where the skill's generalized gripper command closes.
 
 - ``"none"``: nothing happens.
 - ``"move"``: the task's :class:`pbdkit.sim.tasks.ObjectMove`. Coaster task: the coaster slides
@@ -16,7 +21,8 @@ is the time of the first step where the skill's generalized gripper command clos
   those whose end point stays inside the object's placement range (the demonstrated range).
 - ``"push"``: a horizontal force of 40 N on the gripper for 0.3 s, starting halfway to the
   grasp (``t_grasp / 2``), across the arm (perpendicular to the vertical plane through the
-  base axis and the glass), with a random sign. It exceeds what the pan drive can hold (its
+  base axis and the grasped object, :attr:`pbdkit.sim.tasks.TaskSpec.grasped`), with a random
+  sign. It exceeds what the pan drive can hold (its
   URDF effort, 10 N m): the simulated servos give way and the hand is shoved 10-30 cm off its
   path (measured on the coaster task: 5-8 mm at 15-30 N, 12 cm at 34 N, 28 cm at 40 N).
 """
@@ -24,30 +30,36 @@ is the time of the first step where the skill's generalized gripper command clos
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ._registry import Registry
 from .scene import Simulation
 from .tasks import TaskSpec
 
 __all__ = [
     "PERTURBATIONS",
     "Disturbance",
+    "DisturbanceSetup",
     "NoDisturbance",
+    "Perturbation",
     "PushArm",
     "SlideObject",
     "check_perturb",
+    "get_perturbation",
     "grasp_time",
     "make_disturbance",
+    "perturbation_help",
+    "perturbation_names",
+    "register_perturbation",
+    "unregister_perturbation",
 ]
 
 Float = NDArray[np.float64]
-
-#: The names ``--perturb`` accepts.
-PERTURBATIONS = ("none", "move", "push")
 
 PUSH_FORCE = 40.0  # N
 PUSH_DURATION = 0.3  # s
@@ -174,20 +186,6 @@ class PushArm(Disturbance):
         }
 
 
-def check_perturb(name: str, spec: TaskSpec | None = None) -> None:
-    """Refuse a name that is not one of :data:`PERTURBATIONS`, or ``"move"`` for a task
-    (``spec``) without :attr:`TaskSpec.move`.
-
-    Raises
-    ------
-    ValueError
-    """
-    if name not in PERTURBATIONS:
-        raise ValueError(f"perturb must be one of {list(PERTURBATIONS)}, got {name!r}")
-    if name == "move" and spec is not None and spec.move is None:
-        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
-
-
 def grasp_time(times: Float, gripper: Float | None) -> float:
     """Time (s) of the first step whose gripper command closes (> 0.5).
 
@@ -216,55 +214,199 @@ def _slide_direction(
     )
 
 
-def make_disturbance(
-    name: str,
-    spec: TaskSpec,
-    objects: dict[str, Float],
-    times: Float,
-    gripper: Float | None,
-    arm_plane: Float,
-    rng: np.random.Generator,
-) -> Disturbance:
-    """The disturbance ``name`` (one of :data:`PERTURBATIONS`) for one trial.
+@dataclass(frozen=True)
+class DisturbanceSetup:
+    """What a perturbation's factory knows of the trial it disturbs.
 
-    Parameters
+    Attributes
     ----------
-    name : str
-        "none", "move" or "push" (module docstring).
-    spec : TaskSpec
-        The task (its ``move`` and ranges).
+    task : TaskSpec
+        The task (its ``move``, ranges and ``grasped`` object).
     objects : dict str -> ndarray, shape (3,)
-        The trial's true object positions at the start.
+        The trial's true object positions at the start, every object of the task.
     times : ndarray, shape (T,)
         The skill's time grid (s), :meth:`pbdkit.Skill.times`.
     gripper : ndarray, shape (T,), or None
         The skill's generalized gripper command.
-    arm_plane : ndarray, shape (3,)
-        A point the hand passes near the push time (the push is across the vertical plane
-        through the base axis and it).
     rng : numpy.random.Generator
-        Draws the direction (move) or the sign (push).
+        The trial's own stream for the disturbance's draws (the same for every controller).
+    """
+
+    task: TaskSpec
+    objects: Mapping[str, Float]
+    times: Float
+    gripper: Float | None
+    rng: np.random.Generator
+
+    def grasp_time(self) -> float:
+        """``t_grasp``: :func:`grasp_time` of the skill's command (ValueError if it never
+        closes its gripper)."""
+        return grasp_time(self.times, self.gripper)
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """A named disturbance of the registry (``--perturb NAME``).
+
+    Attributes
+    ----------
+    name : str
+        Registry key.
+    help : str
+        What happens, in a few words (the command line's help lists it after the name).
+    make : callable
+        ``make(setup) -> Disturbance``: the disturbance of one trial (:class:`DisturbanceSetup`).
+        It draws only from ``setup.rng``, so that a trial's disturbance depends on nothing but
+        the trial.
+    check : callable, optional
+        ``check(task)`` raises ValueError for a task it cannot disturb (``move``: a task without
+        :attr:`~pbdkit.sim.tasks.TaskSpec.move`); called before any work.
+    """
+
+    name: str
+    help: str
+    make: Callable[[DisturbanceSetup], Disturbance]
+    check: Callable[[TaskSpec], None] | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.help, str) or not self.help.strip():
+            raise ValueError(f"help of perturbation {self.name!r} must be a non-empty string")
+        for what in ("make", "check"):
+            f = getattr(self, what)
+            if f is not None and not callable(f):
+                raise ValueError(f"{what} of perturbation {self.name!r} must be callable")
+
+
+_REGISTRY: Registry[Perturbation] = Registry(
+    "perturbation", Perturbation, "perturbation", "perturb"
+)
+
+#: The registered perturbations, name -> :class:`Perturbation` (a read-only view of the registry,
+#: in registration order): the names ``--perturb`` accepts.
+PERTURBATIONS: Mapping[str, Perturbation] = _REGISTRY.view
+
+
+def register_perturbation(perturbation: Perturbation) -> Perturbation:
+    """Make ``perturbation`` known by its name (``--perturb``, :func:`make_disturbance`);
+    returns it.
 
     Raises
     ------
     ValueError
-        An unknown name, or ``"move"`` for a task without :attr:`TaskSpec.move`.
+        If it is not a Perturbation, or another one has the same name.
     """
-    check_perturb(name, spec)
-    if name == "none":
-        return NoDisturbance()
-    t_grasp = grasp_time(times, gripper)
-    if name == "move":
-        move = spec.move
-        assert move is not None  # check_perturb
-        d = _slide_direction(spec, move.obj, objects[move.obj], move.distance, rng)
-        if move.when == "while_carried":
-            start = t_grasp + 0.5
-        else:
-            start = max(0.0, t_grasp - 1.5 - SLIDE_DURATION)
-        return SlideObject(move.obj, d, start, grasp_s=t_grasp)
+    return _REGISTRY.register(perturbation)
+
+
+def unregister_perturbation(name: str) -> Perturbation:
+    """Forget the perturbation ``name`` and return it; ValueError if it is not registered."""
+    return _REGISTRY.unregister(name)
+
+
+def perturbation_names() -> tuple[str, ...]:
+    """Names of the registered perturbations, in registration order (``"none"`` first)."""
+    return _REGISTRY.names()
+
+
+def get_perturbation(name: str) -> Perturbation:
+    """The registered perturbation ``name``.
+
+    Raises
+    ------
+    ValueError
+        If no perturbation of that name is registered (the message lists them).
+    """
+    return _REGISTRY.get(name)
+
+
+def perturbation_help() -> str:
+    """The registered perturbations in words, for a command's help: ``"none (nothing
+    happens), move (...) or push (...)"``."""
+    items = [f"{p.name} ({p.help})" for p in PERTURBATIONS.values()]
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} or {items[-1]}"
+
+
+def check_perturb(name: str, spec: TaskSpec | None = None) -> None:
+    """Refuse a name that is not registered, or a perturbation that cannot disturb the task
+    ``spec`` (e.g. ``"move"`` for a task without :attr:`TaskSpec.move`).
+
+    Raises
+    ------
+    ValueError
+    """
+    found = get_perturbation(name)
+    if spec is not None and found.check is not None:
+        found.check(spec)
+
+
+def make_disturbance(name: str, setup: DisturbanceSetup) -> Disturbance:
+    """The disturbance ``name`` (a registered :class:`Perturbation`) for one trial.
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`perturbation_names` (module docstring).
+    setup : DisturbanceSetup
+        The trial: its task, true object positions, the skill's time grid and gripper command,
+        and the stream to draw from.
+
+    Raises
+    ------
+    ValueError
+        An unknown name, or a task the perturbation cannot disturb (``"move"`` for a task
+        without :attr:`TaskSpec.move`).
+    """
+    check_perturb(name, setup.task)
+    return get_perturbation(name).make(setup)
+
+
+def _nothing(setup: DisturbanceSetup) -> Disturbance:
+    return NoDisturbance()
+
+
+def _has_move(spec: TaskSpec) -> None:
+    if spec.move is None:
+        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
+
+
+def _slide(setup: DisturbanceSetup) -> Disturbance:
+    """The task's :class:`~pbdkit.sim.tasks.ObjectMove` (module docstring)."""
+    t_grasp = setup.grasp_time()
+    spec = setup.task
+    move = spec.move
+    assert move is not None  # _has_move
+    d = _slide_direction(spec, move.obj, setup.objects[move.obj], move.distance, setup.rng)
+    if move.when == "while_carried":
+        start = t_grasp + 0.5
+    else:
+        start = max(0.0, t_grasp - 1.5 - SLIDE_DURATION)
+    return SlideObject(move.obj, d, start, grasp_s=t_grasp)
+
+
+def _push(setup: DisturbanceSetup) -> Disturbance:
+    """A shove across the vertical plane through the base axis and the grasped object (the
+    hand passes near it at the push's time), halfway to the grasp (module docstring)."""
+    t_grasp = setup.grasp_time()
+    arm_plane = setup.objects[setup.task.grasped]
     radial = np.array([arm_plane[0], arm_plane[1], 0.0])
     radial /= max(float(np.linalg.norm(radial)), 1e-9)
     across = np.array([-radial[1], radial[0], 0.0])
-    sign = 1.0 if rng.uniform() < 0.5 else -1.0
+    sign = 1.0 if setup.rng.uniform() < 0.5 else -1.0
     return PushArm(sign * PUSH_FORCE * across, 0.5 * t_grasp, grasp_s=t_grasp)
+
+
+register_perturbation(Perturbation("none", "nothing happens", _nothing))
+register_perturbation(
+    Perturbation(
+        "move",
+        "an object slides, the task's TaskSpec.move: the coaster 5 cm while the glass is "
+        "carried; basin task: the glass 4 cm before the grasp",
+        _slide,
+        check=_has_move,
+    )
+)
+register_perturbation(
+    Perturbation("push", f"a {PUSH_DURATION:g} s shove on the arm halfway to the grasp", _push)
+)

@@ -114,6 +114,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_positions
+from ._registry import Registry
 
 __all__ = [
     "GLASS_PATCH_PREFIX",
@@ -454,7 +455,13 @@ class TaskSpec:
         return self.check_placement(objects)
 
 
-_REGISTRY: dict[str, TaskSpec] = {}
+_REGISTRY: Registry[TaskSpec] = Registry(
+    "task",
+    TaskSpec,
+    "spec",
+    "task",
+    " (a new task is registered with pbdkit.sim.tasks.register_task)",
+)
 
 
 def register_task(spec: TaskSpec) -> TaskSpec:
@@ -465,28 +472,17 @@ def register_task(spec: TaskSpec) -> TaskSpec:
     ValueError
         If ``spec`` is not a TaskSpec, or another spec has the same name.
     """
-    if not isinstance(spec, TaskSpec):
-        raise ValueError(f"spec must be a TaskSpec, got {type(spec).__name__}")
-    known = _REGISTRY.get(spec.name)
-    if known is not None and known is not spec:
-        raise ValueError(
-            f"task {spec.name!r} is already registered; choose another name (or "
-            "unregister_task it first)"
-        )
-    _REGISTRY[spec.name] = spec
-    return spec
+    return _REGISTRY.register(spec)
 
 
 def unregister_task(name: str) -> TaskSpec:
     """Forget the task ``name`` and return its spec; ValueError if it is not registered."""
-    spec = get_task(name)
-    del _REGISTRY[spec.name]
-    return spec
+    return _REGISTRY.unregister(name)
 
 
 def task_names() -> tuple[str, ...]:
     """Names of the registered tasks, in registration order (the paper's first)."""
-    return tuple(_REGISTRY)
+    return _REGISTRY.names()
 
 
 def get_task(task: str | TaskSpec) -> TaskSpec:
@@ -499,13 +495,7 @@ def get_task(task: str | TaskSpec) -> TaskSpec:
     """
     if isinstance(task, TaskSpec):
         return task
-    spec = _REGISTRY.get(task) if isinstance(task, str) else None
-    if spec is None:
-        raise ValueError(
-            f"task must be one of {list(_REGISTRY)}, got {task!r} (a new task is registered "
-            "with pbdkit.sim.tasks.register_task)"
-        )
-    return spec
+    return _REGISTRY.get(task)
 
 
 def tracked_objects(task: str | TaskSpec) -> tuple[str, ...]:
