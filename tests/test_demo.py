@@ -18,6 +18,7 @@ from pbdkit.apps.demo import run_lasa_demo, run_robot_demo
 from pbdkit.learning.skill import Skill
 from pbdkit.prob.gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
+from pbdkit.sim import evaluation
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import teach
 
@@ -133,7 +134,7 @@ def basin_learner(basin_demos: list) -> FastBasin:
 @pytest.fixture
 def fast_basin(monkeypatch: pytest.MonkeyPatch, basin_learner: FastBasin) -> dict[str, object]:
     """The CLI's evaluate with :class:`FastBasin` as learn_task; returns the options it got."""
-    monkeypatch.setattr(E, "learn_task", basin_learner)
+    monkeypatch.setattr(evaluation, "learn_task", basin_learner)
     return basin_learner.got
 
 

@@ -19,6 +19,7 @@ from pbdkit.sim import perturb as P
 from pbdkit.sim.online import OnlineRun, TruthObserver, execute_online
 from pbdkit.sim.perturb import Disturbance, DisturbanceSetup, PushArm, SlideObject, grasp_time
 from pbdkit.sim.scene import TIMESTEP, Simulation
+from pbdkit.sim.task_skill import step_seconds
 from pbdkit.sim.tasks import TaskSpec
 from pbdkit.sim.teacher import teach
 
@@ -82,7 +83,7 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
     assert isinstance(move, SlideObject) and move.obj == "coaster"
     assert np.linalg.norm(move.displacement) == pytest.approx(0.05)
     t_grasp = grasp_time(
-        np.arange(ts.skill.n_steps) * E._step_seconds(ts), ts.skill.constraints().gripper
+        np.arange(ts.skill.n_steps) * step_seconds(ts), ts.skill.constraints().gripper
     )
     assert move.start == pytest.approx(t_grasp + 0.5)
     online = E.run_online(ts, placement, "fused", disturbance=move)

@@ -20,6 +20,7 @@ from pbdkit import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.parallel import Session, connect, session
+from pbdkit.sim.tasks import get_task
 from pbdkit.sim.teacher import teach
 
 
@@ -167,7 +168,7 @@ def test_one_session_runs_the_same_evaluation_twice(coaster: E.TaskSkill) -> Non
     # The same job scattered twice on one client (a study's maps of two objects): Dask
     # released the first one's data under the second's key ("lost dependencies").
     placements = [
-        E.T.get_task("coaster").sample_objects(np.random.default_rng([3, i])) for i in range(2)
+        get_task("coaster").sample_objects(np.random.default_rng([3, i])) for i in range(2)
     ]
     args: dict[str, Any] = {"seed": 0}
     serial = E.run_trials(coaster, placements, ["fused"], **args)

@@ -15,7 +15,7 @@ pytest.importorskip("mujoco")
 from pbdkit.apps.cli import app
 from pbdkit.learning.skill import Skill
 from pbdkit.robots import katana
-from pbdkit.sim import Simulation, nominal_objects, sample_objects
+from pbdkit.sim import Simulation, get_task, nominal_objects, sample_objects
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import start_posture, teach
 from pbdkit.sim.tracking import (
@@ -153,7 +153,7 @@ def test_observed_objects_passes_fixed_objects_through() -> None:
             observed_objects(sim, tracker, fixed={"basin": [0.0, np.nan, 0.0]})
     # The experiment's observe(): given the glass only, the scene still has the basin at its
     # fixed place and the robot knows it (a skill without a basin constraint ignores it).
-    told = E.observe("basin", {"glass": truth["glass"]}, tracker, arm=_arm(1))
+    told = E.observe(get_task("basin"), {"glass": truth["glass"]}, tracker, arm=_arm(1))
     assert list(told) == ["glass", "basin"]
     np.testing.assert_array_equal(told["basin"], truth["basin"])
     np.testing.assert_allclose(told["glass"], seen["glass"], rtol=0, atol=1e-12)

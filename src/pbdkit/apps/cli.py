@@ -799,7 +799,7 @@ def evaluate(
     _start_workers_early(workers)
     _check_perturb(perturb)  # imports the simulation
     spec = _robot_task(task)
-    from ..sim.experiment import evaluate as sim_evaluate
+    from ..sim.evaluation import evaluate as sim_evaluate
 
     with _progress() as bar:
         job = bar.add_task(f"{task}: teaching and learning", total=None)

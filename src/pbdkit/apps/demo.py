@@ -32,7 +32,7 @@ from .plots import (
 from .report import Figure, Section, write_report
 
 if TYPE_CHECKING:
-    from ..sim.experiment import TaskSkill
+    from ..sim.task_skill import TaskSkill
     from ..sim.tasks import TaskSpec
 
 __all__ = ["run_lasa_demo", "run_robot_demo"]
@@ -148,8 +148,8 @@ def run_robot_demo(
     metrics : dict
         What ``metrics.json`` holds.
     """
-    from ..sim.experiment import learn_task
     from ..sim.perturb import check_perturb
+    from ..sim.task_skill import learn_task
     from ..sim.tasks import get_task
 
     def say(msg: str) -> None:
@@ -186,16 +186,12 @@ def _run_robot_demo(
     t_start: float,
 ) -> dict[str, Any]:
     """:func:`run_robot_demo` once its arguments are checked, writing to ``out``."""
-    from ..sim.experiment import (
-        calibrate_tracker,
-        controller_names,
-        observe,
-        run_controller,
-        run_online,
-        start_posture,
-        tracking_errors,
-        trial_disturbance,
-    )
+    from ..sim.metrics import tracking_errors
+    from ..sim.naming import controller_names
+    from ..sim.runs import run_controller, run_online
+    from ..sim.sensing import calibrate_tracker, observe
+    from ..sim.task_skill import start_posture
+    from ..sim.trials import trial_disturbance
     from ..sim.video import save_video
 
     say(f"teaching {n_demos} demonstrations of the {spec.name} task ...")

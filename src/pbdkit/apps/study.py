@@ -38,12 +38,14 @@ from numpy.typing import NDArray
 from .._io import atomic_write_bytes, write_json
 from .._validation import check_int, check_positive_float
 from ..sim import tasks as T
-from ..sim.experiment import controller_names, learn_task, run_trials
+from ..sim.naming import controller_names
+from ..sim.task_skill import learn_task
 from ..sim.tasks import TaskSpec
+from ..sim.trials import run_trials
 from ._staging import staged_output
 
 if TYPE_CHECKING:
-    from ..sim.experiment import TaskSkill
+    from ..sim.task_skill import TaskSkill
 
 __all__ = [
     "FULL",
@@ -283,7 +285,7 @@ def check_study(
         An unknown task, ``size`` not a :class:`StudySize`, an unknown controller, ``seed``
         not an integer >= 0.
     """
-    from ..sim.experiment import constrained_objects
+    from ..sim.task_skill import constrained_objects
 
     spec = T.get_task(task)
     if not isinstance(size, StudySize):

@@ -6,10 +6,10 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
 - :mod:`pbdkit.sim.tasks`: a task is one :class:`TaskSpec` (placement ranges, scene objects, the
   teacher's via points, the success judge) in a registry (:func:`register_task`,
   :func:`get_task`, :func:`task_names`); the paper's two tasks, ``"coaster"`` and ``"basin"``
-  (:mod:`pbdkit.sim.taskdefs`), are registered when this package is imported. Every function
-  below takes a task's name or its spec. Which objects move (:func:`tracked_objects`: tracked by
-  the cameras, constrained in task space) or are fixed (:func:`fixed_objects`: the basin) comes
-  from the ranges.
+  (:mod:`pbdkit.sim.taskdefs`), are registered when this package is imported. The entry points
+  below take a task's name or its spec and resolve a name once; what they call takes the spec.
+  Which objects move (:func:`tracked_objects`: tracked by the cameras, constrained in task
+  space) or are fixed (:func:`fixed_objects`: the basin) comes from the ranges.
 - :func:`build_scene` (:mod:`pbdkit.sim.world`), :class:`Simulation`: the Katana (from the same
   URDF as :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240
   cameras.
@@ -23,6 +23,12 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
   slides; ``push``, a shove on the arm).
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
+- The experiment (:mod:`pbdkit.sim.experiment` gathers its names), one module per concern:
+  controller names (:mod:`~pbdkit.sim.naming`), a task's skill
+  (:mod:`~pbdkit.sim.task_skill`), one controller's run (:mod:`~pbdkit.sim.runs`), what is
+  measured (:mod:`~pbdkit.sim.metrics`), what the skill is told (:mod:`~pbdkit.sim.sensing`),
+  trials (:mod:`~pbdkit.sim.trials`) on Dask workers (:mod:`~pbdkit.sim.parallel`, a pure
+  executor), and the evaluation (:mod:`~pbdkit.sim.evaluation`).
 
 Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (``osmesa`` if only OSMesa is installed);
 set it before importing this package to choose another backend.

@@ -1,39 +1,36 @@
-"""Trials on every core or on a Dask cluster (``pbdkit evaluate --workers N | --scheduler A``).
+"""Jobs on every core or on a Dask cluster (``pbdkit evaluate --workers N | --scheduler A``).
 
 Dask's ``distributed`` scheduler is the one engine: ``workers=N`` starts a ``LocalCluster`` of N
 single-threaded worker processes on this machine, ``scheduler="tcp://HOST:PORT"`` connects to a
 running cluster (``dask scheduler`` on one machine, ``dask worker tcp://HOST:PORT`` on each of
 the others; every worker needs pbdkit installed with its ``sim`` extra).
 
-What is sent: the skill and the task once per run (scattered to every worker), then per trial
-one task that observes the placement (:func:`pbdkit.sim.experiment.observe_trial`: the
-cameras) and one task per controller that runs it
-(:func:`pbdkit.sim.experiment.run_trial_controller`), which depends on the observation; the
-trial is assembled here (:func:`pbdkit.sim.experiment.assemble_trial`). Tasks of a controller
-run, not of a whole trial: the last worker to finish waits for one controller run, not for a
-whole trial, and a cluster of more workers than trials still has work for all of them (on 2
-workers and 20 trials the two ways take the same time, within the machine's noise). A trial
-depends on nothing but its index and placement (its disturbance is drawn from the seed and its
-index; physics is deterministic), so the trials come back identical to the serial run's, in
-the placements' order, whatever worker ran them. A worker that dies loses only the tasks it
-was running (and the observations it held): the scheduler runs them again on another worker
-(up to three times, Dask's ``distributed.scheduler.allowed-failures``). An exception raised by
-a task is a bug, and is raised here.
+This module is a pure executor: :func:`run_fanout` runs the functions it is given on the
+payloads it is given, and knows nothing of what they do (the trials of an evaluation,
+:func:`pbdkit.sim.trials.run_trials`, are its user). What is sent: the shared payload once per
+run (scattered to every worker), then per item one job of the first stage and, per key, one job
+of the second stage that depends on it; the results come back in the items' order. A worker that
+dies loses only the jobs it was running (and the results it held): the scheduler runs them again
+on another worker (up to three times, Dask's ``distributed.scheduler.allowed-failures``). An
+exception raised by a job is raised here.
 
-Each worker thread runs on its own copy of the skill (a robot's pinocchio work data must not be
-shared between threads), so ``dask worker --nthreads N`` is safe; one thread per core is best.
+Each worker thread runs on its own copy of the shared payload (a robot's pinocchio work data
+must not be shared between threads), so ``dask worker --nthreads N`` is safe; one thread per
+core is best.
 
 Start-up cost, local workers (:func:`session`): they are forked from a server process that has
 imported pbdkit's simulation once (:mod:`pbdkit._forkserver`), started before the learning, so
 that the workers start in a fraction of a second once the skill is learned.
 
-A task defined outside pbdkit must be importable on the workers (its functions are sent by
-reference, as Python pickles functions): register it in a module the workers can import.
+The functions are sent by reference, as Python pickles functions: they, and a task defined
+outside pbdkit, must be importable on the workers (register such a task in a module the workers
+can import).
 """
 
 from __future__ import annotations
 
 import copy
+import importlib
 import logging
 import math
 import socket
@@ -42,89 +39,17 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import Any, TypeVar
 
 from .. import _forkserver
-from .tracking import SimTracker
 
-if TYPE_CHECKING:
-    from .experiment import ControllerOutcome, TaskSkill, Trial, TrialObservation
+__all__ = ["WORKER_CONFIG", "Session", "connect", "run_fanout", "session"]
 
-__all__ = ["WORKER_CONFIG", "Session", "TrialJob", "connect", "run_trials_dask", "session"]
-
-Float = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class TrialJob:
-    """What every trial of a run shares (the arguments of
-    :func:`pbdkit.sim.experiment.run_trial` but the trial's own), sent once to each worker."""
-
-    ts: TaskSkill
-    controllers: tuple[str, ...]
-    tracker: SimTracker | None
-    online: bool
-    perturb: str
-    seed: int
-    noise_mm: float = 0.0
-
-    def run(
-        self, index: int, truth: dict[str, Float], progress: Callable[[int], None] | None = None
-    ) -> Trial:
-        """Trial ``index`` at placement ``truth`` (:func:`pbdkit.sim.experiment.run_trial`)."""
-        from .experiment import run_trial
-
-        return run_trial(
-            self.ts,
-            truth,
-            index,
-            self.controllers,
-            tracker=self.tracker,
-            online=self.online,
-            perturb=self.perturb,
-            seed=self.seed,
-            progress=progress,
-            noise_mm=self.noise_mm,
-        )
-
-    def observe(self, index: int, truth: dict[str, Float]) -> TrialObservation:
-        """What the skill of trial ``index`` is told
-        (:func:`pbdkit.sim.experiment.observe_trial`)."""
-        from .experiment import observe_trial
-
-        return observe_trial(
-            self.ts, truth, index, tracker=self.tracker, seed=self.seed, noise_mm=self.noise_mm
-        )
-
-    def run_controller(
-        self, seen: TrialObservation, index: int, truth: dict[str, Float], controller: str
-    ) -> ControllerOutcome:
-        """One controller of trial ``index``
-        (:func:`pbdkit.sim.experiment.run_trial_controller`)."""
-        from .experiment import run_trial_controller
-
-        return run_trial_controller(
-            self.ts, seen, truth, index, controller,
-            tracker=self.tracker, online=self.online, perturb=self.perturb, seed=self.seed,
-        )  # fmt: skip
-
-    def assemble(
-        self,
-        index: int,
-        truth: dict[str, Float],
-        seen: TrialObservation,
-        runs: Sequence[ControllerOutcome],
-    ) -> Trial:
-        """Trial ``index`` from its parts (:func:`pbdkit.sim.experiment.assemble_trial`)."""
-        from .experiment import assemble_trial
-
-        return assemble_trial(
-            self.ts, truth, index, seen, runs, perturb=self.perturb, seed=self.seed
-        )
+S = TypeVar("S")  # the payload every job shares
+Item = TypeVar("Item")
+Key = TypeVar("Key")
+H = TypeVar("H")  # a first-stage result
+R = TypeVar("R")  # a second-stage result
 
 
 #: Dask settings of the local workers. The worker's statistical profiler (a look at every
@@ -137,14 +62,14 @@ WORKER_CONFIG: dict[str, Any] = {"distributed.worker.profile.enabled": False}
 _LOCAL = threading.local()
 
 
-def _own_copy(job: TrialJob) -> TrialJob:
-    """This thread's copy of ``job``: a robot's pinocchio work data must not be shared between
-    threads, and a worker started with several threads (``dask worker --nthreads 4``) runs
-    several trials at once on the one job it received."""
-    held = getattr(_LOCAL, "job", None)
-    if held is None or held[0] is not job:
-        _LOCAL.job = (job, copy.deepcopy(job))
-    mine: TrialJob = _LOCAL.job[1]
+def _own_copy(shared: S) -> S:
+    """This thread's copy of the shared payload: a robot's pinocchio work data must not be
+    shared between threads, and a worker started with several threads (``dask worker
+    --nthreads 4``) runs several jobs at once on the one payload it received."""
+    held = getattr(_LOCAL, "shared", None)
+    if held is None or held[0] is not shared:
+        _LOCAL.shared = (shared, copy.deepcopy(shared))
+    mine: S = _LOCAL.shared[1]
     return mine
 
 
@@ -164,18 +89,18 @@ def _one_blas_thread() -> AbstractContextManager[Any]:
     return limit
 
 
-def _observe_one(job: TrialJob, index: int, truth: dict[str, Float]) -> TrialObservation:
-    """A trial's observation on a worker, with BLAS on one thread."""
+def _first(fn: Callable[[S, int, Item], H], shared: S, index: int, item: Item) -> H:
+    """A first-stage job on a worker, with BLAS on one thread."""
     with _one_blas_thread():
-        return _own_copy(job).observe(index, truth)
+        return fn(_own_copy(shared), index, item)
 
 
-def _control_one(
-    job: TrialJob, seen: TrialObservation, index: int, truth: dict[str, Float], controller: str
-) -> ControllerOutcome:
-    """A trial's controller run on a worker, with BLAS on one thread."""
+def _second(
+    fn: Callable[[S, H, int, Item, Key], R], shared: S, first: H, index: int, item: Item, key: Key
+) -> R:
+    """A second-stage job on a worker, with BLAS on one thread."""
     with _one_blas_thread():
-        return _own_copy(job).run_controller(seen, index, truth, controller)
+        return fn(_own_copy(shared), first, index, item, key)
 
 
 #: Seconds to wait for a remote scheduler's answer (:func:`connect`, :func:`session`): a
@@ -417,7 +342,10 @@ def _receive(sock: socket.socket, n: int, deadline: float) -> bytes:
 
 
 def _import_sim() -> None:
-    import pbdkit.sim.experiment  # noqa: F401
+    # What a local worker is forked with (pbdkit._forkserver.PRELOAD: pbdkit's simulation, then
+    # the collector's freeze); by name, so that the executor does not import its jobs' modules.
+    for name in _forkserver.PRELOAD:
+        importlib.import_module(name)
 
 
 def _warm_up(client: Any) -> None:
@@ -503,46 +431,73 @@ def _opened(workers: int | None, scheduler: str | None) -> Iterator[Session]:
         run.close()
 
 
-def run_trials_dask(
-    job: TrialJob,
-    placements: Sequence[dict[str, Float]],
+def run_fanout(
+    first: Callable[[S, int, Item], H],
+    second: Callable[[S, H, int, Item, Key], R],
+    shared: S,
+    items: Sequence[Item],
+    keys: Sequence[Key],
     *,
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     client: Any = None,
-) -> list[Trial]:
-    """:func:`pbdkit.sim.experiment.run_trials` on Dask workers: ``job`` at every placement,
-    on ``workers`` local processes, the cluster at ``scheduler``, or with ``client`` (a
-    ``distributed.Client`` or a :class:`Session`; used and left open).
+) -> tuple[list[H], list[list[R]]]:
+    """Jobs of two stages on Dask workers: per item ``first(shared, i, item)``, then per key
+    ``second(shared, first's result, i, item, key)``, which waits for it.
 
-    ``progress(done, total)`` counts controller runs, as in the serial run.
+    On ``workers`` local processes, the cluster at ``scheduler``, or with ``client`` (a
+    ``distributed.Client`` or a :class:`Session`; used and left open). Second-stage jobs, not
+    whole items: the last worker to finish waits for one of them, and a cluster of more workers
+    than items still has work for all of them.
+
+    Parameters
+    ----------
+    first, second : callable
+        Module-level functions (the workers import them by reference); each gets its own
+        thread's copy of ``shared``.
+    shared : object
+        Sent once to every worker (picklable).
+    items : sequence
+        One first-stage job each (picklable).
+    keys : sequence
+        One second-stage job each per item (picklable).
+    progress : callable, optional
+        ``progress(done, total)`` after every second-stage job, ``total = len(items) *
+        len(keys)``.
+    workers, scheduler, client
+        Where the jobs run (:func:`session`).
+
+    Returns
+    -------
+    firsts : list
+        ``first``'s result per item, in the items' order.
+    seconds : list of list
+        ``second``'s results per item, in the keys' order.
     """
     from distributed import as_completed
 
-    # The demonstrations stay here: the workers need the skill and the task only.
-    job = replace(job, ts=replace(job.ts, demos=[]))
-    total = len(placements) * len(job.controllers)
+    total = len(items) * len(keys)
     # A client of the caller's is used and left open; otherwise one is opened for this run.
     opened = session(workers, scheduler) if client is None else nullcontext(client)
     with opened as run:
         client = run.client if isinstance(run, Session) else run
-        # A key of its own: the same job scattered again on this client (a study's second
+        # A key of its own: the same payload scattered again on this client (a study's second
         # map) must not share a key with the last one's, which Dask may be releasing.
-        shared = client.scatter(job, broadcast=True, hash=False)
-        seen, runs = [], []
-        for i, truth in enumerate(placements):
-            obs = client.submit(_observe_one, shared, i, truth, pure=False)
-            seen.append(obs)
-            runs.append(
+        sent = client.scatter(shared, broadcast=True, hash=False)
+        heads, rows = [], []
+        for i, item in enumerate(items):
+            head = client.submit(_first, first, sent, i, item, pure=False)
+            heads.append(head)
+            rows.append(
                 [
-                    client.submit(_control_one, shared, obs, i, truth, name, pure=False)
-                    for name in job.controllers
+                    client.submit(_second, second, sent, head, i, item, key, pure=False)
+                    for key in keys
                 ]
             )
-        finished = as_completed([f for row in runs for f in row])  # type: ignore[no-untyped-call]
+        finished = as_completed([f for row in rows for f in row])  # type: ignore[no-untyped-call]
         for done, _ in enumerate(finished, start=1):
             if progress is not None:
                 progress(done, total)
-        observed, outcomes = client.gather([seen, runs])
-    return [job.assemble(i, truth, observed[i], outcomes[i]) for i, truth in enumerate(placements)]
+        firsts, seconds = client.gather([heads, rows])
+    return list(firsts), [list(row) for row in seconds]

@@ -399,18 +399,18 @@ def _fmt(objects: Mapping[str, Float]) -> str:
 
 
 def teach_one(
-    task: str | TaskSpec,
+    spec: TaskSpec,
     objects: dict[str, Float],
     rng: np.random.Generator,
     robot: Robot | None = None,
     speed: float = 1.0,
 ) -> Demonstration:
-    """One demonstration of ``task`` for given object positions.
+    """One demonstration of the task ``spec`` for given object positions.
 
     Parameters
     ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster", "basin") or its spec.
+    spec : TaskSpec
+        The task (:func:`teach` takes a name too).
     objects : dict str -> ndarray, shape (3,)
         Object positions (see the task).
     rng : numpy.random.Generator
@@ -425,7 +425,6 @@ def teach_one(
     Demonstration
         Encoders at :data:`RATE`; gripper 1.0 while closed.
     """
-    spec = T.get_task(task)
     robot = katana() if robot is None else robot
     error: ValueError | None = None
     # A person never demonstrates an impossible motion: redraw the variability when a drawn path

@@ -1,0 +1,36 @@
+"""The controllers of the experiment by name, as in ``pbdkit evaluate``'s JSON.
+
+Controllers (paper Sec. II-B and Fig. 6):
+
+- ``"fused"``: every constraint, fused as a product of Gaussians (eq. (1));
+- ``"joint"``: the joint-space constraint only;
+- ``"task:OBJECT"``: the task-space constraint of one object only (null-space term alpha = 0.5).
+
+So the coaster task's controllers are ``"fused"``, ``"joint"``, ``"task:glass"``,
+``"task:coaster"`` and the basin task's ``"fused"``, ``"joint"``, ``"task:glass"``: a skill has a
+task-space constraint per object of :func:`pbdkit.sim.task_skill.constrained_objects`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+__all__ = ["controller_names", "controller_use"]
+
+
+def controller_names(object_names: Sequence[str]) -> list[str]:
+    """``["fused", "joint", "task:OBJ", ...]`` for a skill's objects."""
+    return ["fused", "joint", *(f"task:{k}" for k in object_names)]
+
+
+def controller_use(controller: str, object_names: Sequence[str]) -> list[str] | None:
+    """The ``use`` argument of :meth:`pbdkit.Skill.reproduce` for a controller name."""
+    if controller == "fused":
+        return None
+    if controller == "joint":
+        return ["joint"]
+    if controller.startswith("task:") and controller[5:] in object_names:
+        return [controller[5:]]
+    raise ValueError(
+        f"controller must be one of {controller_names(object_names)}, got {controller!r}"
+    )
