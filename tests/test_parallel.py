@@ -422,6 +422,7 @@ def test_the_command_line_caps_the_workers_with_a_notice(
 
     from pbdkit import _forkserver
     from pbdkit.apps.cli import app
+    from pbdkit.sim import evaluation
 
     asked: list[int | None] = []
 
@@ -429,7 +430,7 @@ def test_the_command_line_caps_the_workers_with_a_notice(
         asked.append(workers)
         raise ValueError("stopped here by the test")
 
-    monkeypatch.setattr(E, "evaluate", evaluate)
+    monkeypatch.setattr(evaluation, "evaluate", evaluate)  # where the command finds it
     monkeypatch.setattr(_forkserver, "start", lambda: None)
     monkeypatch.setattr(_forkserver, "cores", lambda: 2)
     runner = CliRunner()

@@ -15,7 +15,7 @@ pytest.importorskip("mujoco")
 from pbdkit.apps.cli import app
 from pbdkit.learning.skill import Skill
 from pbdkit.robots import katana
-from pbdkit.sim import Simulation, get_task, nominal_objects, sample_objects
+from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, sample_objects, task_skill
 from pbdkit.sim import experiment as E
 from pbdkit.sim.teacher import start_posture, teach
 from pbdkit.sim.tracking import (
@@ -180,13 +180,15 @@ def small_skill() -> E.TaskSkill:
 
 @pytest.fixture
 def fast_cli(monkeypatch: pytest.MonkeyPatch, small_skill: E.TaskSkill) -> None:
-    monkeypatch.setattr(E, "learn_task", lambda task, **kwargs: small_skill)
+    # Where pbdkit evaluate and pbdkit demo find it.
+    monkeypatch.setattr(evaluation, "learn_task", lambda task, **kwargs: small_skill)
+    monkeypatch.setattr(task_skill, "learn_task", lambda task, **kwargs: small_skill)
 
 
 def test_evaluate_with_vision_reports_tracking_error(
     fast_cli: None, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(E, "controller_names", lambda names: ["fused"])
+    monkeypatch.setattr(evaluation, "controller_names", lambda names: ["fused"])
     path = tmp_path / "eval.json"
     r = CliRunner().invoke(
         app, ["evaluate", "--task", "coaster", "--trials", "1", "--seed", "3", "--json", str(path)]
