@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, nominal_objects, sample_objects
 from pbdkit.sim._gl import BACKEND
-from pbdkit.sim.teacher import start_posture
+from pbdkit.sim.teacher import random_start_posture
 from pbdkit.sim.tracking import SimTracker, tracked_objects
 from pbdkit.vision import PinholeCamera, StereoTracker
 
@@ -43,7 +43,7 @@ PAPER_PERIOD_S = 1.0 / 15.0  # the paper's cameras: 15 Hz
 def calibrate(task: str, perturb: bool, seed: int) -> tuple[SimTracker, SimTracker]:
     """Trackers (raw, corrected) calibrated at the nominal placement of ``task``."""
     calib = Simulation.from_task(task, nominal_objects(task))
-    calib.set_joints(start_posture(katana(), np.random.default_rng(seed)))
+    calib.set_joints(random_start_posture(katana(), np.random.default_rng(seed)))
     try:
         cams: tuple[PinholeCamera, PinholeCamera] | None = None
         if perturb:
@@ -74,7 +74,7 @@ def errors(
         sim = Simulation.from_task(task, sample_objects(task, rng))
         try:
             truth = sim.object_positions()
-            sim.set_joints(start_posture(robot, rng))
+            sim.set_joints(random_start_posture(robot, rng))
             for key, tr in [*trackers.items(), ("arm at rest", trackers["corrected"])]:
                 if key == "arm at rest":
                     sim.set_joints(np.zeros(sim.n_joints))
@@ -185,7 +185,7 @@ def main() -> None:
     _, tracker = calibrate(task, perturb=False, seed=args.seed)
     rng = np.random.default_rng(args.seed)
     sim = Simulation.from_task(task, sample_objects(task, rng))
-    sim.set_joints(start_posture(katana(), rng))
+    sim.set_joints(random_start_posture(katana(), rng))
     try:
         with threadpool_limits(1):
             # Parts timed inside the same cycles: medians comparable under a varying load.

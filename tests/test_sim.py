@@ -923,3 +923,15 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
     d = ev.as_dict()
     assert d["trials"] == 3 and d["observed"][2] is None and d["runs"]["joint"][1]["err"] is None
     json.dumps(d)
+
+
+def test_the_teachers_start_posture_has_its_own_name() -> None:
+    # `start_posture` meant both the teacher's random start and a skill's own (task_skill).
+    from pbdkit.sim.teacher import random_start_posture, start_posture
+
+    robot = katana()
+    new = random_start_posture(robot, np.random.default_rng(3))
+    with pytest.warns(DeprecationWarning, match="is now random_start_posture"):
+        old = start_posture(robot, np.random.default_rng(3))
+    np.testing.assert_array_equal(old, new)
+    assert np.all(new >= robot.lower) and np.all(new <= robot.upper)

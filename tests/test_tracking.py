@@ -17,7 +17,7 @@ from pbdkit.learning.skill import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, sample_objects, task_skill
 from pbdkit.sim import experiment as E
-from pbdkit.sim.teacher import start_posture, teach
+from pbdkit.sim.teacher import random_start_posture, teach
 from pbdkit.sim.tracking import (
     ObjectNotSeenError,
     SimTracker,
@@ -35,7 +35,7 @@ MAX_ERROR_MM = 4.0
 
 def _arm(seed: int) -> np.ndarray:
     """A start posture of the teacher (hand raised, out of the cameras' way)."""
-    return start_posture(katana(), np.random.default_rng(seed))
+    return random_start_posture(katana(), np.random.default_rng(seed))
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,7 @@ def test_tracked_positions_match_the_truth(coaster_tracker: SimTracker) -> None:
     rng = np.random.default_rng(7)
     for _ in range(4):
         with Simulation.from_task("coaster", sample_objects("coaster", rng)) as sim:
-            sim.set_joints(start_posture(katana(), rng))
+            sim.set_joints(random_start_posture(katana(), rng))
             truth = sim.object_positions()
             tracks = coaster_tracker.locate(sim)
         assert list(tracks) == ["glass", "coaster"]

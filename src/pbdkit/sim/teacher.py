@@ -36,6 +36,7 @@ choice the teacher varies between demonstrations.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -276,7 +277,20 @@ def between(a: Float, b: Float) -> Float:
 
 
 def start_posture(robot: Robot, rng: np.random.Generator) -> Float:
-    """A start posture: the hand raised in front of the robot, with a person's variability."""
+    """Deprecated spelling of :func:`random_start_posture` (it shared its name with
+    :func:`pbdkit.sim.task_skill.start_posture`, a skill's own); goes in pbdkit 0.3."""
+    warnings.warn(
+        "pbdkit.sim.teacher.start_posture is now random_start_posture; the old name goes in "
+        "pbdkit 0.3",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return random_start_posture(robot, rng)
+
+
+def random_start_posture(robot: Robot, rng: np.random.Generator) -> Float:
+    """A teacher's start posture: the hand raised in front of the robot, with a person's
+    variability (drawn from ``rng``)."""
     pan = rng.uniform(-0.15, 0.15)
     r, z = rng.uniform(0.28, 0.34), rng.uniform(0.27, 0.32)
     x = np.array([r * math.cos(pan), r * math.sin(pan), z])
@@ -431,7 +445,7 @@ def teach_one(
     # leaves the reachable set.
     for _ in range(MAX_ATTEMPTS):
         try:
-            q_start = start_posture(robot, rng)
+            q_start = random_start_posture(robot, rng)
             t, joints, gripper = trajectory_from_via_points(
                 robot, q_start, spec.via_points(objects, rng, speed)
             )
