@@ -238,6 +238,11 @@ def test_a_perturbation_is_one_registry_entry(coaster: E.TaskSkill) -> None:
         assert "or tap (a 1 N tap on the gripper at the grasp)." in words
         assert "push (a 0.3 s shove on the arm halfway to the grasp)" in words
         assert "{perturbations}" not in words
+        # The demo's report says what a user's perturbation did (a KeyError before).
+        from pbdkit.apps.demo import _perturbation_words
+
+        words_tap = _perturbation_words({"name": "tap", "force_n": [1.0, 0.0, 0.0]})
+        assert words_tap == "tap: a 1 N tap on the gripper at the grasp"
         # A trial runs it, drawn from the trial's own stream, with what it needs to know.
         ev = E.evaluate("coaster", 1, 0, task_skill=coaster, controllers=["fused"],
                         ground_truth=True, perturb="tap")  # fmt: skip

@@ -329,6 +329,30 @@ def _run_robot_demo(
     return metrics
 
 
+def _perturbation_words(perturb: dict[str, Any]) -> str:
+    """What the run's perturbation did, in words: the built-in ones with their numbers, any
+    other registered one by its help text."""
+    name = perturb["name"]
+    if name == "none":
+        return "no disturbance"
+    if name == "move":
+        return (
+            f"the {perturb.get('object')} slides "
+            f"{1e3 * float(np.linalg.norm(perturb.get('displacement_m', [0.0]))):.0f} mm from "
+            f"t = {perturb.get('start_s', 0.0):.1f} s"
+        )
+    if name == "push":
+        return (
+            f"a {float(np.linalg.norm(perturb.get('force_n', [0.0]))):.0f} N shove on the "
+            f"{perturb.get('body')} for {perturb.get('duration_s', 0.0):.1f} s from "
+            f"t = {perturb.get('start_s', 0.0):.1f} s"
+        )
+    from ..sim.perturb import PERTURBATIONS
+
+    entry = PERTURBATIONS.get(name)
+    return f"{name}: {entry.help}" if entry is not None else str(name)
+
+
 def _online_sections(demo: DemoRun) -> list[Section]:
     """The report's section on the online run (none without ``--online``)."""
     if not demo.online:
@@ -336,15 +360,7 @@ def _online_sections(demo: DemoRun) -> list[Section]:
     on, off = demo.online["online"], demo.online["offline"]
     info = demo.metrics["online"]
     perturb = info["perturb"]
-    what = {
-        "none": "no disturbance",
-        "move": f"the {perturb.get('object')} slides "
-        f"{1e3 * float(np.linalg.norm(perturb.get('displacement_m', [0.0]))):.0f} mm from "
-        f"t = {perturb.get('start_s', 0.0):.1f} s",
-        "push": f"a {float(np.linalg.norm(perturb.get('force_n', [0.0]))):.0f} N shove on the "
-        f"{perturb.get('body')} for {perturb.get('duration_s', 0.0):.1f} s from "
-        f"t = {perturb.get('start_s', 0.0):.1f} s",
-    }[perturb["name"]]
+    what = _perturbation_words(perturb)
     absolute = ("peak_velocity", "peak_acceleration", "peak_jerk")  # the limits section has them
     keys = [k for k in on.summary() if k not in ("success", "tracking", *absolute)]
     rows = [
