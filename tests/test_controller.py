@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_skill import N_STEPS, REACH_STEP, synthetic_demos, unseen_glass
+from synthetic_teacher import N_STEPS, REACH_STEP, synthetic_demos, unseen_glass
 
 from pbdkit import Controller, Skill
 from pbdkit.learning.controller import REPLAN_DISTANCE, Command
@@ -15,30 +15,9 @@ from pbdkit.learning.demonstration import Demonstration
 from pbdkit.learning.probabilistic_ik import RunOptions
 from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
 from pbdkit.motion.otg import follow
-from pbdkit.robots import katana
 from pbdkit.robots.model import Robot
 
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
-
-
-@pytest.fixture(scope="module")
-def robot() -> Robot:
-    return katana()
-
-
-@pytest.fixture(scope="module")
-def demos(robot: Robot) -> list[Demonstration]:
-    return synthetic_demos(robot, np.random.default_rng(0))
-
-
-@pytest.fixture(scope="module")
-def skill(robot: Robot, demos: list[Demonstration]) -> Skill:
-    return Skill.learn(demos, robot, n_steps=N_STEPS, random_state=0)
-
-
-@pytest.fixture(scope="module")
-def limits(robot: Robot) -> MotionLimits:
-    return MotionLimits.from_robot(robot, robot.n_joints)
 
 
 def _run(ctrl: Controller, q: np.ndarray) -> tuple[np.ndarray, list[Command]]:
