@@ -11,7 +11,7 @@ import os
 import re
 import struct
 import tracemalloc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,6 @@ from typer.testing import CliRunner, Result
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
 from pbdkit.apps.cli import app
 from pbdkit.learning.bags import write_demonstration_bag
-from pbdkit.robots import katana
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # ROS time of the first joint state in the hand-written bags (ns)
@@ -39,16 +38,10 @@ MAX_K = 10
 
 
 # ----------------------------------------------------------------------------- fixtures
+# robot: the Katana of conftest.py.
 @pytest.fixture(scope="module")
-def robot() -> Robot:
-    return katana()
-
-
-@pytest.fixture(scope="module")
-def demos() -> list[Demonstration]:
-    from pbdkit.sim import teach
-
-    return teach("coaster", 3, seed=1, speed=2.0)
+def demos(fast_demos: Callable[..., list[Demonstration]]) -> list[Demonstration]:
+    return fast_demos("coaster", 3, seed=1)
 
 
 @pytest.fixture(scope="module")

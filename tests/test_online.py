@@ -3,6 +3,8 @@ slide, an arm that gets pushed, the cameras at 15 Hz (issue 12)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -10,10 +12,8 @@ pytest.importorskip("mujoco")
 
 from typer.testing import CliRunner
 
-from pbdkit import Skill
 from pbdkit.apps.cli import app
 from pbdkit.motion.limits import MotionLimits, motion_peaks
-from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim import perturb as P
 from pbdkit.sim.online import OnlineRun, TruthObserver, execute_online
@@ -21,16 +21,12 @@ from pbdkit.sim.perturb import Disturbance, DisturbanceSetup, PushArm, SlideObje
 from pbdkit.sim.scene import TIMESTEP, Simulation
 from pbdkit.sim.task_skill import step_seconds
 from pbdkit.sim.tasks import TaskSpec
-from pbdkit.sim.teacher import teach
 
 
 @pytest.fixture(scope="module")
-def coaster() -> E.TaskSkill:
-    # Small: 3 fast demonstrations, a coarse time grid.
-    demos = teach("coaster", 3, seed=1, speed=2.0)
-    objects = E.constrained_objects("coaster")
-    skill = Skill.learn(demos, katana(), n_steps=150, objects=objects)
-    return E.TaskSkill("coaster", demos, skill, 0.0, 0.0)
+def coaster(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+    # Small: 3 fast demonstrations, a coarse time grid (test_parallel.py's too).
+    return small_task_skill("coaster", 3, seed=1, n_steps=150)
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,19 +17,14 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("distributed")
 
-from pbdkit import Skill
-from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.parallel import Session, connect, session
 from pbdkit.sim.tasks import get_task
-from pbdkit.sim.teacher import teach
 
 
 @pytest.fixture(scope="module")
-def coaster() -> E.TaskSkill:
-    demos = teach("coaster", 3, seed=1, speed=2.0)
-    skill = Skill.learn(demos, katana(), n_steps=150, objects=E.constrained_objects("coaster"))
-    return E.TaskSkill("coaster", demos, skill, 0.0, 0.0)
+def coaster(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+    return small_task_skill("coaster", 3, seed=1, n_steps=150)
 
 
 def _json(ev: E.Evaluation) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -187,13 +187,9 @@ def test_basin_skill_constraints(constrain_fixed: bool, constraints: list[str]) 
 
 
 @pytest.fixture(scope="module")
-def basin_skill() -> E.TaskSkill:
+def basin_skill(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
     # The paper's configuration, small: a fast teacher, 2 demonstrations, a coarse time grid.
-    demos = teach("basin", 2, seed=22, speed=2.0)
-    skill = Skill.learn(
-        demos, katana(), n_steps=100, max_components=3, objects=E.constrained_objects("basin")
-    )
-    return E.TaskSkill("basin", demos, skill, 0.0, 0.0)
+    return small_task_skill("basin", 2, seed=22, n_steps=100, max_components=3)
 
 
 def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
@@ -528,13 +524,11 @@ def test_recorder_measures_the_servo_stream_as_a_stream_monitor_outside_a_push()
 
 
 @pytest.fixture(scope="module")
-def coaster_run() -> tuple[E.TaskSkill, E.ControllerRun]:
+def coaster_run(
+    small_task_skill: Callable[..., E.TaskSkill],
+) -> tuple[E.TaskSkill, E.ControllerRun]:
     # A quick coaster skill (3 fast demonstrations, 300 steps), its fused run played offline.
-    demos = teach("coaster", 3, seed=30, speed=2.0)
-    skill = Skill.learn(
-        demos, katana(), n_steps=300, max_components=5, objects=E.constrained_objects("coaster")
-    )
-    ts = E.TaskSkill("coaster", demos, skill, 0.0, 0.0)
+    ts = small_task_skill("coaster", 3, seed=30, n_steps=300, max_components=5)
     placement = sample_objects("coaster", np.random.default_rng(31))
     return ts, E.run_controller(ts, placement, "fused")
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,11 +14,10 @@ from typer.testing import CliRunner
 pytest.importorskip("mujoco")
 
 from pbdkit.apps.cli import app
-from pbdkit.learning.skill import Skill
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, sample_objects, task_skill
 from pbdkit.sim import experiment as E
-from pbdkit.sim.teacher import random_start_posture, teach
+from pbdkit.sim.teacher import random_start_posture
 from pbdkit.sim.tracking import (
     ObjectNotSeenError,
     SimTracker,
@@ -170,12 +170,10 @@ def test_bad_objects_are_named() -> None:
 
 
 @pytest.fixture(scope="module")
-def small_skill() -> E.TaskSkill:
+def small_skill(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
     # A fast teacher (durations halved), 3 demonstrations, a coarse time grid: the CLI paths
     # run in seconds instead of a minute; the full demo is tested in test_demo.py.
-    demos = teach("coaster", 3, seed=0, speed=2.0)
-    skill = Skill.learn(demos, katana(), n_steps=200, max_components=5)
-    return E.TaskSkill("coaster", demos, skill, 0.0, 0.0)
+    return small_task_skill("coaster", 3, seed=0, n_steps=200, max_components=5)
 
 
 @pytest.fixture
