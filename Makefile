@@ -1,5 +1,6 @@
 # One entry point for a fresh machine: `make demo` runs the main job, `make test` runs every check,
-# `make docs` builds the API reference and the walkthroughs (docs/_build/html/index.html).
+# `make check` the quick ones (no docs, no tests marked slow), `make docs` builds the API
+# reference and the walkthroughs (docs/_build/html/index.html).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -7,7 +8,7 @@ STAMP := $(VENV)/.installed
 TASK ?= coaster
 OUT ?= demo-output
 
-.PHONY: demo test docs lint bench clean system-deps
+.PHONY: demo test check docs lint bench clean system-deps
 
 # Debian packages for headless rendering (EGL, with OSMesa as fallback); skipped when not root.
 SYSTEM_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
@@ -32,12 +33,19 @@ demo: $(STAMP)
 # incremental build would not repeat the warnings of pages it does not reread), offline.
 SPHINX := $(BIN)/python -m sphinx -E -W --keep-going -q -b html docs docs/_build/html
 
-test: $(STAMP)
+lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples docs
 	$(BIN)/ruff format --check src tests benchmarks examples docs
 	$(BIN)/mypy
+
+test: lint
 	$(SPHINX)
 	$(BIN)/python -m pytest -q
+
+# The quick loop before a commit (about a minute): `make test` without the docs and the tests
+# marked slow (pyproject.toml's pytest markers). The same prerequisites: nothing more to install.
+check: lint
+	$(BIN)/python -m pytest -q -m "not slow"
 
 docs: $(STAMP)
 	$(SPHINX)

@@ -35,6 +35,7 @@ def coaster_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_demo_writes_every_artefact(coaster_demo: Path) -> None:
     for name in (
         "fig3_cartesian.png",
@@ -50,6 +51,7 @@ def test_demo_writes_every_artefact(coaster_demo: Path) -> None:
     assert (coaster_demo / "skill.npz").exists()
 
 
+@pytest.mark.slow
 def test_demo_metrics_show_the_papers_finding(coaster_demo: Path) -> None:
     m = json.loads((coaster_demo / "metrics.json").read_text())
     assert m["task"] == "coaster"
@@ -79,6 +81,7 @@ def test_demo_metrics_show_the_papers_finding(coaster_demo: Path) -> None:
         assert 0.0 < m["controllers"]["fused"][f"peak_{kind}_ratio"] <= 1.0
 
 
+@pytest.mark.slow
 def test_report_has_every_section_and_embedded_figures(coaster_demo: Path) -> None:
     html = (coaster_demo / "report.html").read_text(encoding="utf-8")
     for anchor in ("summary", "learned", "cartesian", "controllers", "limits", "video", "timings"):
@@ -90,6 +93,7 @@ def test_report_has_every_section_and_embedded_figures(coaster_demo: Path) -> No
     assert 'src="reproduction.mp4"' in html
 
 
+@pytest.mark.slow
 def test_evaluate_json_schema(tmp_path: Path) -> None:
     path = tmp_path / "eval.json"
     result = CliRunner().invoke(
@@ -138,6 +142,7 @@ def fast_basin(monkeypatch: pytest.MonkeyPatch, basin_learner: FastBasin) -> dic
     return basin_learner.got
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("flag", "constraints"),
     [([], ["joint", "glass"]), (["--constrain-fixed"], ["joint", "glass", "basin"])],
@@ -200,6 +205,7 @@ def test_evaluate_online_with_a_perturbation(fast_basin: dict[str, object], tmp_
         assert r.exit_code != 0 and msg in r.output, r.output
 
 
+@pytest.mark.slow
 def test_demo_basin_paper_configuration(basin_learner: FastBasin, tmp_path: Path) -> None:
     # With vision: the cameras track the glass, the fixed basin is known; the skill has no
     # basin constraint, yet the run is judged on the scene's basin.
@@ -224,6 +230,7 @@ def test_demo_basin_paper_configuration(basin_learner: FastBasin, tmp_path: Path
     assert "learn (2 GMMs" in html
 
 
+@pytest.mark.slow
 def test_demo_online_shows_the_online_run(basin_learner: FastBasin, tmp_path: Path) -> None:
     # As `pbdkit demo --online --ground-truth` (whose --perturb is move by default).
     run_robot_demo(

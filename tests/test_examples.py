@@ -24,6 +24,9 @@ from pbdkit.learning.probabilistic_ik import ReproductionResult
 from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import panda
 
+# Every test reads the runs of both example scripts (a fresh interpreter each, about 6 s).
+pytestmark = pytest.mark.slow
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCRIPTS = ("panda_from_bags.py", "your_arm.py")
 TS = get_typestore(Stores.ROS2_HUMBLE)

@@ -71,6 +71,7 @@ def sim_start(run: OnlineRun) -> np.ndarray:
     return np.asarray(run.execution.servo_targets[:1])
 
 
+@pytest.mark.slow
 def test_a_sliding_coaster_is_followed_online_and_missed_offline(
     coaster: E.TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
@@ -102,6 +103,7 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
     np.testing.assert_allclose(online.online.objects["coaster"][-1], final, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_pushed_arm_yields_and_is_steered_back_while_offline_snaps_back(
     coaster: E.TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
@@ -127,6 +129,7 @@ def test_a_pushed_arm_yields_and_is_steered_back_while_offline_snaps_back(
     assert online.execution.t[-1] > offline.execution.t[-1]  # the held phase took time
 
 
+@pytest.mark.slow
 def test_online_with_the_cameras_holds_the_grasped_glass_and_the_hidden_coaster(
     coaster: E.TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:

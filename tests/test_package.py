@@ -20,6 +20,7 @@ def _loaded_after(code: str) -> list[str]:
     return out.stdout.split()
 
 
+@pytest.mark.slow
 def test_the_command_line_starts_without_the_numerical_libraries() -> None:
     # `pbdkit --help`, and `evaluate --workers` starting its worker server, come first.
     assert _loaded_after("import pbdkit, pbdkit.apps.cli") == []

@@ -33,6 +33,7 @@ def _json(ev: E.Evaluation) -> str:
     return json.dumps(data, sort_keys=True)
 
 
+@pytest.mark.slow
 def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
     # A disturbance drawn per trial, two controllers, the cameras: everything a trial depends
     # on travels to the workers, and the results come back in order.
@@ -51,6 +52,7 @@ def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
     assert ticks == [(k, 6) for k in range(1, 7)]  # one tick per controller run
 
 
+@pytest.mark.slow
 def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
     from distributed import LocalCluster
 
@@ -78,6 +80,7 @@ def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
     assert _json(parallel) == _json(serial)
 
 
+@pytest.mark.slow
 def test_a_worker_with_two_threads_gives_the_serial_results(coaster: E.TaskSkill) -> None:
     # Two trials at once in one process: each thread works on its own copy of the skill.
     from distributed import LocalCluster
@@ -136,6 +139,7 @@ def test_a_session_starts_quiet_workers_that_have_imported_the_simulation() -> N
     assert client.status == "closed"
 
 
+@pytest.mark.slow
 def test_a_session_refuses_bad_arguments_at_once_and_reports_a_failed_start(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -160,6 +164,7 @@ def test_a_session_refuses_bad_arguments_at_once_and_reports_a_failed_start(
             run.client  # noqa: B018
 
 
+@pytest.mark.slow
 def test_one_session_runs_the_same_evaluation_twice(coaster: E.TaskSkill) -> None:
     # The same job scattered twice on one client (a study's maps of two objects): Dask
     # released the first one's data under the second's key ("lost dependencies").
@@ -186,6 +191,7 @@ print(dask.config.get("distributed.worker.profile.enabled"))
 """
 
 
+@pytest.mark.slow
 def test_sessions_one_after_another_keep_dasks_settings() -> None:
     # Each local session sets Dask's worker settings for its duration and undoes them. In a
     # process that had not imported Dask's distributed yet, undoing them deleted Dask's own

@@ -47,6 +47,7 @@ def _grasp_release(skill: Skill) -> tuple[int, int]:
     return int(closed[0]), int(closed[-1])
 
 
+@pytest.mark.slow
 def test_coaster_captions_hold(coaster: tuple[Skill, list]) -> None:
     skill, _ = coaster
     c = skill.constraints()
@@ -62,6 +63,7 @@ def test_coaster_captions_hold(coaster: tuple[Skill, list]) -> None:
     assert spread["coaster"][release] < spread["glass"][release]
 
 
+@pytest.mark.slow
 def test_basin_glass_matters_while_grasping_not_while_pouring(basin: tuple[Skill, list]) -> None:
     skill, _ = basin
     c = skill.constraints()
@@ -70,6 +72,7 @@ def test_basin_glass_matters_while_grasping_not_while_pouring(basin: tuple[Skill
     assert glass[grasp] < 0.5 * glass[-1]
 
 
+@pytest.mark.slow
 def test_basin_pouring_gesture_is_tight_in_joint_space_with_enough_components(
     basin: tuple[Skill, list],
 ) -> None:
@@ -84,6 +87,7 @@ def test_basin_pouring_gesture_is_tight_in_joint_space_with_enough_components(
     assert abs(c.joint_mean[-1, 4] - np.mean([d.joints[-1, 4] for d in demos])) < 0.1
 
 
+@pytest.mark.slow
 def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, list]) -> None:
     skill, demos = coaster
     data = skill.training_data(demos)
@@ -125,6 +129,7 @@ def _dashed_levels(ax: Any) -> list[float]:
     return sorted(levels)
 
 
+@pytest.mark.slow
 def test_motion_limits_figure_shows_the_joint_closest_to_its_acceleration_limit(
     coaster: tuple[Skill, list],
 ) -> None:
@@ -163,6 +168,7 @@ def test_motion_limits_figure_shows_the_joint_closest_to_its_acceleration_limit(
         plot_motion_limits(t, res.joints, limits, joint=7)
 
 
+@pytest.mark.slow
 def test_figures_leave_the_users_matplotlib_backend_alone() -> None:
     # A Jupyter session keeps its inline backend: plotting must not call matplotlib.use.
     import subprocess

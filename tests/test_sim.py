@@ -192,6 +192,7 @@ def basin_skill(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
     return small_task_skill("basin", 2, seed=22, n_steps=100, max_components=3)
 
 
+@pytest.mark.slow
 def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
     basin_skill: E.TaskSkill,
 ) -> None:
@@ -303,6 +304,7 @@ def test_execute_validates_input() -> None:
     assert res.t[-1] == pytest.approx(0.2, abs=0.011)
 
 
+@pytest.mark.slow
 def test_teacher_demonstrations_structure() -> None:
     robot = katana()
     demos = teach("coaster", n_demos=3, seed=5)
@@ -345,6 +347,7 @@ def _run_demos(task: str, n: int, seed: int) -> list[dict[str, float]]:
     return metrics
 
 
+@pytest.mark.slow
 def test_teacher_coaster_demonstrations_succeed_in_physics() -> None:
     # Physical grasp (friction only) holds through lift and carry; the glass ends upright on
     # the coaster, centred within 15 mm.
@@ -353,6 +356,7 @@ def test_teacher_coaster_demonstrations_succeed_in_physics() -> None:
         assert m["tilt_deg"] < 10.0
 
 
+@pytest.mark.slow
 def test_teacher_basin_demonstration_succeeds_in_physics() -> None:
     (m,) = _run_demos("basin", n=1, seed=8)
     assert m["liquid_fraction"] >= 0.9
@@ -393,6 +397,7 @@ def test_save_video(tmp_path: Path) -> None:
         save_video(frames.astype(np.float64), tmp_path / "bad.mp4")
 
 
+@pytest.mark.slow
 def test_outcome_detects_a_failed_grasp() -> None:
     # The same motion without closing the gripper never lifts the glass (the open fingers may
     # drag it along the shelf): a failure, with the error measured from where the glass is.
@@ -533,6 +538,7 @@ def coaster_run(
     return ts, E.run_controller(ts, placement, "fused")
 
 
+@pytest.mark.slow
 def test_playback_servo_stream_is_within_the_limits(
     coaster_run: tuple[E.TaskSkill, E.ControllerRun],
 ) -> None:
@@ -575,6 +581,7 @@ def test_playback_servo_stream_is_within_the_limits(
     json.dumps(summary)
 
 
+@pytest.mark.slow
 def test_playback_servos_follow_the_samples(
     coaster_run: tuple[E.TaskSkill, E.ControllerRun],
 ) -> None:
@@ -721,6 +728,7 @@ def mark_task() -> Iterator[TaskSpec]:
     assert "mark" not in task_names()
 
 
+@pytest.mark.slow
 def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec) -> None:
     assert "mark" in task_names()
     assert get_task("mark") is mark_task

@@ -719,6 +719,7 @@ def _carry_demos(robot: Robot, rng: np.random.Generator) -> list[Demonstration]:
     return demos
 
 
+@pytest.mark.slow
 def test_line_search_keeps_the_fused_loop_from_oscillating(robot: Robot) -> None:
     # A tight coaster constraint (1 mm) meets a loose joint constraint (0.18 rad) at the end:
     # Table II as written oscillates there (Gauss-Newton with a residual); the line search

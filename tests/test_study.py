@@ -91,6 +91,7 @@ def fast_learning(taught: list) -> FastLearning:
     return FastLearning(taught)
 
 
+@pytest.mark.slow
 def test_a_tiny_study_writes_its_report(fast_learning: FastLearning, tmp_path: Path) -> None:
     size = S.StudySize(
         grid=2,

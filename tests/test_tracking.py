@@ -183,6 +183,7 @@ def fast_cli(monkeypatch: pytest.MonkeyPatch, small_skill: E.TaskSkill) -> None:
     monkeypatch.setattr(task_skill, "learn_task", lambda task, **kwargs: small_skill)
 
 
+@pytest.mark.slow
 def test_evaluate_with_vision_reports_tracking_error(
     fast_cli: None, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -246,6 +247,7 @@ def test_evaluate_counts_unseen_placements_as_failures(
     }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ground_truth", [False, True])
 def test_demo_with_and_without_vision(fast_cli: None, tmp_path: Path, ground_truth: bool) -> None:
     args = ["demo", "--task", "coaster", "--out", str(tmp_path), "--seed", "1"]
