@@ -178,6 +178,7 @@ def test_evaluate_basin_lists_the_controllers_of_its_constraints(
     assert data["perturbations"] == [{"name": "none"}]
 
 
+@pytest.mark.slow
 def test_evaluate_online_with_a_perturbation(fast_basin: dict[str, object], tmp_path: Path) -> None:
     path = tmp_path / "eval.json"
     args = ["evaluate", "--task", "basin", "--trials", "1", "--ground-truth", "--online"]

@@ -124,6 +124,7 @@ def _forked_from_a_server() -> tuple[str, int]:
     return multiprocessing.current_process().name, os.getppid()
 
 
+@pytest.mark.slow
 def test_a_session_starts_quiet_workers_that_have_imported_the_simulation() -> None:
     with session() as none:
         assert none is None  # serial: no cluster
