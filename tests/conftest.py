@@ -29,7 +29,7 @@ from pbdkit.robots import katana
 from pbdkit.robots.model import Robot
 
 if TYPE_CHECKING:  # the simulator is optional: imported where a simulated task is built
-    from pbdkit.sim.experiment import TaskSkill
+    from pbdkit.sim.task_skill import TaskSkill
 
 # The teacher of the small simulated skills demonstrates twice as fast as the default one.
 FAST = 2.0
@@ -77,14 +77,14 @@ def _small_task_skill(
     max_components: int | None,
     objects: tuple[str, ...] | None,
 ) -> TaskSkill:
-    from pbdkit.sim import experiment as E
+    from pbdkit.sim.task_skill import TaskSkill, constrained_objects
 
     demos = list(_taught(task, n_demos, seed))
     # Skill.learn's own default when no maximum is asked for.
     options = {} if max_components is None else {"max_components": max_components}
-    names = E.constrained_objects(task) if objects is None else list(objects)
+    names = constrained_objects(task) if objects is None else list(objects)
     skill = Skill.learn(demos, katana(), n_steps=n_steps, objects=names, **options)
-    return E.TaskSkill(task, demos, skill, 0.0, 0.0)
+    return TaskSkill(task, demos, skill, 0.0, 0.0)
 
 
 @pytest.fixture(scope="session")
@@ -107,7 +107,7 @@ def small_task_skill() -> Callable[..., TaskSkill]:
     objects=None)``: a skill learned from ``fast_demos(task, n_demos, seed)`` on the Katana.
 
     ``objects=None`` constrains the task's constrained objects
-    (:func:`pbdkit.sim.experiment.constrained_objects`); ``max_components=None`` keeps
+    (:func:`pbdkit.sim.task_skill.constrained_objects`); ``max_components=None`` keeps
     :meth:`Skill.learn`'s default. Built once per arguments and shared: read it, don't change it.
     """
     pytest.importorskip("mujoco")

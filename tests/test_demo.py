@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,6 @@ from pbdkit.prob.gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import evaluation
 from pbdkit.sim import experiment as E
-from pbdkit.sim.teacher import teach
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -111,8 +111,8 @@ def test_evaluate_json_schema(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def basin_demos() -> list:
-    return teach("basin", 2, seed=0, speed=2.0)
+def basin_demos(fast_demos: Callable[..., list]) -> list:
+    return fast_demos("basin", 2, seed=0)
 
 
 class FastBasin:

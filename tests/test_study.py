@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,6 @@ from pbdkit.apps.cli import app
 from pbdkit.robots import katana
 from pbdkit.sim import experiment as E
 from pbdkit.sim.tasks import get_task
-from pbdkit.sim.teacher import teach
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -61,9 +61,9 @@ def test_observation_noise_has_the_asked_mean_error_on_moving_objects_only() -> 
 
 
 @pytest.fixture(scope="module")
-def taught() -> list:
+def taught(fast_demos: Callable[..., list]) -> list:
     """Five fast demonstrations of the coaster task (durations halved)."""
-    return teach("coaster", 5, seed=1, speed=2.0)
+    return fast_demos("coaster", 5, seed=1)
 
 
 class FastLearning:
