@@ -59,7 +59,13 @@ def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
     args: dict[str, Any] = {"task_skill": coaster, "controllers": ["fused"], "ground_truth": True}
     serial = E.evaluate("coaster", 4, 0, **args)
     cluster = LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        # Even without a dashboard the scheduler serves HTTP, by default on 8787: another
+        # cluster on the machine would make that a warning (an error here).
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
     )
     killed: list[int] = []
 
@@ -88,7 +94,13 @@ def test_a_worker_with_two_threads_gives_the_serial_results(coaster: E.TaskSkill
     args: dict[str, Any] = {"task_skill": coaster, "controllers": ["fused"], "ground_truth": True}
     serial = E.evaluate("coaster", 4, 1, **args)
     cluster = LocalCluster(
-        n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None
+        n_workers=1,
+        threads_per_worker=2,
+        processes=True,
+        dashboard_address=None,
+        # Even without a dashboard the scheduler serves HTTP, by default on 8787: another
+        # cluster on the machine would make that a warning (an error here).
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
     )
     try:
         threaded = E.evaluate("coaster", 4, 1, scheduler=cluster.scheduler_address, **args)
@@ -328,7 +340,13 @@ def test_connect_refuses_a_bad_timeout() -> None:
 def test_connect_still_reaches_a_real_scheduler() -> None:
     from distributed import LocalCluster
 
-    cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None)
+    cluster = LocalCluster(
+        n_workers=0,
+        processes=False,
+        protocol="tcp",
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+    )
     try:
         client, none = connect(scheduler=cluster.scheduler_address, timeout=3.0)
         try:
