@@ -67,7 +67,7 @@ out = {}
 with threadpool_limits(1):
     for case in job["cases"]:
         demos = load_demonstrations(case["demos"])
-        skill = Skill.learn(demos, katana(), objects=case["objects"])
+        skill = Skill.learn(demos, katana(), task_objects=case["objects"])
         runs = []
         for placement in case["placements"]:
             objects = {k: np.array(v) for k, v in placement.items()}
@@ -144,7 +144,7 @@ def main() -> None:
                 path = tmp / f"{task}{seed}.npz"
                 save_demonstrations(demos, path)
                 objects = E.constrained_objects(task)
-                skill = Skill.learn(demos, robot, objects=objects)
+                skill = Skill.learn(demos, robot, task_objects=objects)
                 pls = placements(skill, demos)
                 name = f"{task} {seed}"
                 skills[name] = (skill, pls)

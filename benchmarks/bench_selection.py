@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> None:
         for seed in range(args.seeds):
             demos = teach(task, 5, seed=seed)
             start = time.perf_counter()
-            skill = Skill.learn(demos, robot, objects=constrained_objects(task))
+            skill = Skill.learn(demos, robot, task_objects=constrained_objects(task))
             learn_s = time.perf_counter() - start
             q = joint_quality(skill, demos)
             jumps = mean_jumps(skill, demos)

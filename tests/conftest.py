@@ -83,7 +83,7 @@ def _small_task_skill(
     # Skill.learn's own default when no maximum is asked for.
     options = {} if max_components is None else {"max_components": max_components}
     names = constrained_objects(task) if objects is None else list(objects)
-    skill = Skill.learn(demos, katana(), n_steps=n_steps, objects=names, **options)
+    skill = Skill.learn(demos, katana(), n_steps=n_steps, task_objects=names, **options)
     return TaskSkill(task, demos, skill, 0.0, 0.0)
 
 

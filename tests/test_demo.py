@@ -125,7 +125,9 @@ class FastBasin:
     def __call__(self, task: str, **kwargs: object) -> E.TaskSkill:
         self.got.update(kwargs)
         objects = E.constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
-        skill = Skill.learn(self.demos, katana(), n_steps=100, max_components=3, objects=objects)
+        skill = Skill.learn(
+            self.demos, katana(), n_steps=100, max_components=3, task_objects=objects
+        )
         return E.TaskSkill(task, self.demos, skill, 0.0, 0.0)
 
 

@@ -420,7 +420,7 @@ def test_default_learning_captures_every_demonstrated_feature(task: str, seed: i
     # (basin 0 and 2: joint K = 3, wrist roll 0.53 rad off at the end) or under-fitted the
     # joints (coaster 1: RMSE 2.15 x the floor). benchmarks/bench_selection.py: seeds 0-9.
     demos = teach(task, 5, seed=seed)
-    skill = Skill.learn(demos, katana(), objects=E.constrained_objects(task))
+    skill = Skill.learn(demos, katana(), task_objects=E.constrained_objects(task))
     cap = MAX_COMPONENTS
     # No space collapses; the joints' K is interior. (A task space may reach the cap: where
     # the demonstrations agree, narrower components keep predicting a left-out demonstration a
@@ -743,7 +743,7 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
 
     objects = E.constrained_objects("mark")
     assert objects == ["glass", "mark"]
-    skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, objects=objects)
+    skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
     ts = E.TaskSkill("mark", demos, skill, 0.0, 0.0)
     assert ts.task is mark_task and ts.constrain_fixed is False
     placement = sample_objects("mark", np.random.default_rng(24))
@@ -841,7 +841,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         assert all(set(d.objects) == {"cup", "coaster"} for d in demos)
         objects = E.constrained_objects(CUP)
         assert objects == ["cup", "coaster"]
-        skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, objects=objects)
+        skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
         ts = E.TaskSkill(CUP, demos, skill, 0.0, 0.0)
         with Simulation.from_task(CUP) as sim:
             assert set(sim.object_positions()) == {"cup", "coaster"}

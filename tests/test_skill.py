@@ -640,11 +640,11 @@ def test_duration_is_the_mean_demo_duration_and_survives_save_load(
     assert loaded.times(free)[-1] == pytest.approx(expected)
 
 
-def test_learn_objects_selects_the_task_space_constraints(
+def test_learn_task_objects_selects_the_task_space_constraints(
     robot: Robot, demos: list[Demonstration]
 ) -> None:
     two = synthetic_demos(robot, np.random.default_rng(3), n_demos=3, coaster=True)
-    only_glass = Skill.learn(two, robot, n_steps=60, n_components=2, objects=["glass"])
+    only_glass = Skill.learn(two, robot, n_steps=60, n_components=2, task_objects=["glass"])
     assert only_glass.constraint_names == ["joint", "glass"]
     res = only_glass.reproduce({"glass": two[0].objects["glass"]})
     assert set(res.influence) == {"joint", "glass"}
@@ -652,10 +652,16 @@ def test_learn_objects_selects_the_task_space_constraints(
     assert both.constraint_names == ["joint", "glass", "coaster"]
     # The same data give the same glass and joint models whichever objects are kept.
     np.testing.assert_array_equal(both.gmms["glass"].means_, only_glass.gmms["glass"].means_)
-    with pytest.raises(ValueError, match=r"objects must be distinct names among .*'cup'"):
-        Skill.learn(two, robot, objects=["cup"])
-    with pytest.raises(ValueError, match=r"objects must be distinct names"):
-        Skill.learn(two, robot, objects=["glass", "glass"])
+    with pytest.raises(ValueError, match=r"task_objects must be distinct names among .*'cup'"):
+        Skill.learn(two, robot, task_objects=["cup"])
+    with pytest.raises(ValueError, match=r"task_objects must be distinct names"):
+        Skill.learn(two, robot, task_objects=["glass", "glass"])
+    # The keyword of before: `objects` means positions everywhere else.
+    with pytest.warns(DeprecationWarning, match=r"is now Skill.learn\(task_objects=\[names\]\)"):
+        old = Skill.learn(two, robot, n_steps=60, n_components=2, objects=["glass"])
+    np.testing.assert_array_equal(old.gmms["glass"].means_, only_glass.gmms["glass"].means_)
+    with pytest.raises(ValueError, match="pass task_objects only"):
+        Skill.learn(two, robot, task_objects=["glass"], objects=["glass"])
 
 
 def test_selection_is_reported_per_space_and_survives_save_load(

@@ -82,7 +82,7 @@ class FastLearning:
         spec = get_task(task)  # type: ignore[arg-type]
         demos = self.taught[:n_demos]
         objects = E.constrained_objects(spec)
-        skill = Skill.learn(demos, katana(), n_steps=100, max_components=3, objects=objects)
+        skill = Skill.learn(demos, katana(), n_steps=100, max_components=3, task_objects=objects)
         return E.TaskSkill(spec, demos, skill, 0.0, 0.0)
 
 

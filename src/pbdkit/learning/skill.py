@@ -215,6 +215,8 @@ class Skill:
         random_state: int | None = 0,
         fit_samples: int | None = 100,
         bic_samples_per_sequence: float = 20.0,
+        task_objects: Sequence[str] | None = None,
+        *,
         objects: Sequence[str] | None = None,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
@@ -256,12 +258,16 @@ class Skill:
             Seed passed to the GMMs.
         bic_samples_per_sequence : float
             ``n_components="bic"`` only: effective number of samples per demonstration.
-        objects : sequence of str, optional
-            The objects that get a task-space constraint, among those the demonstrations
-            record (default: all). An object that never moves (the basin of the paper's
-            second task) carries no information about where the hand must go relative to
-            it that the joint-space constraint does not already hold; leave it out to learn
+        task_objects : sequence of str, optional
+            The names of the objects that get a task-space constraint, among those the
+            demonstrations record (default: all). An object that never moves (the basin of the
+            paper's second task) carries no information about where the hand must go relative
+            to it that the joint-space constraint does not already hold; leave it out to learn
             the paper's configuration.
+        objects : sequence of str, optional
+            Deprecated spelling of ``task_objects`` (goes in pbdkit 0.3): elsewhere
+            ``objects`` means the objects' positions (:meth:`reproduce`,
+            :attr:`Demonstration.objects <pbdkit.Demonstration.objects>`).
         fit_samples : int or None
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
@@ -298,16 +304,28 @@ class Skill:
         _warn_outside_limits(items, robot)
         floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
-        if objects is None:
+        if objects is not None:
+            if task_objects is not None:
+                raise ValueError(
+                    "pass task_objects only (objects is its deprecated spelling), got both"
+                )
+            warnings.warn(
+                "Skill.learn(objects=[names]) is now Skill.learn(task_objects=[names]) "
+                "(objects means positions elsewhere); the old keyword goes in pbdkit 0.3",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            task_objects = objects
+        if task_objects is None:
             names = recorded
         else:
-            if isinstance(objects, str):
-                objects = [objects]
-            names = list(objects)
+            if isinstance(task_objects, str):
+                task_objects = [task_objects]
+            names = list(task_objects)
             unknown = [k for k in names if k not in recorded]
             if unknown or len(set(names)) != len(names):
                 raise ValueError(
-                    f"objects must be distinct names among the recorded objects {recorded}, "
+                    f"task_objects must be distinct names among the recorded objects {recorded}, "
                     f"got {names}"
                 )
         has_gripper = items[0].gripper is not None

@@ -115,7 +115,7 @@ def learn_task(
         katana(),
         n_steps=n_steps,
         max_components=max_components,
-        objects=_constrained(spec, constrain_fixed),
+        task_objects=_constrained(spec, constrain_fixed),
     )
     learn_s = time.perf_counter() - start
     return TaskSkill(spec, demos, skill, learn_s, teach_s)
