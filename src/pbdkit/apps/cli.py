@@ -559,7 +559,11 @@ def learn(
     with console.status("learning ..."):
         t_start = time.perf_counter()
         skill = Skill.learn(
-            items, arm, n_steps=n_steps, max_components=max_components, objects=task_space or None
+            items,
+            arm,
+            n_steps=n_steps,
+            max_components=max_components,
+            task_objects=task_space or None,
         )
         seconds = time.perf_counter() - t_start
     skill.save(out)

@@ -55,7 +55,7 @@ def constrained_objects(task: str | TaskSpec, *, constrain_fixed: bool = False) 
     Returns
     -------
     names : list of str
-        The ``objects`` argument of :meth:`pbdkit.Skill.learn`.
+        The ``task_objects`` argument of :meth:`pbdkit.Skill.learn`.
     """
     return _constrained(get_task(task), constrain_fixed)
 
