@@ -267,7 +267,7 @@ class Skill:
         objects : sequence of str, optional
             Deprecated spelling of ``task_objects`` (goes in pbdkit 0.3): elsewhere
             ``objects`` means the objects' positions (:meth:`reproduce`,
-            :attr:`Demonstration.objects <pbdkit.Demonstration.objects>`).
+            ``Demonstration.objects``).
         fit_samples : int or None
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
