@@ -852,7 +852,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         glass = [d.__class__(d.t, d.joints, {"glass": d.objects["cup"],
                  "coaster": d.objects["coaster"]}, d.gripper) for d in demos]  # fmt: skip
         skill = Skill.learn(glass, katana(), n_steps=200, max_components=5,
-                            objects=["glass", "coaster"])  # fmt: skip
+                            task_objects=["glass", "coaster"])  # fmt: skip
         ts_glass = E.TaskSkill(C.SPEC, glass, skill, 0.0, 0.0)
         same = E.evaluate(C.SPEC, 1, 0, task_skill=ts_glass, controllers=["fused"],
                           ground_truth=True)  # fmt: skip
