@@ -25,7 +25,7 @@ __all__ = [
     "NpyHeader",
     "NpzArchive",
     "atomic_write_bytes",
-    "load_npz_safe",
+    "check_format",
     "open_npz",
     "save_npz_atomic",
     "write_json",
@@ -385,37 +385,21 @@ def _check_members(
     return headers, members
 
 
-def load_npz_safe(
-    path: str | os.PathLike[str],
-    *,
-    what: str = "file",
-    keys: Callable[[str], bool] | Collection[str] | None = None,
-    max_bytes: int = MAX_NPZ_BYTES,
-) -> dict[str, NDArray[Any]]:
-    """Load every array of an ``.npz`` file with ``allow_pickle=False``, after checking the
-    archive from its headers (:func:`open_npz`).
-
-    Parameters
-    ----------
-    path : str or path-like
-    what : str
-        What the file should be, for the messages.
-    keys : collection of str, or callable str -> bool, optional
-        The keys the format has: any other is refused before an array is loaded. Default: any.
-    max_bytes : int
-        The most bytes all arrays together may take once loaded.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    ValueError
-        As :func:`open_npz`, or an unknown key.
-    """
-    with open_npz(path, what=what, max_bytes=max_bytes) as archive:
-        if keys is not None:
-            archive.check_keys(keys)
-        return {k: archive.read(k) for k in archive}
+def check_format(
+    data: Mapping[str, NDArray[Any]], path: str | os.PathLike[str], what: str, version: int
+) -> None:
+    """Check the ``format`` and ``version`` keys of a pbdkit ``.npz`` file: ``format`` is
+    ``what``, ``version`` is ``version``; ValueError naming ``path`` otherwise."""
+    fmt = data.get("format")
+    if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != what:
+        raise ValueError(f"{path} is not a {what} file (its 'format' key is missing or differs)")
+    ver = data.get("version")
+    if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
+        raise ValueError(f"{path} is not a valid {what} file: missing 'version'")
+    if int(ver) != version:
+        raise ValueError(
+            f"{path} is a {what} file of version {int(ver)}; this pbdkit reads version {version}"
+        )
 
 
 def _json_default(value: object) -> object:

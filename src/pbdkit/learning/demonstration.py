@@ -63,7 +63,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import open_npz, save_npz_atomic
+from .._io import check_format, open_npz, save_npz_atomic
 from .._validation import check_array, check_int, check_positions
 
 __all__ = [
@@ -340,20 +340,6 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
     save_npz_atomic(path, arrays)
 
 
-def _header(data: Mapping[str, NDArray[Any]], path: Path, what: str, version: int) -> None:
-    """Check the format name and version keys of a pbdkit ``.npz`` file."""
-    fmt = data.get("format")
-    if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != what:
-        raise ValueError(f"{path} is not a {what} file (its 'format' key is missing or differs)")
-    ver = data.get("version")
-    if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
-        raise ValueError(f"{path} is not a valid {what} file: missing 'version'")
-    if int(ver) != version:
-        raise ValueError(
-            f"{path} is a {what} file of version {int(ver)}; this pbdkit reads version {version}"
-        )
-
-
 def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
     """Load demonstrations saved by :func:`save_demonstrations`.
 
@@ -379,7 +365,7 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
     # The archive's headers are checked first (sizes, object arrays); then its header keys are
     # read, and every other key is judged by name against them before any array is loaded.
     with open_npz(p, what=FORMAT_NAME + " file") as data:
-        _header(data, p, FORMAT_NAME, FORMAT_VERSION)
+        check_format(data, p, FORMAT_NAME, FORMAT_VERSION)
         try:
             demos = _demonstrations_from_arrays(data)
         except KeyError as exc:

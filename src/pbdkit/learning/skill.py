@@ -48,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._io import NpzArchive, open_npz, save_npz_atomic
+from .._io import NpzArchive, check_format, open_npz, save_npz_atomic
 from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
@@ -703,19 +703,7 @@ class Skill:
         """The skill in an open archive (:meth:`load`)."""
         from ..robots._joint_limits import check_limit_array, joint_limits_mapping
 
-        fmt = data.get("format")
-        if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != FORMAT_NAME:
-            raise ValueError(
-                f"{p} is not a {FORMAT_NAME} file (its 'format' key is missing or differs)"
-            )
-        ver = data.get("version")
-        if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
-            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing 'version'")
-        if int(ver) != FORMAT_VERSION:
-            raise ValueError(
-                f"{p} is a {FORMAT_NAME} file of version {int(ver)}; "
-                f"this pbdkit reads version {FORMAT_VERSION}"
-            )
+        check_format(data, p, FORMAT_NAME, FORMAT_VERSION)
         try:
             names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
         except KeyError as exc:
