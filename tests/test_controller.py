@@ -399,6 +399,16 @@ def test_controller_bad_input(skill: Skill, demos: list[Demonstration]) -> None:
             limits=MotionLimits.from_robot(skill.robot, 5),
             replan_distance=-1.0,
         )
+    # Limits are per second: without the step's duration they are refused, as by solve.
+    for dt in (float("nan"), 0.0):
+        with pytest.raises(ValueError, match=r"need the duration of a step: pass dt > 0"):
+            Controller(
+                skill.robot,
+                skill.constraints(),
+                {"glass": glass},
+                dt=dt,
+                limits=MotionLimits.from_robot(skill.robot, 5),
+            )
     # Streams: limits needed, a fresh controller, at least one setpoint per step.
     with pytest.raises(ValueError, match="no motion limits"):
         skill.controller({"glass": glass}, **NO_LIMITS).stream(1000)

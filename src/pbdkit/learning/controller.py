@@ -94,6 +94,7 @@ from .probabilistic_ik import (
     ReproductionResult,
     RunOptions,
     _check_reach,
+    check_timing,
     make_step,
     setup_run,
     timed_path,
@@ -254,9 +255,7 @@ class Controller:
         limits: MotionLimits | None = None,
         replan_distance: float = REPLAN_DISTANCE,
     ) -> None:
-        timed = limits is not None and limits.any
-        if timed and not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"limits need the duration of a step: dt > 0 (s), got {dt!r}")
+        timed = check_timing(limits, dt)
         if timed:
             step_limit = None  # the trajectory generator bounds the speed
         run = setup_run(

@@ -216,6 +216,7 @@ __all__ = [
     "RunSetup",
     "TaskStep",
     "check_objects",
+    "check_timing",
     "first_posture",
     "make_step",
     "reach_from_samples",
@@ -655,6 +656,17 @@ def setup_run(
     )
 
 
+def check_timing(limits: MotionLimits | None, dt: float | None) -> bool:
+    """Whether ``limits`` apply to a run (any of them set); they are per second and need the
+    duration of a step, ``dt`` > 0 (s): ValueError otherwise."""
+    timed = limits is not None and limits.any
+    if timed and (dt is None or not (math.isfinite(dt) and dt > 0)):
+        raise ValueError(
+            f"limits are in seconds and need the duration of a step: pass dt > 0 (s), got {dt!r}"
+        )
+    return timed
+
+
 def solve(
     robot: KinematicModel,
     constraints: Constraints,
@@ -701,13 +713,8 @@ def solve(
     -------
     result : ReproductionResult
     """
-    timed = limits is not None and limits.any
+    timed = check_timing(limits, dt)
     if timed:
-        if dt is None or not (math.isfinite(dt) and dt > 0):
-            raise ValueError(
-                "limits are in seconds and need the duration of a step: pass dt > 0 (s), "
-                f"got {dt!r}"
-            )
         step_limit = None  # the timing bounds the speed
     run = setup_run(
         robot,
