@@ -677,7 +677,7 @@ def reproduce(
     # The bag too is written (after the .npz): --out may not be where it goes.
     _check_output(out, "--out", inputs=[("SKILL", skill_path)], also=[("--bag", bag)])
     if bag is not None:
-        _check_bag_output(bag, out)
+        _check_bag_output(bag)
     skill = Skill.load(skill_path)
     res = skill.reproduce(objects, use=use or None)
     # Before writing anything: the bag's content is checked (a skill without a duration or
@@ -717,9 +717,9 @@ def reproduce(
         console.print(f"wrote {bag}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
 
 
-def _check_bag_output(bag: Path, out: Path) -> None:
-    """Fail unless a new bag (a directory) can be created at ``bag`` (``out`` is another path:
-    :func:`_check_output` checked that)."""
+def _check_bag_output(bag: Path) -> None:
+    """Fail unless a new bag (a directory) can be created at ``bag`` (that it is not ``--out``
+    is :func:`_check_output`'s check)."""
     if bag.exists() or bag.is_symlink():
         _fail(f"--bag {bag}: exists; give a new path (a bag is a directory, never overwritten)")
     _check_output(bag, "--bag")
