@@ -186,7 +186,7 @@ def left_jacobian_inverse(r: npt.ArrayLike) -> Float:
             small, 1.0 / 12.0 + theta**2 / 720.0, 1.0 / t**2 - (1 + np.cos(t)) / (2 * t * np.sin(t))
         )
     k = skew(v)
-    return np.eye(3) - 0.5 * k + d[..., None, None] * (k @ k)
+    return np.asarray(np.eye(3) - 0.5 * k + d[..., None, None] * (k @ k), dtype=np.float64)
 
 
 def pose_matrix(position: npt.ArrayLike, rotation: npt.ArrayLike | None = None) -> Float:
@@ -253,7 +253,7 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
             f"{np.linalg.det(rot):.3g}"
         )
     u, _, vt = np.linalg.svd(rot)
-    return arr[:3, 3].copy(), u @ vt
+    return arr[:3, 3].copy(), np.asarray(u @ vt, dtype=np.float64)
 
 
 def mean_rotation(rotations: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> Float:
