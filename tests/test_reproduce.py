@@ -561,7 +561,7 @@ def test_singular_posture_stays_finite() -> None:
         ({"objects": {"a": [0, 0, 0]}}, r"missing position\(s\) for \['b'\]"),
         ({"objects": {"a": [0, 0, 0], "b": [0, 0, 0], "c": [0, 0, 0]}}, r"unknown object.*'c'"),
         ({"objects": {"a": [0, 0, np.nan], "b": [0, 0, 0]}}, r"objects\['a'\] must be finite"),
-        ({"objects": {"a": [0, 0], "b": [0, 0, 0]}}, r"objects\['a'\] must have shape \(3,\)"),
+        ({"objects": {"a": [0, 0], "b": [0, 0, 0]}}, r"objects\['a'\] must be a position \(3,\)"),
         ({"objects": [[0, 0, 0]]}, r"objects must be a dict"),
         ({"q0": [0.0, 0.0, 0.0]}, r"q0 must have shape \(4,\), got \(3,\)"),
         ({"q0": [0.0, 0.0, 0.0, np.inf]}, r"q0 must be finite"),

@@ -386,20 +386,27 @@ def _check_members(
 
 
 def check_format(
-    data: Mapping[str, NDArray[Any]], path: str | os.PathLike[str], what: str, version: int
-) -> None:
+    data: Mapping[str, NDArray[Any]],
+    path: str | os.PathLike[str],
+    what: str,
+    version: int | tuple[int, ...],
+) -> int:
     """Check the ``format`` and ``version`` keys of a pbdkit ``.npz`` file: ``format`` is
-    ``what``, ``version`` is ``version``; ValueError naming ``path`` otherwise."""
+    ``what``, ``version`` is ``version`` (or one of them); ValueError naming ``path``
+    otherwise. Returns the file's version."""
     fmt = data.get("format")
     if fmt is None or fmt.shape != () or fmt.dtype.kind != "U" or str(fmt) != what:
         raise ValueError(f"{path} is not a {what} file (its 'format' key is missing or differs)")
     ver = data.get("version")
     if ver is None or ver.shape != () or ver.dtype.kind not in "iu":
         raise ValueError(f"{path} is not a valid {what} file: missing 'version'")
-    if int(ver) != version:
+    versions = (version,) if isinstance(version, int) else version
+    if int(ver) not in versions:
+        shown = " or ".join(str(v) for v in versions)
         raise ValueError(
-            f"{path} is a {what} file of version {int(ver)}; this pbdkit reads version {version}"
+            f"{path} is a {what} file of version {int(ver)}; this pbdkit reads version {shown}"
         )
+    return int(ver)
 
 
 def _json_default(value: object) -> object:

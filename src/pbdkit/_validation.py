@@ -7,6 +7,7 @@ Each ``check_*`` function returns the cleaned array (float64, C-contiguous) or r
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +17,7 @@ __all__ = [
     "RESERVED_NAMES",
     "check_array",
     "check_int",
+    "check_object_names",
     "check_positions",
     "check_positive_float",
     "shape_str",
@@ -180,6 +182,19 @@ def check_positions(
             f"{name} must be a dict mapping {wanted} to positions (3,), "
             f"got {type(objects).__name__}"
         )
+    keys = check_object_names(objects, name, expected=expected, what=what)
+    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)).copy() for k in keys}
+
+
+def check_object_names(
+    objects: Mapping[Any, Any],
+    name: str = "objects",
+    *,
+    expected: Sequence[str] | None = None,
+    what: str = "this skill",
+) -> list[str]:
+    """The names of a mapping of objects, checked as :func:`check_positions` checks them
+    (exactly ``expected`` if given, in its order; else the names given, none reserved)."""
     for key in objects:
         if not isinstance(key, str) or not key:
             raise ValueError(f"{name} keys must be non-empty strings, got {key!r}")
@@ -200,4 +215,4 @@ def check_positions(
                 f"{name}: missing position(s) for {missing}; {what} needs {list(expected)}"
             )
         keys = list(expected)
-    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)).copy() for k in keys}
+    return keys

@@ -26,8 +26,13 @@ key                   dtype, shape              meaning
 ``demo_{i}_t``        float64, (T_i,)           time stamps in seconds, strictly increasing
 ``demo_{i}_joints``   float64, (T_i, n)         joint angles in radians
 ``demo_{i}_objects``  float64, (N, 3)           object positions, rows in ``object_names`` order
+``demo_{i}_rotations`` float64, (N, 3, 3)       version 2 only: each object's rotation matrix
+                                                (a pose), all NaN for a position-only object
 ``demo_{i}_gripper``  float64, (T_i,)           gripper signal (0 open, 1 closed), optional
 ====================  ========================  ===============================================
+
+Version 2 is written when some object has a pose (:mod:`pbdkit.learning.placement`); a file of
+positions only is written as version 1, as before, and both versions load.
 
 :func:`load_demonstrations` judges the archive from its headers before it loads an array: a
 key not in this table (or a ``demo_{i}_*`` with i >= ``n_demos``), an object array, or arrays of
@@ -64,7 +69,8 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._io import check_format, open_npz, save_npz_atomic
-from .._validation import check_array, check_int, check_positions
+from .._validation import check_array, check_int
+from .placement import check_placements, is_pose, position_of
 
 __all__ = [
     "FORMAT_NAME",
@@ -79,7 +85,9 @@ __all__ = [
 ]
 
 FORMAT_NAME = "pbdkit-demonstrations"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The versions :func:`load_demonstrations` reads (1: positions only; 2: poses too).
+READABLE_VERSIONS = (1, 2)
 #: How far (rad, or m for a prismatic joint) a demonstrated joint angle may lie outside the
 #: robot's limits before :meth:`pbdkit.Skill.learn` warns (:class:`LimitWarning`): recorded
 #: encoders can graze a limit.
@@ -97,8 +105,9 @@ class LimitWarning(UserWarning):
 
 
 def _check_objects(objects: object, name: str = "objects") -> dict[str, Float]:
-    """Validated positions (:func:`pbdkit._validation.check_positions`), made read-only."""
-    out = check_positions(objects, name)
+    """Validated placements (:func:`pbdkit.learning.placement.check_placements`: a position
+    (3,) or a pose, kept as 4x4), made read-only."""
+    out = check_placements(objects, name)
     for pos in out.values():
         pos.setflags(write=False)
     return out
@@ -114,9 +123,12 @@ class Demonstration:
         Time stamps (seconds, or any unit), finite and strictly increasing, T >= 2.
     joints : array-like, shape (T, n)
         Joint angles theta in radians, one row per time stamp.
-    objects : dict str -> array-like, shape (3,)
-        Position o(n) of each object in the robot's base frame (metres), constant during the
-        demonstration. The name ``"joint"`` is reserved. May be empty (joint-space skill only).
+    objects : dict str -> array-like, shape (3,), (4, 4) or (7,)
+        Where each object is in the robot's base frame (metres), constant during the
+        demonstration: a position (3,), or a pose, as a 4x4 transform or
+        (x, y, z, qw, qx, qy, qz) (quaternion w first), kept as its 4x4 transform
+        (:mod:`pbdkit.learning.placement`). The name ``"joint"`` is reserved. May be empty
+        (joint-space skill only).
     gripper : array-like, shape (T,), optional
         Gripper signal (0 open, 1 closed; booleans accepted), one value per time stamp, within
         [0, 1] (a value in between is a partly closed gripper, or a resampled transition).
@@ -299,6 +311,13 @@ def check_demonstrations(demos: object, *, min_demos: int = 2) -> list[Demonstra
                 f"demos[{i}] has objects {sorted(d.object_names)}, expected "
                 f"{sorted(ref.object_names)} like demos[0]"
             )
+        for k in ref.object_names:
+            if is_pose(d.objects[k]) != is_pose(ref.objects[k]):
+                kind = "a pose" if is_pose(d.objects[k]) else "a position"
+                raise ValueError(
+                    f"demos[{i}].objects[{k!r}] is {kind}, unlike in demos[0]: give each "
+                    "object as a pose in every demonstration or as a position in every one"
+                )
         if (d.gripper is None) != (ref.gripper is None):
             raise ValueError(
                 f"demos[{i}] {'has no' if d.gripper is None else 'has a'} gripper signal, "
@@ -322,9 +341,11 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
     items = check_demonstrations(demos, min_demos=1)
     names = list(items[0].object_names)
     has_gripper = items[0].gripper is not None
+    posed = bool(names) and any(is_pose(items[0].objects[n]) for n in names)
     arrays: dict[str, Any] = {
         "format": np.array(FORMAT_NAME),
-        "version": np.array(FORMAT_VERSION, dtype=np.int64),
+        # Positions only: version 1, as before poses (older readers still load the file).
+        "version": np.array(FORMAT_VERSION if posed else 1, dtype=np.int64),
         "n_demos": np.array(len(items), dtype=np.int64),
         "object_names": np.array(names, dtype=np.str_) if names else np.zeros(0, dtype="<U1"),
         "has_gripper": np.array(has_gripper),
@@ -333,8 +354,15 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
         arrays[f"demo_{i}_t"] = d.t
         arrays[f"demo_{i}_joints"] = d.joints
         arrays[f"demo_{i}_objects"] = (
-            np.stack([d.objects[n] for n in names]) if names else np.zeros((0, 3))
+            np.stack([position_of(d.objects[n]) for n in names]) if names else np.zeros((0, 3))
         )
+        if posed:
+            arrays[f"demo_{i}_rotations"] = np.stack(
+                [
+                    d.objects[n][:3, :3] if is_pose(d.objects[n]) else np.full((3, 3), np.nan)
+                    for n in names
+                ]
+            )
         if d.gripper is not None:
             arrays[f"demo_{i}_gripper"] = d.gripper
     save_npz_atomic(path, arrays)
@@ -365,9 +393,9 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
     # The archive's headers are checked first (sizes, object arrays); then its header keys are
     # read, and every other key is judged by name against them before any array is loaded.
     with open_npz(p, what=FORMAT_NAME + " file") as data:
-        check_format(data, p, FORMAT_NAME, FORMAT_VERSION)
+        version = check_format(data, p, FORMAT_NAME, READABLE_VERSIONS)
         try:
-            demos = _demonstrations_from_arrays(data)
+            demos = _demonstrations_from_arrays(data, posed=version >= 2)
         except KeyError as exc:
             raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
         except (TypeError, ValueError) as exc:
@@ -378,7 +406,9 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
 _HEADER_KEYS = frozenset({"format", "version", "n_demos", "object_names", "has_gripper"})
 
 
-def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demonstration]:
+def _demonstrations_from_arrays(
+    data: Mapping[str, NDArray[Any]], *, posed: bool = False
+) -> list[Demonstration]:
     """The demonstrations of a file, checked against its header keys (n_demos, ...).
 
     ``data`` may load each array when it is asked for (:class:`pbdkit._io.NpzArchive`): the
@@ -399,7 +429,11 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
     if grip_arr.shape != () or grip_arr.dtype.kind != "b":
         raise ValueError(f"has_gripper must be a boolean, got {grip_arr!r}")
     has_gripper = bool(grip_arr)
-    fields = ("t", "joints", "objects", "gripper") if has_gripper else ("t", "joints", "objects")
+    fields: tuple[str, ...] = ("t", "joints", "objects")
+    if posed:
+        fields += ("rotations",)
+    if has_gripper:
+        fields += ("gripper",)
     # Key by key up to the first missing one: the file's own keys bound the work, whatever
     # n_demos it declares.
     for i in range(n_demos):
@@ -420,11 +454,23 @@ def _demonstrations_from_arrays(data: Mapping[str, NDArray[Any]]) -> list[Demons
         pos = np.asarray(data[f"demo_{i}_objects"], dtype=np.float64)
         if pos.shape != (len(names), 3):
             raise ValueError(f"demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}")
+        placements: dict[str, Any] = {n: pos[k] for k, n in enumerate(names)}
+        if posed:
+            rot = np.asarray(data[f"demo_{i}_rotations"], dtype=np.float64)
+            if rot.shape != (len(names), 3, 3):
+                raise ValueError(
+                    f"demo_{i}_rotations must have shape ({len(names)}, 3, 3), got {rot.shape}"
+                )
+            for k, n in enumerate(names):
+                if not np.all(np.isnan(rot[k])):  # all NaN: a position-only object
+                    pose = np.eye(4)
+                    pose[:3, :3], pose[:3, 3] = rot[k], pos[k]
+                    placements[n] = pose
         try:
             demo = Demonstration(
                 t=data[f"demo_{i}_t"],
                 joints=data[f"demo_{i}_joints"],
-                objects={n: pos[k] for k, n in enumerate(names)},
+                objects=placements,
                 gripper=data[f"demo_{i}_gripper"] if has_gripper else None,
             )
         except ValueError as exc:

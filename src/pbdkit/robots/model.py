@@ -324,8 +324,13 @@ def _chain_fk_jacobian(
     tip_translation: NDArray[np.float64],
     *,
     jacobian: bool,
+    pose: bool = False,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Tip positions (M, 3) and position Jacobians (M, 3, n) for a batch q (M, n)."""
+    """Tip positions (M, 3) and position Jacobians (M, 3, n) for a batch q (M, n).
+
+    With ``pose``: tip transforms (M, 4, 4) instead of positions, and 6-D Jacobians (M, 6, n)
+    (linear rows, then angular rows, in the base frame) instead of position Jacobians.
+    """
     m, n = q.shape
     s, c1 = np.sin(q), 1.0 - np.cos(q)
     rot = np.broadcast_to(np.eye(3), (m, 3, 3))
@@ -348,8 +353,13 @@ def _chain_fk_jacobian(
             rot = np.ascontiguousarray(b[:, :, 0:3])
         origins[:, i] = pos
     x = pos + rot @ tip_translation
+    if pose:
+        tf = np.zeros((m, 4, 4))
+        tf[:, :3, :3] = rot @ tip_rotation
+        tf[:, :3, 3] = x
+        tf[:, 3, 3] = 1.0
     if not jacobian:
-        return x, None
+        return (tf, None) if pose else (x, None)
     d = x[:, None, :] - origins  # (M, n, 3): from each joint origin to the tip
     # revolute column: w x (x_tip - p_i); prismatic column: w
     cols = np.empty((m, n, 3))
@@ -358,6 +368,11 @@ def _chain_fk_jacobian(
     cols[..., 2] = axes[..., 0] * d[..., 1] - axes[..., 1] * d[..., 0]
     if not revolute.all():
         cols[:, ~revolute] = axes[:, ~revolute]
+    if pose:
+        j6 = np.zeros((m, 6, n))
+        j6[:, :3] = cols.transpose(0, 2, 1)
+        j6[:, 3:] = np.where(revolute[None, :, None], axes, 0.0).transpose(0, 2, 1)
+        return tf, j6
     return x, np.ascontiguousarray(cols.transpose(0, 2, 1))
 
 
@@ -804,6 +819,76 @@ link_prefix, tip, velocity, effort
         )
         assert jb is not None
         return x, jb
+
+    def fk_pose(self, q: npt.ArrayLike) -> NDArray[np.float64]:
+        """Tip pose in the base frame: its position and orientation.
+
+        Parameters
+        ----------
+        q : array-like, shape (n,) or (M, n)
+
+        Returns
+        -------
+        pose : ndarray, shape (4, 4) or (M, 4, 4)
+            Homogeneous transforms [[R, x], [0, 0, 0, 1]]: R the tip frame's axes in the base
+            frame, x = :meth:`fk`.
+        """
+        arr = self.check_joints(q)
+        if arr.ndim == 1:
+            pin.forwardKinematics(self._model, self._data, arr)
+            return np.array(pin.updateFramePlacement(self._model, self._data, self._tip_id))
+        tf, _ = _chain_fk_jacobian(
+            arr,
+            self._consts,
+            self._revolute,
+            self._tip_rot,
+            self._tip_trans,
+            jacobian=False,
+            pose=True,
+        )
+        return tf
+
+    def jacobian6(self, q: npt.ArrayLike) -> NDArray[np.float64]:
+        """The tip's 6-D Jacobian: [dx/dq ; omega/dq], linear rows then angular rows, both in
+        the base frame (pinocchio's LOCAL_WORLD_ALIGNED frame Jacobian).
+
+        The angular rows give the tip's angular velocity omega = J_w dq in base axes (for a
+        revolute joint, its axis in the base frame; 0 for a prismatic one). An orientation
+        error e = log(R R_ref^T) moves with de = J_l(e)^-1 J_w dq
+        (:mod:`pbdkit.prob.rotations`).
+
+        Parameters
+        ----------
+        q : array-like, shape (n,) or (M, n)
+
+        Returns
+        -------
+        J : ndarray, shape (6, n) or (M, 6, n)
+        """
+        arr = self.check_joints(q)
+        if arr.ndim == 1:
+            return self.fk_pose_jacobian_unchecked(arr)[2]
+        _, j6 = _chain_fk_jacobian(
+            arr,
+            self._consts,
+            self._revolute,
+            self._tip_rot,
+            self._tip_trans,
+            jacobian=True,
+            pose=True,
+        )
+        assert j6 is not None
+        return j6
+
+    def fk_pose_jacobian_unchecked(
+        self, q: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Tip position (3,), rotation (3, 3) and 6-D Jacobian (6, n) for one configuration,
+        without input validation (control loops; ``q`` as for :meth:`fk_jacobian_unchecked`)."""
+        jac = pin.computeFrameJacobian(self._model, self._data, q, self._tip_id, self._lf)
+        placement = self._oMf[self._tip_id]
+        full = np.array(jac, dtype=np.float64).reshape(6, self.n_joints)
+        return placement.translation.copy(), placement.rotation.copy(), full
 
     def fk_jacobian_unchecked(
         self, q: NDArray[np.float64]
