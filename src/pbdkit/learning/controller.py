@@ -54,8 +54,8 @@ measured on the coaster task). So the controller plans and follows:
    acceleration) and the skill's phase there, with the positions known then:
 
    - when an object moves by more than ``replan_distance`` (m) from the positions the plan
-     was made for: the arm heads for the object where it now is, the command stream staying
-     continuous;
+     was made for (or a posed object turns by more than :data:`REPLAN_ANGLE`): the arm heads
+     for the object where it now is, the command stream staying continuous;
    - when the measured posture is more than ``max_lag`` steps (at top speed) from the last
      command (a push): the command is held (:attr:`Command.held`), and the plan starts from the
      measured state (the measured posture, its velocity from the last two measurements):
@@ -85,30 +85,48 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_positions
+from .._validation import check_array
 from ..motion.limits import LIMIT_SAFETY, MotionLimits
 from ..motion.otg import Motion, follow
+from ..prob.rotations import log3
+from .placement import check_placements, position_of, rotation_of
 from .probabilistic_ik import (
     Constraints,
     KinematicModel,
     ReproductionResult,
     RunOptions,
     _check_reach,
+    check_objects,
     check_timing,
     make_step,
     setup_run,
     timed_path,
 )
 
-__all__ = ["REPLAN_DISTANCE", "Command", "CommandStream", "Controller"]
+__all__ = ["REPLAN_ANGLE", "REPLAN_DISTANCE", "Command", "CommandStream", "Controller"]
 
 #: With motion limits, an object that moves farther than this (m) from the position the plan
 #: was made for makes the controller plan again (module docstring, "Motion limits"): about
 #: twice the cameras' noise (pbdkit.sim.tracking: 0.6 mm), a tenth of the coaster task's
 #: tolerance.
 REPLAN_DISTANCE = 1e-3
+#: With motion limits, an object whose pose turns farther than this (rad) from the one the plan
+#: was made for makes the controller plan again: 1 mm at 0.1 m from its origin, as
+#: :data:`REPLAN_DISTANCE`.
+REPLAN_ANGLE = 1e-2
 
 Float = NDArray[np.float64]
+
+
+def _moved(now: Float, planned: Float, distance: float) -> bool:
+    """Whether an object moved by more than ``distance`` (m) or turned by more than
+    :data:`REPLAN_ANGLE` from ``planned`` (both positions (3,) or both poses (4, 4))."""
+    if float(np.linalg.norm(position_of(now) - position_of(planned))) > distance:
+        return True
+    rot, ref = rotation_of(now), rotation_of(planned)
+    if rot is None or ref is None:
+        return False
+    return float(np.linalg.norm(log3(rot @ ref.T))) > REPLAN_ANGLE
 
 
 class Command:
@@ -202,7 +220,7 @@ class Controller:
     robot : KinematicModel
     constraints : Constraints
         The skill's generalized constraints over its T steps.
-    objects : dict str -> array-like, shape (3,)
+    objects : dict str -> array-like, shape (3,), (4, 4) or (7,)
         Position of every object of the skill (base frame).
     options : RunOptions, optional
         As :func:`pbdkit.learning.probabilistic_ik.solve`; its ``q0`` is the posture the run
@@ -361,7 +379,7 @@ class Controller:
         q_measured : array-like, shape (n,)
             The joint angles the arm is at (a measurement slightly outside the joint limits is
             clipped to them).
-        objects : dict str -> array-like, shape (3,), optional
+        objects : dict str -> array-like, shape (3,), (4, 4) or (7,), optional
             New positions of any of the skill's objects, used from this step on.
 
         Returns
@@ -507,10 +525,7 @@ class Controller:
 
     def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
         names = self._c.object_names
-        given = check_positions(objects, "objects")
-        unknown = [k for k in given if k not in names]
-        if unknown:
-            raise ValueError(f"objects: unknown object name(s) {unknown}; this skill knows {names}")
+        given = check_objects(objects, names, oriented=self._c.oriented, partial=True)
         updated = {**self._objs, **given}
         if self._run.reach is not None:
             # Checked before it is kept: a refused update leaves the positions as they were.
@@ -520,7 +535,7 @@ class Controller:
         if st is not None and st.plan is not None:
             planned = st.plan.objects
             st.moved = st.moved or any(
-                float(np.linalg.norm(updated[k] - planned[k])) > st.replan_distance for k in given
+                _moved(updated[k], planned[k], st.replan_distance) for k in given
             )
         self._step.set_objects(self._objs)
 
@@ -666,7 +681,7 @@ class CommandStream:
         ctrl = self.controller
         q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],), allow_bool=False)
         if objects is not None:
-            self._pending.update(check_positions(objects, "objects"))
+            self._pending.update(check_placements(objects, "objects"))
         if self.done:
             raise ValueError("the stream is done: its setpoints came to rest at the end")
         t = (self._ticks + 1) * self.period  # the time of the setpoint to give

@@ -192,7 +192,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
-from .._validation import check_array, check_positions, check_positive_float
+from .._validation import check_array, check_positive_float
 from ..motion.limits import (
     LIMIT_SAFETY,
     MotionLimits,
@@ -201,8 +201,19 @@ from ..motion.limits import (
     times_from_durations,
 )
 from ..motion.otg import point_to_point, spline_derivatives
+from ..prob.frames import precision_to_world
 from ..prob.gaussian import inverse_cholesky_factor
+from ..prob.rotations import (
+    check_rotation,
+    exp_map,
+    left_jacobian,
+    left_jacobian_inverse,
+    left_jacobian_inverse3,
+    log3,
+    log_map,
+)
 from ..robots.kinematics import damped_pinv
+from .placement import check_placements, is_pose, position_of
 
 __all__ = [
     "Constraints",
@@ -210,11 +221,14 @@ __all__ = [
     "FusedStep",
     "JointStep",
     "KinematicModel",
+    "PoseFusedStep",
+    "PoseTaskStep",
     "ReachWarning",
     "ReproductionResult",
     "RunOptions",
     "RunSetup",
     "TaskStep",
+    "WorldTask",
     "check_objects",
     "check_timing",
     "first_posture",
@@ -303,12 +317,19 @@ class Constraints:
         theta_hat: expected joint angles (GMR of the joint-space GMM).
     joint_cov : array-like, shape (T, n, n)
         Sigma^theta: their covariance (positive definite).
-    task_mean : dict str -> array-like, shape (T, 3)
-        x_hat^(n): expected hand position relative to object n.
-    task_cov : dict str -> array-like, shape (T, 3, 3)
-        Sigma^x(n): its covariance (positive definite). Same keys as ``task_mean``.
+    task_mean : dict str -> array-like, shape (T, 3) or (T, 6)
+        x_hat^(n): expected hand position relative to object n: x - o(n) for a position-only
+        constraint (T, 3); for an oriented one (T, 6), the hand's position in the object's
+        frame R^T (x - p), then the hand's orientation relative to the object as a rotation
+        vector r in the tangent space at ``rotation_base[n]`` = M: R^T R_hand = exp([r]x) M
+        (left, object axes: :mod:`pbdkit.prob.rotations`).
+    task_cov : dict str -> array-like, shape (T, 3, 3) or (T, 6, 6)
+        Sigma^x(n): its covariance (positive definite). Same keys and sizes as ``task_mean``.
     gripper : array-like, shape (T,), optional
         Generalized gripper signal (GMR of the gripper column of the joint-space GMM).
+    rotation_base : dict str -> array-like, shape (3, 3), optional
+        M for every oriented constraint (the demonstrations' mean relative orientation), and
+        only for those.
 
     Attributes
     ----------
@@ -318,8 +339,10 @@ class Constraints:
         (Sigma^theta)^-1.
     joint_eta : ndarray, shape (T, n)
         (Sigma^theta)^-1 theta_hat.
-    task_prec : dict str -> ndarray, shape (T, 3, 3)
+    task_prec : dict str -> ndarray, shape (T, 3, 3) or (T, 6, 6)
         (Sigma^x(n))^-1.
+    oriented : list of str
+        The oriented constraints (those of ``rotation_base``).
     """
 
     def __init__(
@@ -330,6 +353,7 @@ class Constraints:
         task_mean: Mapping[str, npt.ArrayLike],
         task_cov: Mapping[str, npt.ArrayLike],
         gripper: npt.ArrayLike | None = None,
+        rotation_base: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
         self.t = check_array(t, "t", ndim=1, min_rows=2)
         n_steps = self.t.shape[0]
@@ -343,13 +367,23 @@ class Constraints:
             )
         if JOINT in task_mean:
             raise ValueError(f"task_mean: {JOINT!r} is reserved for the joint-space constraint")
+        bases = {} if rotation_base is None else dict(rotation_base)
+        unknown = [k for k in bases if k not in task_mean]
+        if unknown:
+            raise ValueError(f"rotation_base: {unknown} are not task constraints")
+        self.rotation_base: dict[str, Float] = {}
+        for k, m in bases.items():
+            self.rotation_base[k] = check_rotation(m, f"rotation_base[{k!r}]")
+        dims = {k: 6 if k in bases else 3 for k in task_mean}
         self.task_mean = {
-            k: check_array(v, f"task_mean[{k!r}]", shape=(n_steps, 3)) for k, v in task_mean.items()
+            k: check_array(v, f"task_mean[{k!r}]", shape=(n_steps, dims[k]))
+            for k, v in task_mean.items()
         }
         self.task_cov = {
-            k: check_array(task_cov[k], f"task_cov[{k!r}]", shape=(n_steps, 3, 3))
+            k: check_array(task_cov[k], f"task_cov[{k!r}]", shape=(n_steps, dims[k], dims[k]))
             for k in task_mean
         }
+        self.oriented: list[str] = [k for k in task_mean if k in bases]
         self.gripper = (
             None if gripper is None else check_array(gripper, "gripper", shape=(n_steps,))
         )
@@ -382,6 +416,59 @@ class Constraints:
     def names(self) -> list[str]:
         """``["joint", *object names]``."""
         return [JOINT, *self.task_mean]
+
+    def position_cov(self, name: str) -> Float:
+        """The covariance (T, 3, 3) of the position part of task constraint ``name`` (in the
+        object's frame for an oriented constraint)."""
+        return self.task_cov[name][:, :3, :3]
+
+    def world_task(self, name: str, placement: Float) -> WorldTask:
+        """Task constraint ``name`` in the robot's base frame for the object at ``placement``
+        (a position (3,), or a 4x4 pose for an oriented constraint; see :class:`WorldTask`).
+
+        Position-only: target o + x_hat, precision P. Oriented, with the object's pose
+        (R, p) and x_hat = [m ; r]: target position p + R m, target orientation R exp([r]x) M;
+        the covariance of the world error [x - target ; log(R_hand R_target^T)] is
+        B S B^T with B = blockdiag(R, R J_l(r)) (:mod:`pbdkit.prob.rotations`: the left error
+        of the object's axes is R times it in the world; J_l carries the tangent space at M to
+        the one at the mean), so the precision is B^-T S^-1 B^-1
+        (:func:`pbdkit.prob.frames.precision_to_world`, the frame code of
+        :class:`pbdkit.FrameModel`).
+        """
+        mean = self.task_mean[name]
+        if name not in self.rotation_base:
+            pos = placement[:3, 3] if placement.shape == (4, 4) else placement
+            return WorldTask(pos + mean, None, self.task_prec[name])
+        rot, p = placement[:3, :3], placement[:3, 3]
+        local = exp_map(mean[:, 3:])
+        b = np.zeros((self.n_steps, 6, 6))
+        b[:, :3, :3] = rot
+        b[:, 3:, 3:] = rot @ left_jacobian(mean[:, 3:])
+        return WorldTask(
+            p + mean[:, :3] @ rot.T,
+            rot @ local @ self.rotation_base[name],
+            precision_to_world(b, self.task_prec[name]),
+        )
+
+
+@dataclass(frozen=True)
+class WorldTask:
+    """A task constraint in the robot's base frame, over the time grid
+    (:meth:`Constraints.world_task`).
+
+    Attributes
+    ----------
+    position : ndarray, shape (T, 3)
+        Where the constraint expects the hand.
+    rotation : ndarray, shape (T, 3, 3), or None
+        The hand orientation it expects (oriented constraints only).
+    precision : ndarray, shape (T, 3, 3) or (T, 6, 6)
+        Of the error x - position, or of [x - position ; log(R_hand rotation^T)].
+    """
+
+    position: Float
+    rotation: Float | None
+    precision: Float
 
 
 @dataclass(frozen=True, eq=False)
@@ -437,6 +524,13 @@ class ReproductionResult:
     nominal_dt : float
         With motion limits: the duration of a step at the demonstrations' pace (s); NaN
         without. :attr:`stretch` compares the timing with it.
+    orientations : ndarray, shape (T, 3, 3), or None
+        For a skill with oriented constraints: the hand's orientation R_hand at each sample
+        (the tip frame's axes in the base frame, :meth:`pbdkit.Robot.fk_pose`); None for a
+        skill of positions only.
+    orientation_errors : dict str -> ndarray, shape (T,)
+        For every oriented object (in use or not): the angle (rad) between the hand's
+        orientation and the one its constraint expects, |log(R_hand R_target^T)|.
 
     With motion limits the result has a sample per step of the skill plus the lead-in samples:
     T = L + n_steps.
@@ -458,6 +552,8 @@ class ReproductionResult:
     accelerations: Float | None = None
     lead_in: NDArray[np.bool_] | None = None
     nominal_dt: float = float("nan")
+    orientations: Float | None = None
+    orientation_errors: dict[str, Float] = dataclasses.field(default_factory=dict)
 
     @property
     def stretch(self) -> float:
@@ -472,22 +568,56 @@ class ReproductionResult:
         return float((own[-1] - own[0]) / nominal) if nominal > 0 else float("nan")
 
 
-def check_objects(objects: object, names: Sequence[str], name: str = "objects") -> dict[str, Float]:
-    """Validate object positions for a reproduction.
+def check_objects(
+    objects: object,
+    names: Sequence[str],
+    name: str = "objects",
+    *,
+    oriented: Sequence[str] = (),
+    partial: bool = False,
+) -> dict[str, Float]:
+    """Validate where the objects are, for a reproduction.
 
     Parameters
     ----------
-    objects : dict str -> array-like, shape (3,)
-        Must have exactly the keys ``names``.
+    objects : dict str -> array-like
+        Must have exactly the keys ``names`` (any subset of them with ``partial``). Each a
+        position (3,) or a pose (4x4, or x, y, z, qw, qx, qy, qz with the quaternion w first:
+        :mod:`pbdkit.learning.placement`).
     names : sequence of str
         Expected object names.
+    oriented : sequence of str
+        The objects whose constraints are oriented: they need a pose. The others need a
+        position; a pose given for one is used by its position (its frame translates only).
 
     Returns
     -------
-    objects : dict str -> ndarray, shape (3,)
-        In the order of ``names``.
+    objects : dict str -> ndarray, shape (3,) or (4, 4)
+        In the order of ``names``: a position for an object of a position-only constraint, a
+        4x4 pose for an oriented one.
     """
-    return check_positions(objects, name, expected=names)
+    if partial:
+        given = check_placements(objects, name)
+        unknown = [k for k in given if k not in names]
+        if unknown:
+            raise ValueError(
+                f"{name}: unknown object name(s) {unknown}; this skill knows {list(names)}"
+            )
+    else:
+        given = check_placements(objects, name, expected=names)
+    out: dict[str, Float] = {}
+    for k, v in given.items():
+        if k in oriented:
+            if not is_pose(v):
+                raise ValueError(
+                    f"{name}[{k!r}] must be a pose (a 4x4 transform or x, y, z, qw, qx, qy, qz): "
+                    f"the skill learned the hand's position and orientation in {k!r}'s frame; "
+                    f"got a position {v.tolist()}"
+                )
+            out[k] = v
+        else:
+            out[k] = position_of(v).copy()
+    return out
 
 
 def _check_use(use: Sequence[str] | str | None, names: Sequence[str]) -> list[str]:
@@ -526,8 +656,11 @@ def _check_reach(
     """Compare each object's most constrained target with the arm's reach (module docstring)."""
     for k, o in objs.items():
         # The step where the constraint is tightest is where the hand must be at o + x_hat.
-        j = int(np.argmin(np.trace(constraints.task_cov[k], axis1=1, axis2=2)))
-        target = o + constraints.task_mean[k][j]
+        j = int(np.argmin(np.trace(constraints.position_cov(k), axis1=1, axis2=2)))
+        if k in constraints.rotation_base:  # p + R m for a pose
+            target = o[:3, 3] + o[:3, :3] @ constraints.task_mean[k][j, :3]
+        else:
+            target = o + constraints.task_mean[k][j]
         dist = float(np.linalg.norm(target))
         if dist > reach:
             msg = (
@@ -620,7 +753,7 @@ def setup_run(
     n = c.n_joints
     if int(robot.n_joints) != n:
         raise ValueError(f"robot has {robot.n_joints} joints, the constraints have {n}")
-    objs = check_objects(objects, c.object_names)
+    objs = check_objects(objects, c.object_names, oriented=c.oriented)
     used = _check_use(options.use, c.names)
     alpha = check_positive_float(options.alpha, "alpha", allow_zero=True)
     max_step = options.max_step
@@ -687,8 +820,10 @@ def solve(
         The arm (e.g. :class:`pbdkit.Robot`); n joints, as the constraints.
     constraints : Constraints
         The skill's generalized constraints over T steps.
-    objects : dict str -> array-like, shape (3,)
-        Position o(n) of every object of the skill, in the robot's base frame.
+    objects : dict str -> array-like, shape (3,), (4, 4) or (7,)
+        Where every object of the skill is, in the robot's base frame: a position o(n), or a
+        pose (4x4, or x, y, z, qw, qx, qy, qz, quaternion w first), which an oriented
+        constraint needs (:func:`check_objects`).
     options : RunOptions, optional
         The start posture, the constraints in use and how the loop steps (default
         ``RunOptions()``: every constraint fused, from theta_hat_0).
@@ -728,7 +863,7 @@ def solve(
         assert limits is not None and dt is not None
         return timed_path(robot, run, limits, dt)
     path = _table_ii(robot, run, run.theta0)
-    return _result(run, run.constraints.t.copy(), path, None, None, None, None, float("nan"))
+    return _result(robot, run, run.constraints.t.copy(), path, None, None, None, None, float("nan"))
 
 
 def reproduce(
@@ -848,10 +983,11 @@ def timed_path(
         velocities[: n_lead + 1] = lead_v
         accelerations[: n_lead + 1] = lead_a
     path = (joints, positions, covs, influence, influence_js, limited)
-    return _result(run, steps, path, times, velocities, accelerations, lead, float(dt))
+    return _result(robot, run, steps, path, times, velocities, accelerations, lead, float(dt))
 
 
 def _result(
+    robot: KinematicModel | None,
     run: RunSetup,
     steps: Float,
     path: tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]],
@@ -865,9 +1001,19 @@ def _result(
     c, objs = run.constraints, run.objects
     joints, positions, covs, influence, influence_js, limited = path
     index = np.asarray(np.floor(steps + 1e-9), dtype=np.intp)
+    world = {k: c.world_task(k, o) for k, o in objs.items()}
     task_errors = {
-        k: np.linalg.norm(positions - (o + c.task_mean[k][index]), axis=1) for k, o in objs.items()
+        k: np.linalg.norm(positions - w.position[index], axis=1) for k, w in world.items()
     }
+    orientations = None
+    orientation_errors: dict[str, Float] = {}
+    if c.oriented:
+        assert robot is not None
+        orientations = np.asarray(robot.fk_pose(joints), dtype=np.float64)[:, :3, :3]  # type: ignore[attr-defined]
+        for k, w in world.items():
+            if w.rotation is not None:
+                err = log_map(orientations @ np.swapaxes(w.rotation[index], -1, -2))
+                orientation_errors[k] = np.linalg.norm(err, axis=1)
     signal = None if c.gripper is None else c.gripper[index].copy()
     closed = np.zeros(index.shape[0], dtype=bool) if signal is None else signal > 0.5
     return ReproductionResult(
@@ -887,6 +1033,8 @@ def _result(
         accelerations=accelerations,
         lead_in=np.zeros(joints.shape[0], dtype=bool) if lead is None else lead,
         nominal_dt=nominal_dt,
+        orientations=orientations,
+        orientation_errors=orientation_errors,
     )
 
 
@@ -898,10 +1046,17 @@ def _lead(a: NDArray[Any], n_lead: int) -> NDArray[Any]:
 def make_step(robot: KinematicModel, run: RunSetup) -> ControllerStep:
     """The step of the controller ``run`` asks for (its constraints in use): the one place
     the offline loop (:func:`solve`) and the online controller get it from."""
+    oriented = any(k in run.constraints.rotation_base for k in run.tasks)
+    if oriented and not hasattr(robot, "fk_pose_jacobian_unchecked"):
+        raise ValueError(
+            "oriented task constraints need the tip's orientation and 6-D Jacobian: the robot "
+            "must provide fk_pose and fk_pose_jacobian_unchecked (pbdkit.Robot does), got "
+            f"{type(robot).__name__}"
+        )
     if JOINT not in run.used:
-        return TaskStep(robot, run)
+        return PoseTaskStep(robot, run) if oriented else TaskStep(robot, run)
     if run.tasks:
-        return FusedStep(robot, run)
+        return PoseFusedStep(robot, run) if oriented else FusedStep(robot, run)
     return JointStep(run)
 
 
@@ -927,6 +1082,8 @@ def _table_ii(
         ones = {JOINT: np.ones(c.n_steps - start)}
         covs = c.joint_cov[start:].copy()
         return joints, positions, covs, ones, {JOINT: ones[JOINT].copy()}, limited
+    if isinstance(step, (PoseFusedStep, PoseTaskStep)):
+        return _pose_loop(c, step, theta0, start=start)
     assert isinstance(step, TaskStep)
     joints, positions, covs, influence, limited = _task_loop(step, theta0, start=start)
     # Rank-3 covariance: no joint-space precision to compare; the task-space shares.
@@ -959,9 +1116,9 @@ def first_posture(
         return np.asarray(theta, dtype=np.float64)
     if step is None:
         step = make_step(robot, run)
-    if isinstance(step, TaskStep) and step.step_limit is not None:
+    if isinstance(step, (TaskStep, PoseTaskStep, PoseFusedStep)) and step.step_limit is not None:
         # Standing still at t_0 is not bounded by a speed: the step without its velocity bound.
-        step = TaskStep(robot, dataclasses.replace(run, step_limit=None))
+        step = type(step)(robot, dataclasses.replace(run, step_limit=None))
     x: Float | None
     jac: Float | None
     x, jac, axes = step.kinematics(theta)
@@ -1481,6 +1638,319 @@ def _task_loop(
     # Already in hand space: share_n = tr(S_fused P_n) / 3, S_fused = (sum_n P_n)^-1.
     influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}
     return joints, positions, covs, influence, _limited_mask(n_steps, limited)
+
+
+# ------------------------------------------------------------------ oriented constraints
+class PoseFusedStep(ControllerStep):
+    """One step of the fused controller when some task constraint in use is oriented.
+
+    The fused energy of step j adds, for each oriented constraint n, the 6-D error
+    r_n = [x - x_n ; log(R_hand R_n^T)] weighted by its world precision P_n
+    (:meth:`Constraints.world_task`); position-only constraints keep their 3-D term. One
+    Gauss-Newton step on it, with the error's Jacobian G_n = [J_p ; J_l(e_n)^-1 J_w] from the
+    robot's 6-D Jacobian (:meth:`pbdkit.Robot.jacobian6`):
+
+        dtheta = -(Lambda_theta + sum_n G_n^T P_n G_n)^-1 (Lambda_theta (theta - theta_hat)
+                 + sum_n G_n^T P_n r_n),
+
+    the product of the Gaussians in information form as for positions (precisions add). An arm
+    of fewer than 6 joints (the Katana has 5) cannot meet a position and an orientation at
+    once in general: the precisions weigh what each constraint gives up, exactly as the joint
+    constraint and the task constraints are weighed already. The step is bounded and
+    line-searched on the fused energy like :class:`FusedStep`'s; Newton's curvature term is
+    not used (Gauss-Newton steps).
+    """
+
+    mode = "fused"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c = run.constraints
+        self.c, self.tasks, self.n = c, run.tasks, c.n_joints
+        self.lower, self.upper = run.lower, run.upper
+        self.max_step, self.step_limit, self.line_search = (
+            run.max_step,
+            run.step_limit,
+            run.line_search,
+        )
+        self.kin = robot.fk_pose_jacobian_unchecked  # type: ignore[attr-defined]
+        self.free2 = _free_step2(run.max_step, run.step_limit)
+        self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
+        self.set_objects(run.objects)
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New placements (every object in use), for every step from now on."""
+        c = self.c
+        flat = [k for k in self.tasks if k not in c.rotation_base]
+        self.oriented_tasks = [k for k in self.tasks if k in c.rotation_base]
+        if flat:
+            _, p_sum, h = _task_stack(c, objs, flat)
+        else:
+            p_sum, h = np.zeros((c.n_steps, 3, 3)), np.zeros((c.n_steps, 3))
+        self.p_sum_list, self.h_list = list(p_sum), list(h)
+        self.world = {k: c.world_task(k, objs[k]) for k in self.tasks}
+        self.oriented = [
+            (list(w.position), list(w.rotation), list(w.precision))
+            for k in self.oriented_tasks
+            for w in (self.world[k],)
+            if w.rotation is not None
+        ]
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        """f(theta), the 6-D Jacobian J(theta) (6, n) and the hand's orientation (3, 3)."""
+        x, rot, jac = self.kin(theta)
+        return x, jac, rot
+
+    def _terms(self, j: int, x: Float, jac: Float, rot: Float) -> tuple[Float, Float, float]:
+        """sum_n G_n^T P_n G_n, sum_n G_n^T P_n r_n and the task energy at one posture."""
+        jp, jw = jac[:3], jac[3:]
+        p_sum, h = self.p_sum_list[j], self.h_list[j]
+        px = p_sum.dot(x)
+        a = jp.T.dot(p_sum)
+        lam = a.dot(jp)
+        grad = jp.T.dot(px - h)
+        energy = 0.5 * x.dot(px) - h.dot(x)
+        for pos, rots, precs in self.oriented:
+            e = log3(rot.dot(rots[j].T))
+            g = np.concatenate([jp, left_jacobian_inverse3(e).dot(jw)])
+            r = np.concatenate([x - pos[j], e])
+            gp = g.T.dot(precs[j])
+            lam = lam + gp.dot(g)
+            grad = grad + gp.dot(r)
+            energy += 0.5 * r.dot(precs[j].dot(r))
+        return lam, grad, energy
+
+    def _energy(self, j: int, theta: Float, x: Float, rot: Float) -> float:
+        e_joint = 0.5 * theta.dot(self.prec_list[j].dot(theta)) - self.eta_list[j].dot(theta)
+        p_sum, h = self.p_sum_list[j], self.h_list[j]
+        energy = float(e_joint + 0.5 * x.dot(p_sum.dot(x)) - h.dot(x))
+        for pos, rots, precs in self.oriented:
+            r = np.concatenate([x - pos[j], log3(rot.dot(rots[j].T))])
+            energy += 0.5 * float(r.dot(precs[j].dot(r)))
+        return energy
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x, the 6-D jac and the orientation ``axes``
+        from :meth:`kinematics`)."""
+        assert x is not None and jac is not None and axes is not None
+        lam_t, grad_t, _ = self._terms(j, x, jac, axes)
+        lam = self.prec_list[j] + lam_t
+        grad = self.prec_list[j].dot(theta) - self.eta_list[j] + grad_t
+        _, step, info = dposv(lam, -grad)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
+        step2 = float(step.dot(step))
+        limited = False
+        if step2 > self.free2:
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                step = step * scale
+                limited = True
+        new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
+        x_new, rot_new, jac_new = self.kin(new)
+        if self.line_search:
+            before = self._energy(j, theta, x, axes)
+            halvings = 0
+            while self._energy(j, new, x_new, rot_new) > before and halvings < MAX_HALVINGS:
+                halvings += 1
+                new = theta + 0.5 * (new - theta)
+                x_new, rot_new, jac_new = self.kin(new)
+        return new, x_new, jac_new, rot_new, limited
+
+    def precisions(self, j: int, jac: Float) -> dict[str, Float]:
+        """The joint-space precision of every constraint in use at step j, with the 6-D
+        Jacobian ``jac`` (the orientation errors linearized at 0: G_n = J)."""
+        out = {JOINT: self.prec_list[j]}
+        jp = jac[:3]
+        for k in self.tasks:
+            w = self.world[k]
+            g = jp if w.rotation is None else jac
+            out[k] = g.T.dot(w.precision[j]).dot(g)
+        return out
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """Sigma_j = (sum of the precisions)^-1 with the 6-D Jacobian ``jac`` used."""
+        inv = np.linalg.inv(sum(self.precisions(j, jac).values()))
+        return np.asarray(0.5 * (inv + inv.T))
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Hand pose space (6-D): share_n = tr(Sigma Lambda_n) / 6, the joint constraint the
+        rest (module docstring, "Orientation")."""
+        prec = self.precisions(j, jac)
+        shares = {k: float(np.trace(cov.dot(prec[k]))) / 6 for k in self.tasks}
+        return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
+
+    def influence_joint_space(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Joint space: tr(Sigma Lambda_c) / n for every constraint c in use."""
+        prec = self.precisions(j, jac)
+        return {k: float(np.trace(cov.dot(p))) / self.n for k, p in prec.items()}
+
+
+class PoseTaskStep(ControllerStep):
+    """One step of a task-only controller when some task constraint in use is oriented.
+
+    The task constraints in use are fused in the hand's pose space first, at every step: the
+    pose that minimizes sum_n r_n^T P_n r_n (:func:`pbdkit.prob.rotations.fuse_poses`'s
+    Gauss-Newton, batched over the time grid; a position-only constraint weighs the position
+    only), with fused precision P. Then, with W = chol(P)^T and G = [J_p ; J_l(e)^-1 J_w],
+    dtheta = (W G)+ W dx + alpha (I - (W G)+ W G)(theta_hat - theta): Table II's step with the
+    damped pseudo-inverse of the precision-weighted Jacobian, dx = [x* - x ; -e] the error to
+    the fused pose. With 6 joints or more it is the plain right inverse (the weights cancel);
+    with fewer (the Katana) the weighted least-squares step: the precisions weigh what cannot
+    all be met.
+    """
+
+    mode = "task"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c = run.constraints
+        self.c, self.tasks, self.alpha, self.n = c, run.tasks, run.alpha, c.n_joints
+        self.lower, self.upper = run.lower, run.upper
+        self.max_step, self.step_limit = run.max_step, run.step_limit
+        self.kin = robot.fk_pose_jacobian_unchecked  # type: ignore[attr-defined]
+        self.free2 = _free_step2(run.max_step, run.step_limit)
+        self.eye = np.eye(c.n_joints)
+        self.set_objects(run.objects)
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New placements (every object in use), for every step from now on."""
+        c = self.c
+        self.world = {k: c.world_task(k, objs[k]) for k in self.tasks}
+        self.target, self.target_rot, self.fused_prec = _fuse_world_tasks(
+            [self.world[k] for k in self.tasks]
+        )
+        self.weights = np.swapaxes(np.linalg.cholesky(self.fused_prec), -1, -2)  # W^T W = P
+        self.s_fused = _spd_inverse(self.fused_prec)
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        x, rot, jac = self.kin(theta)
+        return x, jac, rot
+
+    def _weighted(self, j: int, x: Float, jac: Float, rot: Float) -> tuple[Float, Float]:
+        e = log3(rot.dot(self.target_rot[j].T))
+        g = np.concatenate([jac[:3], left_jacobian_inverse3(e).dot(jac[3:])])
+        dx = np.concatenate([self.target[j] - x, -e])
+        w = self.weights[j]
+        return w.dot(g), w.dot(dx)
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        assert x is not None and jac is not None and axes is not None
+        wg, wdx = self._weighted(j, x, jac, axes)
+        jp = damped_pinv(wg)
+        d_hat = self.c.joint_mean[j] - theta
+        step = jp.dot(wdx) + self.alpha * (self.eye - jp.dot(wg)).dot(d_hat)
+        step2 = float(step.dot(step))
+        limited = False
+        if step2 > self.free2:
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                step = step * scale
+                limited = True
+        new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
+        x_new, rot_new, jac_new = self.kin(new)
+        return new, x_new, jac_new, rot_new, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """The paper's J+ Sigma^x J+^T in pose space: (W J)+ (W J)+^T, rank <= 6."""
+        jp = damped_pinv(self.weights[j].dot(jac))
+        return np.asarray(jp.dot(jp.T))
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """In the hand's pose space: share_n = tr(S_fused P_n) / 6 (a position-only
+        constraint's P_n padded with zeros), summing to 1."""
+        s = self.s_fused[j]
+        out: dict[str, float] = {}
+        for k in self.tasks:
+            p = self.world[k].precision[j]
+            d = p.shape[0]
+            out[k] = float(np.trace(s[:d, :d].dot(p))) / 6
+        return out
+
+    def influence_joint_space(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        return self.influence(j, jac, cov)
+
+
+def _fuse_world_tasks(
+    tasks: Sequence[WorldTask], iterations: int = 30
+) -> tuple[Float, Float, Float]:
+    """The product of task constraints in the hand's pose space at every step (T batched):
+    target positions (T, 3), orientations (T, 3, 3) and the fused 6x6 precision (T, 6, 6),
+    by Gauss-Newton on sum_n r_n^T P_n r_n (:func:`pbdkit.prob.rotations.fuse_poses`)."""
+    n_steps = tasks[0].position.shape[0]
+    # Start: the product of the position parts, the first orientation.
+    p_blocks = [t.precision[:, :3, :3] for t in tasks]
+    pos = np.linalg.solve(
+        sum(p_blocks),
+        sum(np.einsum("tij,tj->ti", b, t.position) for b, t in zip(p_blocks, tasks, strict=True))[
+            ..., None
+        ],
+    )[..., 0]
+    rot = next(t.rotation for t in tasks if t.rotation is not None).copy()
+    info = np.zeros((n_steps, 6, 6))
+    for _ in range(iterations):
+        info = np.zeros((n_steps, 6, 6))
+        grad = np.zeros((n_steps, 6))
+        for t in tasks:
+            if t.rotation is None:
+                info[:, :3, :3] += t.precision
+                grad[:, :3] += np.einsum("tij,tj->ti", t.precision, pos - t.position)
+                continue
+            e = log_map(rot @ np.swapaxes(t.rotation, -1, -2))
+            g = np.zeros((n_steps, 6, 6))
+            g[:, :3, :3] = np.eye(3)
+            g[:, 3:, 3:] = left_jacobian_inverse(e)
+            gp = np.swapaxes(g, -1, -2) @ t.precision
+            info += gp @ g
+            grad += np.einsum("tij,tj->ti", gp, np.concatenate([pos - t.position, e], axis=1))
+        delta = -np.linalg.solve(info, grad[..., None])[..., 0]
+        pos = pos + delta[:, :3]
+        rot = exp_map(delta[:, 3:]) @ rot
+        if float(np.abs(delta).max()) < 1e-12:
+            break
+    return pos, rot, 0.5 * (info + np.swapaxes(info, -1, -2))
+
+
+def _pose_loop(
+    c: Constraints, step: PoseFusedStep | PoseTaskStep, theta0: Float, start: int = 0
+) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+    """The loop of an oriented controller (:class:`PoseFusedStep` or :class:`PoseTaskStep`)
+    over every step from ``start``: the same outputs as :func:`_fused_loop`."""
+    n_steps = c.n_steps - start
+    limited: list[int] = []
+    theta = theta0
+    x, jac, rot = step.kinematics(theta)
+    joints_l, positions_l, jacs_l = [theta], [x], [jac]
+    for j in range(start + 1, c.n_steps):
+        theta, x_new, jac_new, rot, was_limited = step.advance(j, theta, x, jac, rot)
+        assert x_new is not None and jac_new is not None
+        x, jac = x_new, jac_new
+        if was_limited:
+            limited.append(j - start)
+        joints_l.append(theta)
+        positions_l.append(x)
+        jacs_l.append(jac)
+    jac_used = [jacs_l[0], *jacs_l[:-1]]
+    covs = np.empty((n_steps, c.n_joints, c.n_joints))
+    influence: dict[str, list[float]] = {}
+    influence_js: dict[str, list[float]] = {}
+    for i in range(n_steps):
+        j = start + i
+        covs[i] = step.covariance(j, jac_used[i])
+        for k, v in step.influence(j, jac_used[i], covs[i]).items():
+            influence.setdefault(k, []).append(v)
+        for k, v in step.influence_joint_space(j, jac_used[i], covs[i]).items():
+            influence_js.setdefault(k, []).append(v)
+    return (
+        np.array(joints_l),
+        np.array(positions_l),
+        covs,
+        {k: np.array(v) for k, v in influence.items()},
+        {k: np.array(v) for k, v in influence_js.items()},
+        _limited_mask(n_steps, limited),
+    )
 
 
 def reach_from_samples(

@@ -27,9 +27,22 @@ float64 (n_joints,), rad/s, rad/s^2, rad/s^3, each > 0 or inf (no limit); :meth:
 rebuilds the robot with them (they win over the URDF's velocity, as a joint_limits YAML does).
 These keys were added within version 1: a file without them loads as before (velocity from the
 URDF, no acceleration or jerk limit). Also ``duration`` (s, NaN if unknown) and, per space,
-``sel_{space}_*`` (the model selection). :meth:`Skill.load` judges the archive from its headers
-before it loads an array: any other key, or arrays of more than :data:`MAX_FILE_BYTES` in all,
-are refused.
+``sel_{space}_*`` (the model selection). Version 2 (written when the skill has oriented
+constraints; a skill of positions only is still written as version 1) adds ``rot_base_{i}``
+(3, 3) for every oriented object i: the mean relative orientation M whose tangent space its
+GMM's last three columns live in (the GMM is then over {t, R^T (x - p), r}, D = 7).
+:meth:`Skill.load` judges the archive from its headers before it loads an array: any other
+key, or arrays of more than :data:`MAX_FILE_BYTES` in all, are refused.
+
+Orientation (:meth:`Skill.learn` with ``orientation=True``, the default, and objects given as
+poses): for an object with pose (R, p), its task space is {t, R^T (x - p), r} with r the
+hand's orientation relative to the object, R^T R_hand = exp([r]x) M: a rotation vector on the
+left, in the object's axes, in the tangent space at M, the demonstrations' mean relative
+orientation (Karcher mean over all their samples), not at the identity (a hand pointing down at
+an upright object is 90 degrees or more from it; near 180 degrees the rotation vector would
+flip). Relative orientations up to 90 degrees from M (a spread of +-90 degrees) are
+represented without wrap-around. At reproduction each constraint is mapped to the world with
+the object's new pose (:meth:`pbdkit.learning.probabilistic_ik.Constraints.world_task`).
 """
 
 from __future__ import annotations
@@ -53,8 +66,10 @@ from .._validation import check_int, check_positive_float
 from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
 from ..prob.gmr import CovarianceMode
+from ..prob.rotations import check_rotation, log_map, mean_rotation
 from .controller import Controller
 from .demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
+from .placement import is_pose, position_of
 from .probabilistic_ik import (
     JOINT,
     Constraints,
@@ -73,14 +88,16 @@ __all__ = [
     "MIN_STEP_SECONDS",
     "VARIABILITY_FLOOR",
     "Skill",
+    "mean_relative_rotation",
     "space_data",
 ]
 
 Float = NDArray[np.float64]
 #: Default variability floors (variances): joint angles (rad^2), gripper signal, hand position
-#: relative to an object (m^2). See :meth:`Skill.learn`.
+#: relative to an object (m^2), hand orientation relative to an object (rad^2). See
+#: :meth:`Skill.learn`.
 VARIABILITY_FLOOR: Mapping[str, float] = MappingProxyType(
-    {"joint": 0.01**2, "gripper": 0.1**2, "task": 0.001**2}
+    {"joint": 0.01**2, "gripper": 0.1**2, "task": 0.001**2, "orientation": 0.01**2}
 )
 TIME_FLOOR = 1e-6  # steps^2: numerical jitter on the time column
 #: Largest number of steps of a skill's time grid (:meth:`Skill.learn` and :meth:`Skill.load`).
@@ -100,7 +117,9 @@ MAX_FILE_BYTES = 64 * 2**20
 #: shorter step, or that is not finite.
 MIN_STEP_SECONDS = 1e-9
 FORMAT_NAME = "pbdkit-skill"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The versions :meth:`Skill.load` reads (1: positions only; 2: oriented constraints too).
+READABLE_VERSIONS = (1, 2)
 
 
 class Skill:
@@ -143,8 +162,12 @@ class Skill:
         has_gripper: bool,
         reach: float,
         duration: float = float("nan"),
+        rotation_base: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
         self.robot = robot
+        self.rotation_base: dict[str, Float] = {
+            k: np.asarray(v, dtype=np.float64) for k, v in (rotation_base or {}).items()
+        }
         self.duration = float(duration)
         self.n_steps = int(n_steps)
         self.object_names = list(object_names)
@@ -157,6 +180,12 @@ class Skill:
     def constraint_names(self) -> list[str]:
         """``["joint", *object_names]``."""
         return [JOINT, *self.object_names]
+
+    @property
+    def oriented(self) -> list[str]:
+        """The objects whose constraint includes the hand's orientation (they need a pose at
+        reproduction)."""
+        return [k for k in self.object_names if k in self.rotation_base]
 
     @property
     def n_components(self) -> dict[str, int]:
@@ -217,6 +246,7 @@ class Skill:
         bic_samples_per_sequence: float = 20.0,
         task_objects: Sequence[str] | None = None,
         *,
+        orientation: bool = True,
         objects: Sequence[str] | None = None,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
@@ -264,6 +294,13 @@ class Skill:
             paper's second task) carries no information about where the hand must go relative
             to it that the joint-space constraint does not already hold; leave it out to learn
             the paper's configuration.
+        orientation : bool
+            For the objects the demonstrations give as poses: True (default) learns the hand's
+            position in each object's frame, R^T (x - p), and its orientation relative to the
+            object (module docstring, "Orientation"), so the constraint turns with the object;
+            False learns the paper's x - p (frames translate only; the objects' orientations
+            are ignored), for comparison. Objects given as positions are the paper's either
+            way.
         objects : sequence of str, optional
             Deprecated spelling of ``task_objects`` (goes in pbdkit 0.3): elsewhere
             ``objects`` means the objects' positions (:meth:`reproduce`,
@@ -333,7 +370,15 @@ class Skill:
         n_fit = n_steps if fit_samples is None else check_int(fit_samples, "fit_samples", minimum=2)
         steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
 
-        spaces = space_data(items, robot, names, n_steps, steps)
+        oriented = [k for k in names if orientation and is_pose(items[0].objects[k])]
+        if oriented and not hasattr(robot, "fk_pose"):
+            raise ValueError(
+                f"the objects {oriented} are poses: learning the hand's orientation needs "
+                "robot.fk_pose (pbdkit.Robot has it); pass orientation=False to learn positions "
+                "only"
+            )
+        bases = {k: mean_relative_rotation(items, robot, k, n_steps, steps) for k in oriented}
+        spaces = space_data(items, robot, names, n_steps, steps, rotation_base=bases)
         data = {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
         groups = np.repeat(np.arange(len(items)), steps.shape[0])  # the demonstration of a row
         # Per dimension: time (steps; a jitter only), then the space's own units.
@@ -341,7 +386,14 @@ class Skill:
             JOINT: np.r_[TIME_FLOOR, np.full(n, floors["joint"])]
             if not has_gripper
             else np.r_[TIME_FLOOR, np.full(n, floors["joint"]), floors["gripper"]],
-            **{k: np.r_[TIME_FLOOR, np.full(3, floors["task"])] for k in names},
+            **{
+                k: np.r_[TIME_FLOOR, np.full(3, floors["task"])]
+                if k not in bases
+                else np.r_[
+                    TIME_FLOOR, np.full(3, floors["task"]), np.full(3, floors["orientation"])
+                ]
+                for k in names
+            },
         }
         gmms = {
             k: GMM(
@@ -365,6 +417,7 @@ class Skill:
             has_gripper=has_gripper,
             reach=reach,
             duration=duration,
+            rotation_base=bases,
         )
 
     def training_data(self, demos: Sequence[Demonstration]) -> dict[str, Float]:
@@ -380,11 +433,14 @@ class Skill:
         Returns
         -------
         data : dict str -> ndarray, shape (M, T, D)
-            ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}; M demonstrations of
+            ``"joint"``: {t, theta (, gripper)}; each object: {t, x - o}, or for an oriented
+            one {t, R^T (x - p), r} (module docstring, "Orientation"); M demonstrations of
             T = :attr:`n_steps` steps.
         """
         items = check_demonstrations(demos, min_demos=1)
-        return space_data(items, self.robot, self.object_names, self.n_steps)
+        return space_data(
+            items, self.robot, self.object_names, self.n_steps, rotation_base=self.rotation_base
+        )
 
     # ------------------------------------------------------------------ generalization
     def constraints(self, covariance: CovarianceMode = "exact") -> Constraints:
@@ -423,6 +479,7 @@ class Skill:
             task_mean,
             task_cov,
             gripper=mean[:, n] if self.has_gripper else None,
+            rotation_base=self.rotation_base,
         )
         self._constraints[covariance] = c
         return c
@@ -456,8 +513,11 @@ class Skill:
 
         Parameters
         ----------
-        objects : dict str -> array-like, shape (3,)
-            Position of every object of the skill in the robot's base frame (m).
+        objects : dict str -> array-like, shape (3,), (4, 4) or (7,)
+            Where every object of the skill is in the robot's base frame (m): a position, or
+            a pose (a 4x4 transform, or x, y, z, qw, qx, qy, qz with the quaternion w first).
+            An object of an oriented constraint (:attr:`oriented`) needs a pose; for the
+            others a pose's position is used (their frames translate only).
         q0 : array-like, shape (n,), optional
             Initial posture within the joint limits; default theta_hat_0 (the paper).
         use : sequence of str, optional
@@ -639,7 +699,8 @@ class Skill:
                 limits[f"robot_{kind}_limit"] = np.where(arr > 0, arr, np.inf)
         arrays: dict[str, Any] = {
             "format": np.array(FORMAT_NAME),
-            "version": np.array(FORMAT_VERSION, dtype=np.int64),
+            # Positions only: version 1, as before orientations (older readers load it).
+            "version": np.array(FORMAT_VERSION if self.rotation_base else 1, dtype=np.int64),
             "n_steps": np.array(self.n_steps, dtype=np.int64),
             "n_joints": np.array(self.n_joints, dtype=np.int64),
             "object_names": np.array(self.object_names, dtype=np.str_)
@@ -664,6 +725,8 @@ class Skill:
             arrays[f"sel_{key}_scores"] = np.asarray(sel.scores, dtype=np.float64)
             arrays[f"sel_{key}_fold_scores"] = np.asarray(sel.fold_scores, dtype=np.float64)
             arrays[f"sel_{key}_best_chosen"] = np.array([sel.best, sel.chosen], dtype=np.int64)
+            if k in self.rotation_base:
+                arrays[f"rot_base_{key}"] = self.rotation_base[k]
         save_npz_atomic(path, arrays)
 
     @classmethod
@@ -703,7 +766,7 @@ class Skill:
         """The skill in an open archive (:meth:`load`)."""
         from ..robots._joint_limits import check_limit_array, joint_limits_mapping
 
-        check_format(data, p, FORMAT_NAME, FORMAT_VERSION)
+        version = check_format(data, p, FORMAT_NAME, READABLE_VERSIONS)
         try:
             names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
         except KeyError as exc:
@@ -726,6 +789,7 @@ class Skill:
             urdf = str(data["robot_urdf"])
             tip = str(data["robot_tip"])
             gmms: dict[str, GMM] = {}
+            rotation_base: dict[str, Float] = {}
             for i, k in enumerate([JOINT, *names]):
                 key = "joint" if k == JOINT else str(i - 1)
                 gmms[k] = GMM.from_params(
@@ -735,6 +799,8 @@ class Skill:
                 )
                 if f"sel_{key}_method" in data:  # files before the selection was recorded lack it
                     gmms[k].selection_ = _selection_from_arrays(data, key, k)
+                if version >= 2 and f"rot_base_{key}" in data:
+                    rotation_base[k] = check_rotation(data[f"rot_base_{key}"], f"rot_base_{key}")
         except KeyError as exc:
             raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
         except (TypeError, ValueError) as exc:
@@ -746,12 +812,13 @@ class Skill:
             )
         d_joint = 1 + n_joints + int(has_gripper)
         dims = {k: int(g.means_.shape[1]) for k, g in gmms.items()}
-        expected = {k: (d_joint if k == JOINT else 4) for k in gmms}
+        expected = {k: (d_joint if k == JOINT else 7 if k in rotation_base else 4) for k in gmms}
         if dims != expected:
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: GMM dimensions {dims}, expected "
                 f"{expected} for n_joints={n_joints}, gripper={has_gripper} (time, then "
-                "the joints and the gripper; time and x - o for an object)"
+                "the joints and the gripper; time and x - o for an object; time, R^T (x - p) "
+                "and the relative orientation for an oriented object)"
             )
         # NaN: unknown (a skill learned before durations were stored); else as learn checks it.
         problem = "" if math.isnan(duration) else _duration_problem(duration, n_steps)
@@ -796,6 +863,7 @@ class Skill:
             has_gripper=has_gripper,
             reach=reach,
             duration=duration,
+            rotation_base=rotation_base,
         )
 
 
@@ -819,7 +887,8 @@ _BASE_KEYS = frozenset(
 # gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.
 _SPACE_KEY = re.compile(
     r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
-    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen))"
+    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen)"
+    r"|rot_base_(0|[1-9][0-9]{0,8}))"
 )
 
 
@@ -843,7 +912,7 @@ def _is_skill_key(key: str, n_objects: int) -> bool:
     match = _SPACE_KEY.fullmatch(key)
     if match is None:
         return False
-    index = match.group(1) or match.group(2)
+    index = match.group(1) or match.group(2) or match.group(3)
     return index is None or int(index) < n_objects
 
 
@@ -906,6 +975,8 @@ def space_data(
     object_names: Sequence[str],
     n_steps: int,
     steps: npt.ArrayLike | None = None,
+    *,
+    rotation_base: Mapping[str, Float] | None = None,
 ) -> dict[str, Float]:
     """The data of every constraint space, per demonstration (paper Table I).
 
@@ -923,28 +994,65 @@ def space_data(
     n_steps : int
     steps : array-like of int, optional
         The steps kept (default: all ``n_steps``).
+    rotation_base : dict str -> ndarray (3, 3), optional
+        The oriented objects (given as poses) and their mean relative orientation M.
 
     Returns
     -------
     data : dict str -> ndarray, shape (M, T', D)
         ``"joint"``: {t, theta (n), gripper (if the demonstrations have one)}; each object:
-        {t, x - o}; M demonstrations, T' = len(steps) steps, time in steps.
+        {t, x - o} (a pose's position as o), or for an oriented object {t, R^T (x - p), r}
+        with R^T R_hand = exp([r]x) M (module docstring, "Orientation"); M demonstrations,
+        T' = len(steps) steps, time in steps.
     """
+    bases = rotation_base or {}
     idx = np.arange(n_steps) if steps is None else np.asarray(steps, dtype=np.intp)
     resampled = [d.rescaled(n_steps) for d in demos]
     m, t_len = len(resampled), idx.shape[0]
     t = np.broadcast_to(idx.astype(np.float64)[None, :, None], (m, t_len, 1))
     theta = np.stack([d.joints[idx] for d in resampled])  # (M, T', n)
-    x = np.asarray(robot.fk(theta.reshape(m * t_len, -1)), dtype=np.float64).reshape(m, t_len, 3)
+    flat = theta.reshape(m * t_len, -1)
+    if bases:
+        poses = np.asarray(robot.fk_pose(flat), dtype=np.float64)  # type: ignore[attr-defined]
+        x = poses[:, :3, 3].reshape(m, t_len, 3)
+        hand = poses[:, :3, :3].reshape(m, t_len, 3, 3)
+    else:
+        x = np.asarray(robot.fk(flat), dtype=np.float64).reshape(m, t_len, 3)
     cols = [t, theta]
     grips = [d.gripper[idx] for d in resampled if d.gripper is not None]
     if grips:
         cols.append(np.stack(grips)[..., None])
     out = {JOINT: np.concatenate(cols, axis=2)}
     for k in object_names:
-        o = np.stack([d.objects[k] for d in demos])[:, None, :]
-        out[k] = np.concatenate([t, x - o], axis=2)
+        o = np.stack([position_of(d.objects[k]) for d in demos])[:, None, :]
+        if k not in bases:
+            out[k] = np.concatenate([t, x - o], axis=2)
+            continue
+        rot = np.stack([d.objects[k][:3, :3] for d in demos])  # (M, 3, 3)
+        local = np.einsum("mji,mtj->mti", rot, x - o)  # R^T (x - p)
+        rel = np.swapaxes(rot, -1, -2)[:, None] @ hand  # R^T R_hand, (M, T', 3, 3)
+        r = log_map(rel @ bases[k].T)
+        out[k] = np.concatenate([t, local, r], axis=2)
     return out
+
+
+def mean_relative_rotation(
+    demos: Sequence[Demonstration],
+    robot: KinematicModel,
+    name: str,
+    n_steps: int,
+    steps: npt.ArrayLike | None = None,
+) -> Float:
+    """M: the Karcher mean (:func:`pbdkit.prob.rotations.mean_rotation`) of the hand's
+    orientation relative to object ``name`` (a pose), R^T R_hand, over every demonstration
+    and step kept: the tangent space the skill's orientation data live in."""
+    idx = np.arange(n_steps) if steps is None else np.asarray(steps, dtype=np.intp)
+    rels = []
+    for d in demos:
+        q = d.rescaled(n_steps).joints[idx]
+        hand = np.asarray(robot.fk_pose(q), dtype=np.float64)[:, :3, :3]  # type: ignore[attr-defined]
+        rels.append(d.objects[name][:3, :3].T @ hand)
+    return mean_rotation(np.concatenate(rels))
 
 
 def _selection_from_arrays(data: Mapping[str, Any], key: str, name: str) -> ModelSelection:

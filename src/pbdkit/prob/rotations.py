@@ -30,10 +30,13 @@ from numpy.typing import NDArray
 
 __all__ = [
     "as_pose",
+    "check_rotation",
     "exp_map",
     "fuse_poses",
     "left_jacobian",
     "left_jacobian_inverse",
+    "left_jacobian_inverse3",
+    "log3",
     "log_map",
     "matrix_from_quaternion",
     "mean_rotation",
@@ -256,6 +259,21 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     return arr[:3, 3].copy(), np.asarray(u @ vt, dtype=np.float64)
 
 
+def check_rotation(value: object, name: str = "rotation") -> Float:
+    """A rotation matrix (3, 3), checked as :func:`as_pose` checks a 4x4's rotation block
+    (finite, orthonormal within :data:`ORTHONORMAL_TOLERANCE`, determinant +1) and
+    re-orthonormalized."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a rotation matrix (3, 3), got {value!r}") from exc
+    if arr.shape != (3, 3):
+        raise ValueError(f"{name} must be a rotation matrix (3, 3), got shape {arr.shape}")
+    _, rot = as_pose(pose_matrix(np.zeros(3), arr), name)
+    assert rot is not None
+    return rot
+
+
 def mean_rotation(rotations: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> Float:
     """The (weighted) Karcher mean of rotation matrices (M, 3, 3): the rotation R minimizing
     sum_i w_i |log(R_i R^T)|^2, from the chordal mean (the projection of sum_i w_i R_i onto
@@ -326,3 +344,39 @@ def fuse_poses(
             break
     cov = np.linalg.inv(info)
     return pose_matrix(p, rot), 0.5 * (cov + cov.T)
+
+
+def log3(rot: Float) -> Float:
+    """:func:`log_map` of one rotation matrix (3, 3), for control loops: a few scalar
+    operations away from pi, the quaternion route near it."""
+    tr = rot[0, 0] + rot[1, 1] + rot[2, 2]
+    c = 0.5 * (tr - 1.0)
+    vee: Float = np.array(
+        [rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]], dtype=np.float64
+    )
+    if c > 0.99999999:  # angle below 1.4e-4 rad: sin(a) / a ~ 1 - a^2 / 6
+        return np.asarray(0.5 * (1.0 + (1.0 - c) / 3.0) * vee, dtype=np.float64)
+    if c > -0.999:
+        angle = math.acos(c)
+        return np.asarray((0.5 * angle / math.sin(angle)) * vee, dtype=np.float64)
+    return np.asarray(log_map(rot), dtype=np.float64)
+
+
+def left_jacobian_inverse3(r: Float) -> Float:
+    """:func:`left_jacobian_inverse` of one rotation vector (3,), for control loops
+    ([r]x^2 = r r^T - |r|^2 I)."""
+    x, y, z = float(r[0]), float(r[1]), float(r[2])
+    t2 = x * x + y * y + z * z
+    if t2 < 1e-8:
+        d = 1.0 / 12.0 + t2 / 720.0
+    else:
+        t = math.sqrt(t2)
+        d = 1.0 / t2 - (1.0 + math.cos(t)) / (2.0 * t * math.sin(t))
+    a = 1.0 - d * t2
+    return np.array(
+        [
+            [a + d * x * x, d * x * y + 0.5 * z, d * x * z - 0.5 * y],
+            [d * x * y - 0.5 * z, a + d * y * y, d * y * z + 0.5 * x],
+            [d * x * z + 0.5 * y, d * y * z - 0.5 * x, a + d * z * z],
+        ]
+    )
