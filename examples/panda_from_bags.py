@@ -1,15 +1,42 @@
-"""A Franka Panda skill from ROS 2 bags, reproduced for a new glass, written back as a bag, and
-run online at 1 kHz within Franka's limits.
+"""A Franka Panda grasping a mug by its handle, whatever way the mug is turned: a pose skill
+from ROS 2 bags, reproduced for new mug poses, written back as a bag, and run online at 1 kHz
+within Franka's limits.
 
 Run:  python examples/panda_from_bags.py [OUTPUT_FOLDER]   (default: a temporary folder)
 
 What a session on a real Panda looks like, without the robot: five kinesthetic demonstrations of
-"reach for the glass, grasp it, lift it" are recorded as rosbag2 bags (joint states from the
-driver, with the two finger joints and a new joint order in every message; the glass pose from
-perception at 30 Hz; the gripper as std_msgs/Bool), then:
+"reach for the mug, grasp it by its handle, lift it", the mug at a new place and a new yaw each
+time (-90 to 90 degrees), are recorded as rosbag2 bags (joint states from the driver, with the
+two finger joints and a new joint order in every message; the mug's pose from perception at
+30 Hz as geometry_msgs/PoseStamped, position and orientation; the gripper as std_msgs/Bool),
+then:
 
-    bags -> pbdkit.read_bag -> Skill.learn -> skill.reproduce(new glass) -> write_trajectory_bag
-                                           -> skill.controller(new glass).stream(1000)
+    bags -> pbdkit.read_bag -> Skill.learn -> skill.reproduce(new mug pose) -> write_trajectory_bag
+                                           -> skill.controller(new mug pose).stream(1000)
+
+The mug is a pose: read_bag gives it as a 4x4 transform, and ``Skill.learn(...,
+orientation=True)`` (the default) learns the hand's position and orientation in the mug's frame,
+so the grasp turns with the mug. ``orientation=False`` learns the paper's position-only skill
+from the same bags: the hand relative to the mug's position, in the robot's axes. The handle's
+offset turns with the mug, so over the demonstrations' yaws it averages towards the mug's axis,
+and nothing constrains the hand's turn but the averaged postures: for a new yaw it misses the
+handle by centimetres and the grasp's orientation by tens of degrees. The script prints both
+skills over 20 new mug poses (seeded): the grasp's position and orientation errors, and how many
+are within 5 mm and 3 degrees.
+
+Frames and conventions (all poses in the robot's base frame, panda_link0, m):
+- The mug's frame: origin at the centre of its base, z up, x through the handle.
+- The grasp is measured at the Franka Hand's fingertip centre (the TCP: 0.1034 m beyond the
+  flange along its z, turned -45 degrees about it), the flange being pbdkit.robots.panda()'s
+  tip. The teacher grasps the top of the handle from above, the fingers closing across it.
+- The demonstrated grasp is the fingertips' pose in the mug's frame at the sample where the
+  gripper closes, averaged over the five bags as read back (positions: mean; orientations:
+  Karcher mean). A reproduction's grasp is the fingertips' pose in the new mug's frame at the
+  first step where the reproduced gripper is closed (the hand holds still over the closing).
+  Position error: the distance between the two, mm; orientation error: the angle of the
+  rotation between them, degrees.
+- Quaternions: the PoseStamped messages hold x, y, z, w (ROS's order); pbdkit writes them w
+  first, (x, y, z, qw, qx, qy, qz) as pytransform3d does, where the script prints a pose.
 
 Offline, the reproduction is timed within Franka's velocity, acceleration and jerk limits
 (pbdkit.robots.panda() declares them): a lead-in from the arm's posture to the skill's first
@@ -25,13 +52,16 @@ stops on one that needs more velocity, acceleration or jerk than its limits; a
 pbdkit.motion.limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for
 the arm (the joints follow the setpoints, the encoders read them with a little noise).
 
-The output folder gets the demonstration bags, the trajectory bag, the skill (skill.npz) and the
-online run's setpoints (stream.npz: t, q, gripper, and the glass).
+The output folder gets the demonstration bags, the trajectory bag, both skills (skill.npz, the
+pose skill; skill_position_only.npz), the 20 new mug poses with both skills' errors
+(grasps.npz) and the online run's setpoints (stream.npz: t, q, gripper, and the mug's pose).
 
-Here the demonstrations are synthesized: joint-space via points (start, pre-grasp, grasp,
-lift, retreat) interpolated with minimum-jerk profiles, the teacher's postures and timing
-varying from one demonstration to the next; the glass is where the hand is at the grasp
-posture (forward kinematics), seen by perception with 1 mm noise.
+Here the demonstrations are synthesized: the teacher's hand goes from the "ready" posture to
+12 cm above the handle, down to the grasp, holds while the gripper closes, and lifts the mug
+15 cm; joint-space via points (inverse kinematics of those poses, from the teacher's last
+posture) interpolated with minimum-jerk profiles, the start posture and timing varying from one
+demonstration to the next. Perception sees the mug with 1 mm and 0.3 degrees (per axis) of
+noise.
 """
 
 from __future__ import annotations
@@ -46,12 +76,74 @@ import numpy as np
 import pbdkit
 from pbdkit.learning.bags import write_demonstration_bag
 from pbdkit.motion.limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
+from pbdkit.prob.rotations import (
+    exp_map,
+    log_map,
+    mean_rotation,
+    pose_matrix,
+    quaternion_from_matrix,
+)
 
 RATE = 100.0  # Hz, the joint state rate of the driver
 LOOP_HZ = 1000.0  # the Panda's control loop: one setpoint per millisecond
 START = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])  # Panda "ready"
-GRASP = np.array([0.0, 0.35, 0.0, -2.0, 0.0, 2.35, 0.785])  # hand low in front of the base
 FINGERS = {"panda_finger_joint1": 0.04, "panda_finger_joint2": 0.04}
+
+
+def rot_z(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+# The Franka Hand's fingertip centre (TCP) in the flange frame.
+TCP = pose_matrix([0.0, 0.0, 0.1034], rot_z(-np.pi / 4))
+# The teacher's grasp, the fingertips in the mug's frame: 7 cm out on the handle, 8 cm up,
+# pointing down (hand z = -mug z), closing across the handle (hand y = -mug y). At mug yaw 0 this
+# is the hand's orientation at "ready" (joint 7 at 0.785 rad), so the yaws of +-90 degrees turn
+# joint 7 by about as much, within its +-2.90 rad; at yaw -90, where it turns furthest, the
+# handle is on the mug's right (y < 0), where joint 1 turns the arm the other way. Measured:
+# joint 7 from -1.0 to 2.7 rad at the demonstrations' grasps (2.71 at the worst corner of the
+# mugs' range), no wrist flip. Turned 90 degrees about the vertical either way, the grasp would
+# drive joint 7 to its limit near one end of the yaws, or flip the wrist between two
+# demonstrations: new mugs between them would get an average of two postures that fit neither.
+GRASP = pose_matrix([0.07, 0.0, 0.08], np.diag([1.0, -1.0, -1.0]))
+PRE_GRASP, LIFT = 0.12, 0.15  # m above the grasp
+# Where the mugs are: the centre of the base in these ranges (m), yaw in [-90, 90] degrees.
+MUG_X, MUG_Y, MUG_YAW = (0.5, 0.65), (-0.12, 0.12), np.pi / 2
+# The demonstrations' mugs (x m, y m, yaw deg): the yaws span the range, the places the table.
+DEMO_MUGS = [
+    (0.55, 0.1, -90),
+    (0.62, -0.12, -45),
+    (0.5, 0.0, 0),
+    (0.6, 0.12, 45),
+    (0.56, -0.08, 90),
+]
+N_NEW = 20  # new mug poses the skills are measured on
+TOLERANCE_MM, TOLERANCE_DEG = 5.0, 3.0
+
+
+def mug_pose(x: float, y: float, yaw: float) -> np.ndarray:
+    """The mug standing on the table (z = 0) at (x, y), turned by yaw (rad) about z."""
+    return pose_matrix([x, y, 0.0], rot_z(yaw))
+
+
+def xyz_wxyz(pose: np.ndarray) -> list[float]:
+    """A pose as x, y, z, qw, qx, qy, qz (quaternion w first: pbdkit's and pytransform3d's)."""
+    return [*pose[:3, 3].tolist(), *quaternion_from_matrix(pose[:3, :3]).tolist()]
+
+
+def inverse_kinematics(robot: pbdkit.Robot, target: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The teacher's posture for a flange pose, from the posture q (damped least squares)."""
+    for _ in range(200):
+        pose = robot.fk_pose(q)
+        error = np.r_[target[:3, 3] - pose[:3, 3], log_map(target[:3, :3] @ pose[:3, :3].T)]
+        if np.linalg.norm(error) < 1e-12:
+            break
+        jac = robot.jacobian6(q)
+        q = robot.clip(q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-9 * np.eye(6), error))
+    if np.linalg.norm(error) > 1e-9:
+        raise RuntimeError(f"no posture reaches {np.round(target, 3).tolist()}")
+    return q
 
 
 def min_jerk(q_from: np.ndarray, q_to: np.ndarray, n: int) -> np.ndarray:
@@ -61,14 +153,20 @@ def min_jerk(q_from: np.ndarray, q_to: np.ndarray, n: int) -> np.ndarray:
 
 
 def demonstration(
-    robot: pbdkit.Robot, grasp: np.ndarray, rng: np.random.Generator
+    robot: pbdkit.Robot, mug: np.ndarray, rng: np.random.Generator
 ) -> pbdkit.Demonstration:
-    """One demonstration reaching the grasp posture: via points, durations and the glass."""
+    """One demonstration of grasping the mug (a 4x4 pose) by its handle and lifting it."""
+    flange = mug @ GRASP @ np.linalg.inv(TCP)  # where the flange is at the grasp
+
+    def above(height: float) -> np.ndarray:
+        return pose_matrix(flange[:3, 3] + [0.0, 0.0, height], flange[:3, :3])
+
     start = START + rng.normal(0.0, 0.02, 7)
-    pre = grasp + np.array([0.0, -0.15, 0.0, -0.15, 0.0, 0.0, 0.0]) + rng.normal(0.0, 0.01, 7)
-    lift = grasp + np.array([0.0, -0.2, 0.0, 0.1, 0.0, -0.2, 0.0]) + rng.normal(0.0, 0.01, 7)
-    vias = [start, pre, grasp, grasp, lift, START + rng.normal(0.0, 0.02, 7)]
-    seconds = np.array([1.5, 1.0, 0.5, 1.2, 1.3]) * rng.uniform(0.85, 1.15, 5)
+    pre = inverse_kinematics(robot, above(PRE_GRASP), start)
+    grasp = inverse_kinematics(robot, flange, pre)
+    lift = inverse_kinematics(robot, above(LIFT), grasp)
+    vias = [start, pre, grasp, grasp, lift]
+    seconds = np.array([1.8, 0.8, 0.8, 1.0]) * rng.uniform(0.85, 1.15, 4)
     parts = [
         min_jerk(a, b, max(2, round(s * RATE)))[1:]
         for a, b, s in zip(vias[:-1], vias[1:], seconds, strict=True)
@@ -78,8 +176,58 @@ def demonstration(
     at_grasp = 1 + parts[0].shape[0] + parts[1].shape[0]  # the first sample of the hold
     closed_from = at_grasp + parts[2].shape[0] // 2  # the fingers close during the hold
     gripper = (np.arange(joints.shape[0]) >= closed_from).astype(float)
-    glass = robot.fk(grasp) + rng.normal(0.0, 0.001, 3)  # perception noise
-    return pbdkit.Demonstration(t, robot.clip(joints), {"glass": glass}, gripper=gripper)
+    noise = pose_matrix(rng.normal(0.0, 0.001, 3), exp_map(rng.normal(0.0, np.radians(0.3), 3)))
+    seen = mug @ noise  # the mug as perception sees it
+    return pbdkit.Demonstration(t, joints, {"mug": seen}, gripper=gripper)
+
+
+def grasp_in_mug(robot: pbdkit.Robot, q: np.ndarray, mug: np.ndarray) -> np.ndarray:
+    """The fingertips' pose in the mug's frame with the arm at q."""
+    return np.linalg.inv(mug) @ robot.fk_pose(q) @ TCP
+
+
+def grasp_error(grasp: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
+    """(position error in mm, orientation error in degrees) of a grasp, both in the mug's frame."""
+    distance = np.linalg.norm(grasp[:3, 3] - reference[:3, 3])
+    angle = np.linalg.norm(log_map(grasp[:3, :3] @ reference[:3, :3].T))
+    return 1000 * float(distance), float(np.degrees(angle))
+
+
+def closing_sample(demo: pbdkit.Demonstration) -> int:
+    """The sample where the demonstration's gripper closes."""
+    if demo.gripper is None:
+        raise ValueError("the demonstration has no gripper signal")
+    return int(np.argmax(demo.gripper > 0.5))
+
+
+def demonstrated_grasp(robot: pbdkit.Robot, demos: list[pbdkit.Demonstration]) -> np.ndarray:
+    """The fingertips in the mug's frame where each demonstration's gripper closes, averaged:
+    positions by their mean, orientations by their Karcher mean."""
+    grasps = np.stack(
+        [grasp_in_mug(robot, d.joints[closing_sample(d)], d.objects["mug"]) for d in demos]
+    )
+    return pose_matrix(grasps[:, :3, 3].mean(axis=0), mean_rotation(grasps[:, :3, :3]))
+
+
+def new_mugs(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """n mug poses drawn uniformly over the table's range and the yaws."""
+    return [
+        mug_pose(rng.uniform(*MUG_X), rng.uniform(*MUG_Y), rng.uniform(-MUG_YAW, MUG_YAW))
+        for _ in range(n)
+    ]
+
+
+def grasp_errors(
+    skill: pbdkit.Skill, robot: pbdkit.Robot, mugs: list[np.ndarray], reference: np.ndarray
+) -> np.ndarray:
+    """(len(mugs), 2): each reproduction's grasp error (mm, degrees), from "ready", at the first
+    step where its gripper is closed."""
+    errors = []
+    for mug in mugs:
+        res = skill.reproduce({"mug": mug}, q0=START)
+        closing = int(np.argmax(res.gripper))
+        errors.append(grasp_error(grasp_in_mug(robot, res.joints[closing], mug), reference))
+    return np.array(errors)
 
 
 class SimulatedPanda:
@@ -125,11 +273,11 @@ def main(out: Path) -> None:
     robot = pbdkit.robots.panda()
     rng = np.random.default_rng(0)
 
-    # 1. Record five demonstrations as bags (both rosbag2 storages), as a real driver would.
+    # 1. Record five demonstrations as bags (both rosbag2 storages), as a real driver would:
+    #    the mug's PoseStamped carries its orientation (quaternion x, y, z, w, ROS's order).
     bags = []
-    for i in range(5):
-        grasp = GRASP + rng.uniform(-1, 1, 7) * np.array([0.35, 0.1, 0.1, 0.12, 0.1, 0.1, 0.2])
-        demo = demonstration(robot, grasp, rng)
+    for i, (x, y, yaw) in enumerate(DEMO_MUGS):
+        demo = demonstration(robot, mug_pose(x, y, np.radians(yaw)), rng)
         bag = out / f"demo_{i}"
         write_demonstration_bag(
             bag,
@@ -142,25 +290,47 @@ def main(out: Path) -> None:
         )
         bags.append(bag)
 
-    # 2. Read them back: joints in the robot's order, the glass from its topic, the gripper.
+    # 2. Read them back: joints in the robot's order, the mug's pose (4x4) from its topic, the
+    #    gripper.
     demos = [
-        pbdkit.read_bag(b, robot=robot, objects={"glass": "/glass/pose"}, gripper_topic="/gripper")
+        pbdkit.read_bag(b, robot=robot, objects={"mug": "/mug/pose"}, gripper_topic="/gripper")
         for b in bags
     ]
+    reference = demonstrated_grasp(robot, demos)
+    spread = np.array(
+        [
+            grasp_error(
+                grasp_in_mug(robot, d.joints[closing_sample(d)], d.objects["mug"]), reference
+            )
+            for d in demos
+        ]
+    )
 
-    # 3. Learn, and reproduce for a glass placed where no demonstration had it, the arm at
-    #    "ready": a lead-in to the skill's first posture, then its steps, within the limits.
+    # 3. Learn the pose skill and, from the same bags, the position-only skill.
     skill = pbdkit.Skill.learn(demos, robot, max_components=15)
+    position_only = pbdkit.Skill.learn(demos, robot, max_components=15, orientation=False)
     skill.save(out / "skill.npz")
-    new_grasp = GRASP + np.array([0.2, 0.05, 0.0, -0.05, 0.0, 0.05, 0.0])
-    glass = robot.fk(new_grasp)
-    res = skill.reproduce({"glass": glass}, q0=START)
-    closest = float(np.linalg.norm(res.positions - glass, axis=1).min())
-    joint_res = skill.reproduce({"glass": glass}, use=["joint"])
-    joint_only = float(np.linalg.norm(joint_res.positions - glass, axis=1).min())
+    position_only.save(out / "skill_position_only.npz")
 
-    # 4. Write the trajectory for a joint trajectory controller, with the velocities and
-    #    accelerations of its timing (the controller's splines then follow the timed motion).
+    # 4. Both over 20 new mug poses, each reproduced from "ready" within Franka's limits.
+    mugs = new_mugs(np.random.default_rng(1), N_NEW)
+    errors = {
+        "pose (orientation=True)": grasp_errors(skill, robot, mugs, reference),
+        "position only (False)": grasp_errors(position_only, robot, mugs, reference),
+    }
+    np.savez(
+        out / "grasps.npz",
+        mugs=np.stack(mugs),
+        demonstrated=reference,
+        pose=errors["pose (orientation=True)"],
+        position_only=errors["position only (False)"],
+    )
+
+    # 5. The first new mug again: the trajectory for a joint trajectory controller, with the
+    #    velocities and accelerations of its timing (the controller's splines then follow the
+    #    timed motion).
+    mug = mugs[0]
+    res = skill.reproduce({"mug": mug}, q0=START)
     trajectory = out / "trajectory"
     t = skill.times(res)
     pbdkit.write_trajectory_bag(
@@ -175,32 +345,58 @@ def main(out: Path) -> None:
     limits = MotionLimits.from_robot(robot, robot.n_joints)  # Franka's published limits
     offline = motion_peaks(t, res.joints, limits)
 
-    # 5. Online: the skill in the arm's 1 kHz loop, from "ready", every setpoint checked.
-    setpoints, closed, online = run_online(
-        skill, {"glass": glass}, SimulatedPanda(START, rng), limits
-    )
+    # 6. Online: the skill in the arm's 1 kHz loop, from "ready", every setpoint checked.
+    setpoints, closed, online = run_online(skill, {"mug": mug}, SimulatedPanda(START, rng), limits)
     np.savez(
         out / "stream.npz",
         t=np.arange(len(setpoints)) / LOOP_HZ,
         q=setpoints,
         gripper=closed,
-        glass=glass,
+        mug=mug,
     )
-    grasp_offline = np.linalg.norm(robot.fk(res.joints[np.argmax(res.gripper)]) - glass)
-    grasp_online = np.linalg.norm(robot.fk(setpoints[np.argmax(closed)]) - glass)
+    grasp_offline = grasp_error(
+        grasp_in_mug(robot, res.joints[np.argmax(res.gripper)], mug), reference
+    )
+    grasp_online = grasp_error(grasp_in_mug(robot, setpoints[np.argmax(closed)], mug), reference)
 
-    seen = [d.objects["glass"] for d in demos]
+    seen = np.array([d.objects["mug"] for d in demos])
+    yaws = np.degrees(np.arctan2(seen[:, 1, 0], seen[:, 0, 0]))
     print(f"recorded {len(bags)} demonstration bags in {out}")
     print(
         f"read {len(demos)} demonstrations: {[d.n_steps for d in demos]} joint states, "
-        f"glass x {min(p[0] for p in seen):.3f}..{max(p[0] for p in seen):.3f} m, "
-        f"y {min(p[1] for p in seen):.3f}..{max(p[1] for p in seen):.3f} m"
+        f"mug x {seen[:, 0, 3].min():.3f}..{seen[:, 0, 3].max():.3f} m, "
+        f"y {seen[:, 1, 3].min():.3f}..{seen[:, 1, 3].max():.3f} m, "
+        f"yaw {yaws.min():.1f}..{yaws.max():.1f} deg"
     )
-    print(f"learned K per space: {skill.n_components}")
-    print(f"new glass at {np.round(glass, 4).tolist()} m")
     print(
-        f"closest approach to the glass: {1000 * closest:.1f} mm "
-        f"(joint space only, the demonstrated postures: {1000 * joint_only:.1f} mm)"
+        "demonstrated grasp (fingertips in the mug's frame when the gripper closes, mean of the "
+        f"bags): x, y, z, qw, qx, qy, qz = {np.round(xyz_wxyz(reference), 4).tolist()} "
+        f"(quaternion w first); the bags within {spread[:, 0].max():.1f} mm and "
+        f"{spread[:, 1].max():.2f} deg of it"
+    )
+    print(f"learned K per space: pose skill {skill.n_components}, position only ", end="")
+    print(position_only.n_components)
+    print(
+        f"grasp over {N_NEW} new mug poses (x {MUG_X[0]}..{MUG_X[1]} m, y {MUG_Y[0]}..{MUG_Y[1]}"
+        " m, yaw -90..90 deg; seeded), at the first step the gripper is closed, vs the "
+        "demonstrated grasp in the mug's frame:"
+    )
+    print(f"  {'skill':<24}{'position mm':>16}{'orientation deg':>19}{'within':>10}{'within':>9}")
+    print(
+        f"  {'':<24}{'median':>9}{'max':>7}{'median':>11}{'max':>8}{'5 mm':>10}{'3 deg':>9}"
+        f"{'both':>8}"
+    )
+    for name, e in errors.items():
+        within_mm, within_deg = e[:, 0] <= TOLERANCE_MM, e[:, 1] <= TOLERANCE_DEG
+        print(
+            f"  {name:<24}{np.median(e[:, 0]):9.1f}{e[:, 0].max():7.1f}"
+            f"{np.median(e[:, 1]):11.2f}{e[:, 1].max():8.2f}"
+            f"{np.count_nonzero(within_mm):7d}/{N_NEW}{np.count_nonzero(within_deg):6d}/{N_NEW}"
+            f"{np.count_nonzero(within_mm & within_deg):5d}/{N_NEW}"
+        )
+    print(
+        f"new mug at x, y, z, qw, qx, qy, qz = {np.round(xyz_wxyz(mug), 4).tolist()} "
+        "(m; quaternion w first)"
     )
     n_lead = int(np.count_nonzero(res.lead_in))
     print(
@@ -217,8 +413,9 @@ def main(out: Path) -> None:
             f"acceleration {peaks.acceleration:.3f}, jerk {peaks.jerk:.3f}"
         )
     print(
-        f"hand when the gripper closes: {1000 * grasp_online:.1f} mm from the glass online "
-        f"({1000 * grasp_offline:.1f} mm offline)"
+        f"grasp when the gripper closes: {grasp_online[0]:.1f} mm and {grasp_online[1]:.2f} deg "
+        f"from the demonstrated grasp online ({grasp_offline[0]:.1f} mm, "
+        f"{grasp_offline[1]:.2f} deg offline)"
     )
     print(f"done in {time.perf_counter() - began:.1f} s")
 
