@@ -3,9 +3,9 @@
 A frame is an invertible matrix A (D, D) (a rotation, a scaling, a reflection or any
 combination) and an origin b (D,). A point x of the world is A^-1 (x - b) in the frame; a
 Gaussian N(m, S) learned in the frame is, in the world, N(A m + b, A S A^T), with precision
-A^-T L A^-1 (L = S^-1). For a rotation A^-1 = A^T and the precision maps as A L A^T, but only
-then: for a scaled or reflected frame it does not (pbdlib's ``GMM.lintrans`` maps the precision
-as A L A^T).
+A^-T L A^-1 (L = S^-1). For an orthogonal A (a rotation or a reflection) A^-1 = A^T and the
+precision maps as A L A^T, but only then: for a scaled or sheared frame it does not (pbdlib's
+``GMM.lintrans`` maps the precision as A L A^T).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def covariance_to_world(a: npt.ArrayLike, cov: npt.ArrayLike) -> Float:
 
 def precision_to_world(a: npt.ArrayLike, prec: npt.ArrayLike) -> Float:
     """A^-T L A^-1 for precisions L (..., D, D) and frames A (..., D, D): the inverse of
-    A S A^T. Equal to A L A^T only when A is a rotation."""
+    A S A^T. Equal to A L A^T only when A is orthogonal (a rotation or a reflection)."""
     ainv = np.linalg.inv(np.asarray(a, dtype=np.float64))
     return np.asarray(np.swapaxes(ainv, -1, -2) @ np.asarray(prec, dtype=np.float64) @ ainv)
 
