@@ -579,7 +579,11 @@ def test_learn_rejects_bad_input(robot: Robot, demos: list[Demonstration]) -> No
         ({"cup": [0.4, 0.2, 0.2]}, {}, r"unknown object name\(s\) \['cup'\]"),
         ({}, {}, r"missing position\(s\) for \['glass'\]"),
         ({"glass": [0.4, np.nan, 0.2]}, {}, r"objects\['glass'\] must be finite"),
-        ({"glass": [0.4, 0.2]}, {}, r"objects\['glass'\] must be a position \(3,\).*got an array of shape \(2,\)"),
+        (
+            {"glass": [0.4, 0.2]},
+            {},
+            r"objects\['glass'\] must be a position \(3,\).*got an array of shape \(2,\)",
+        ),
         ({"glass": [3.0, 0.0, 0.2]}, {}, r"objects\['glass'\]: .* beyond the arm's reach"),
         ({"glass": [0.4, 0.2, 0.2]}, {"q0": [0, 3.0, 0, 0, 0]}, r"q0\[1\] must be within"),
         ({"glass": [0.4, 0.2, 0.2]}, {"q0": [0, 0, 0]}, r"q0 must have shape \(5,\)"),

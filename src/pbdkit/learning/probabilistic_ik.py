@@ -530,7 +530,7 @@ class ReproductionResult:
         skill of positions only.
     orientation_errors : dict str -> ndarray, shape (T,)
         For every oriented object (in use or not): the angle (rad) between the hand's
-        orientation and the one its constraint expects, |log(R_hand R_target^T)|.
+        orientation and the one its constraint expects, the norm of log(R_hand R_target^T).
 
     With motion limits the result has a sample per step of the skill plus the lead-in samples:
     T = L + n_steps.
@@ -611,7 +611,7 @@ def check_objects(
             if not is_pose(v):
                 raise ValueError(
                     f"{name}[{k!r}] must be a pose (a 4x4 transform or x, y, z, qw, qx, qy, qz): "
-                    f"the skill learned the hand's position and orientation in {k!r}'s frame; "
+                    f"the skill learned the hand's position and orientation in the frame of {k!r}; "
                     f"got a position {v.tolist()}"
                 )
             out[k] = v
