@@ -15,9 +15,9 @@ File formats
 ``.npz`` (:func:`save_demonstrations` / :func:`load_demonstrations`): a NumPy archive with no
 pickled object (``allow_pickle=False`` on load), written atomically. Keys:
 
-======================  ==================  ==============================================================
+======================  ==================  ==================================================
 key                     dtype, shape        meaning
-======================  ==================  ==============================================================
+======================  ==================  ==================================================
 ``format``              unicode, ()         ``"pbdkit-demonstrations"``
 ``version``             int64, ()           ``1`` (positions only) or ``2`` (poses)
 ``n_demos``             int64, ()           number of demonstrations M
@@ -26,9 +26,9 @@ key                     dtype, shape        meaning
 ``demo_{i}_t``          float64, (T_i,)     time stamps in seconds, strictly increasing
 ``demo_{i}_joints``     float64, (T_i, n)   joint angles in radians
 ``demo_{i}_objects``    float64, (N, 3)     object positions, rows in ``object_names`` order
-``demo_{i}_rotations``  float64, (N, 3, 3)  version 2: each object's rotation (a pose), NaN for a position
+``demo_{i}_rotations``  float64, (N, 3, 3)  version 2: rotations (poses), NaN for a position
 ``demo_{i}_gripper``    float64, (T_i,)     gripper signal (0 open, 1 closed), optional
-======================  ==================  ==============================================================
+======================  ==================  ==================================================
 
 Version 2 is written when some object has a pose (:mod:`pbdkit.learning.placement`); a file of
 positions only is written as version 1, as before, and both versions load.
