@@ -1,9 +1,11 @@
 """ROS bags: teacher demonstrations recorded as bags read back exactly (both rosbag2 storages,
-shuffled joint order, a finger joint, objects at 30 Hz); a skill learned from bags equals one
+shuffled joint order, a finger joint, objects at 30 Hz); posed objects read back with their
+orientation (ROS's x, y, z, w quaternions against scipy's); a skill learned from bags equals one
 learned from the arrays; trajectory bags hold the reproduction (read with rosbags' own reader),
 with the timing's velocities and accelerations when given; tf, PointStamped, TransformStamped
-and fixed sources; cuts; every bad input a clear error; the `pbdkit learn BAG...` and
-`pbdkit reproduce --bag` commands."""
+and fixed sources (positions and poses; orientations through rotated frames, their mean over
+noise, invalid quaternions dropped); cuts; every bad input a clear error; the
+`pbdkit learn BAG...` and `pbdkit reproduce --bag` commands."""
 
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ from typer.testing import CliRunner, Result
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
 from pbdkit.apps.cli import app
 from pbdkit.learning.bags import write_demonstration_bag
+from pbdkit.learning.placement import is_pose, position_of, rotation_of
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # ROS time of the first joint state in the hand-written bags (ns)
@@ -86,6 +89,19 @@ def _raw(path: Path, topic: str) -> list[tuple[int, Any]]:
 
 def _stamp(msg: Any) -> int:
     return int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+
+
+def _positions(demo: Demonstration) -> Demonstration:
+    """The demonstration with its objects' positions only (a PoseStamped gives a pose)."""
+    objects = {k: position_of(v) for k, v in demo.objects.items()}
+    return Demonstration(demo.t, demo.joints, objects, gripper=demo.gripper)
+
+
+def _rotation(value: np.ndarray) -> np.ndarray:
+    """The rotation of a placement that must be a pose."""
+    rotation = rotation_of(value)
+    assert rotation is not None, f"a position, not a pose: {value}"
+    return rotation
 
 
 # ----------------------------------------------------------------------------- hand-written bags
@@ -184,10 +200,54 @@ def test_teacher_demonstrations_read_back_exactly(
         assert back.t[0] == 0.0
         assert back.object_names == ("glass", "coaster")
         for name in SOURCES:
-            np.testing.assert_array_equal(back.objects[name], d.objects[name])
+            # A PoseStamped gives a pose: the position exactly, the identity orientation that
+            # was written for an object given as a position.
+            np.testing.assert_array_equal(position_of(back.objects[name]), d.objects[name])
+            np.testing.assert_allclose(_rotation(back.objects[name]), np.eye(3), atol=1e-12)
         assert d.gripper is not None and back.gripper is not None
         np.testing.assert_array_equal(back.gripper > 0.5, d.gripper > 0.5)
         assert 0 < np.count_nonzero(back.gripper) < back.n_steps  # it opens and closes
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_posed_objects_read_back_with_their_orientation(
+    tmp_path: Path, demos: list[Demonstration], robot: Robot, storage: str
+) -> None:
+    # Objects given as (x, y, z, qw, qx, qy, qz) (w first), as a 4x4 and as a position: each
+    # PoseStamped carries the orientation, read back to 1e-9; compared with scipy's rotations,
+    # whose quaternions are (x, y, z, w) as ROS's.
+    rng = np.random.default_rng(23)
+    r_glass = Rotation.from_quat(rng.normal(size=4))  # uniform on SO(3)
+    r_coaster = Rotation.from_quat(rng.normal(size=4))
+    d = demos[0]
+    x, y, z, w = r_glass.as_quat()
+    coaster = np.eye(4)
+    coaster[:3, :3], coaster[:3, 3] = r_coaster.as_matrix(), d.objects["coaster"]
+    objects = {
+        "glass": [*d.objects["glass"], w, x, y, z],
+        "coaster": coaster,
+        "basin": [0.3, -0.1, 0.0],
+    }
+    posed = Demonstration(d.t, d.joints, objects, gripper=d.gripper)
+    path = tmp_path / "posed"
+    write_demonstration_bag(path, posed, robot.joint_names, storage=storage)
+    # In the bag: ROS's (x, y, z, w), which is scipy's order (q and -q: the same rotation).
+    for name, rot in [("glass", r_glass), ("coaster", r_coaster)]:
+        for _, msg in _raw(path, f"/{name}/pose"):
+            q = msg.pose.orientation
+            wire = np.array([q.x, q.y, q.z, q.w])
+            sign = 1.0 if wire @ rot.as_quat() > 0 else -1.0
+            np.testing.assert_allclose(sign * wire, rot.as_quat(), rtol=0, atol=1e-12)
+    back = read_bag(path, robot=robot, objects={n: f"/{n}/pose" for n in objects})
+    np.testing.assert_array_equal(back.joints, d.joints)
+    for name, rot in [("glass", r_glass), ("coaster", r_coaster)]:
+        np.testing.assert_array_equal(
+            position_of(back.objects[name]), position_of(posed.objects[name])
+        )
+        np.testing.assert_allclose(_rotation(back.objects[name]), rot.as_matrix(), atol=1e-9)
+    # A position is written with the identity orientation: it comes back as that pose.
+    np.testing.assert_array_equal(position_of(back.objects["basin"]), [0.3, -0.1, 0.0])
+    np.testing.assert_allclose(_rotation(back.objects["basin"]), np.eye(3), atol=1e-12)
 
 
 def test_recorded_bags_are_what_a_real_driver_writes(
@@ -213,7 +273,10 @@ def test_skill_from_bags_equals_skill_from_arrays(
     bags: dict[str, list[Path]], robot: Robot, skill: Skill
 ) -> None:
     paths = [bags["sqlite3"][0], bags["mcap"][1], bags["sqlite3"][2]]  # both storages
-    from_bags = [read_bag(p, robot=robot, objects=SOURCES, gripper_topic="/gripper") for p in paths]
+    from_bags = [
+        _positions(read_bag(p, robot=robot, objects=SOURCES, gripper_topic="/gripper"))
+        for p in paths
+    ]
     learned = Skill.learn(from_bags, robot, n_steps=N_STEPS, max_components=MAX_K)
     assert learned.n_components == skill.n_components
     a, b = learned.constraints(), skill.constraints()
@@ -334,15 +397,21 @@ def test_tf_frame_two_levels_with_rotation(tmp_path: Path, robot: Robot, storage
     path = _write(tmp_path / "tf", msgs, storage)
     back = read_bag(path, robot=robot, objects={"glass": "tf:glass"})
     expected = r_cam.apply(p_glass) + p_cam  # base <- camera <- glass
-    np.testing.assert_allclose(back.objects["glass"], expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(position_of(back.objects["glass"]), expected, rtol=0, atol=1e-12)
     assert np.linalg.norm(expected - p_glass) > 0.1  # the rotation matters
+    # The glass's orientation in the base frame: the camera's rotation, then the glass's in it.
+    rotation = _rotation(back.objects["glass"])
+    np.testing.assert_allclose(rotation, (r_cam * r_glass).as_matrix(), rtol=0, atol=1e-12)
+    assert np.abs(rotation - r_glass.as_matrix()).max() > 0.5  # the camera's rotation matters
 
 
 def test_tf_with_a_common_root_and_a_point_in_the_camera_frame(
     tmp_path: Path, robot: Robot
 ) -> None:
     # world -> base_link and world -> camera (static); the glass is a PointStamped in the
-    # camera frame: expressed in the base frame through tf (tf2's lookup via the common root).
+    # camera frame: expressed in the base frame through tf (tf2's lookup via the common root),
+    # a position still; the mug a PoseStamped in the camera frame: a pose, its orientation
+    # turned through tf as its position is.
     r_base = Rotation.from_euler("z", 90.0, degrees=True)
     p_base = np.array([1.0, 0.5, 0.0])
     r_cam = Rotation.from_euler("xz", [180.0, 20.0], degrees=True)
@@ -360,13 +429,39 @@ def test_tf_with_a_common_root_and_a_point_in_the_camera_frame(
         header=_header(T0 + 10**8, "camera"), point=_vector("geometry_msgs/msg/Point", point)
     )
     msgs.append(("/glass/point", "geometry_msgs/msg/PointStamped", T0 + 10**8, pt))
+    r_mug = Rotation.from_euler("zyx", [-70.0, 35.0, 15.0], degrees=True)
+    p_mug = np.array([-0.2, 0.15, 1.1])
+    mug = _pose(T0 + 2 * 10**8, p_mug, "camera", r_mug.as_quat())
+    msgs.append(("/mug/pose", "geometry_msgs/msg/PoseStamped", T0 + 2 * 10**8, mug))
     path = _write(tmp_path / "root", msgs)
-    back = read_bag(path, robot=robot, objects={"glass": "/glass/point", "cam": "tf:camera"})
+    back = read_bag(
+        path,
+        robot=robot,
+        objects={"glass": "/glass/point", "cam": "tf:camera", "mug": "/mug/pose"},
+    )
     in_world = r_cam.apply(point) + p_cam
     expected = r_base.inv().apply(in_world - p_base)
+    assert back.objects["glass"].shape == (3,)  # a PointStamped: a position
     np.testing.assert_allclose(back.objects["glass"], expected, rtol=0, atol=1e-12)
+    assert is_pose(back.objects["cam"])
     np.testing.assert_allclose(
-        back.objects["cam"], r_base.inv().apply(p_cam - p_base), rtol=0, atol=1e-12
+        position_of(back.objects["cam"]), r_base.inv().apply(p_cam - p_base), rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        _rotation(back.objects["cam"]), (r_base.inv() * r_cam).as_matrix(), rtol=0, atol=1e-12
+    )
+    # T_base_mug = T_world_base^-1 T_world_camera T_camera_mug, composed by scipy.
+    np.testing.assert_allclose(
+        position_of(back.objects["mug"]),
+        r_base.inv().apply(r_cam.apply(p_mug) + p_cam - p_base),
+        rtol=0,
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        _rotation(back.objects["mug"]),
+        (r_base.inv() * r_cam * r_mug).as_matrix(),
+        rtol=0,
+        atol=1e-12,
     )
 
 
@@ -410,9 +505,157 @@ def test_point_and_transform_stamped_median_over_the_first_second(
     path = _write(tmp_path / "points", msgs, "mcap")
     back = read_bag(path, robot=robot, objects={"glass": "/glass/point", "coaster": "/coaster/tf"})
     assert len(first["glass"]) == 31  # stamps 0 .. 1 s, both ends kept
+    assert back.objects["glass"].shape == (3,)  # a PointStamped: a position
+    assert is_pose(back.objects["coaster"])  # a TransformStamped: a pose (identity here)
+    np.testing.assert_allclose(_rotation(back.objects["coaster"]), np.eye(3), atol=1e-12)
     for name in truth:
-        np.testing.assert_array_equal(back.objects[name], np.median(first[name], axis=0))
-        assert np.linalg.norm(back.objects[name] - truth[name]) < 0.003  # outlier ignored
+        position = position_of(back.objects[name])
+        np.testing.assert_array_equal(position, np.median(first[name], axis=0))
+        assert np.linalg.norm(position - truth[name]) < 0.003  # outlier ignored
+
+
+def _karcher_mean(rotations: Rotation) -> Rotation:
+    """The Karcher mean of rotations with scipy's maps, in the right tangent space: a reference
+    independent of pbdkit's (its fixed point is the same: the geodesic distance is
+    bi-invariant)."""
+    mean = rotations[0]
+    for _ in range(100):
+        step = (mean.inv() * rotations).as_rotvec().mean(axis=0)
+        mean = mean * Rotation.from_rotvec(step)
+        if np.linalg.norm(step) < 1e-14:
+            break
+    return mean
+
+
+def test_a_noisy_orientation_stream_gives_its_mean(tmp_path: Path, robot: Robot) -> None:
+    # A mug's PoseStamped and a tray's TransformStamped at 30 Hz, about 5 degrees of noise:
+    # the Karcher mean of the first second's orientations, close to the truth. Quaternions come
+    # with either sign and unnormalized; a zero or NaN one is dropped (its position counts).
+    rng = np.random.default_rng(11)
+    truth = Rotation.from_euler("zyx", [120.0, -40.0, 75.0], degrees=True)
+    where = np.array([0.45, 0.2, 0.175])
+    turn = Rotation.from_euler("z", 90.0, degrees=True)
+    r_cam = Rotation.from_euler("xyz", [-100.0, 5.0, 30.0], degrees=True)
+    msgs = _arm_motion(n=100)
+    kept: list[Rotation] = []
+    first: list[np.ndarray] = []
+    for k in range(45):
+        ns = T0 + k * 33_333_333
+        seen = Rotation.from_rotvec(rng.normal(0.0, 0.05, 3)) * truth
+        p = where + rng.normal(0.0, 0.001, 3)
+        if k > 30:
+            seen = turn * seen  # after the first second: the mug is turned, not counted
+        quat = seen.as_quat()
+        if k % 3 == 1:
+            quat = -quat
+        if k % 4 == 2:
+            quat = 2.5 * quat
+        if k == 7:
+            quat = np.zeros(4)  # a tracker's "no orientation"
+        if k == 8:
+            quat = np.array([np.nan, 0.0, 0.0, 1.0])
+        if k <= 30:
+            first.append(p)
+            if k not in (7, 8):
+                kept.append(seen)
+        msgs.append(("/mug/pose", "geometry_msgs/msg/PoseStamped", ns, _pose(ns, p, quat=quat)))
+        tray = _transform(ns, "base_link", "tray", p, quat)
+        msgs.append(("/tray/tf", "geometry_msgs/msg/TransformStamped", ns, tray))
+        # tf: the same rule. The first sample's zero quaternion was the reference of the signs.
+        cam = np.zeros(4) if k == 0 else (-1.0) ** k * r_cam.as_quat()
+        msgs.append(_tf_entry("/tf", ns, "base_link", "camera", [0.1, 0.2, 0.3], cam))
+    path = _write(tmp_path / "noisy", msgs)
+    back = read_bag(
+        path, robot=robot, objects={"mug": "/mug/pose", "tray": "/tray/tf", "cam": "tf:camera"}
+    )
+    assert len(kept) == 29 and len(first) == 31
+    reference = _karcher_mean(Rotation.concatenate(kept))
+    for name in ("mug", "tray"):
+        rotation = _rotation(back.objects[name])
+        np.testing.assert_allclose(rotation, reference.as_matrix(), rtol=0, atol=1e-9)
+        error = (Rotation.from_matrix(rotation) * truth.inv()).magnitude()
+        assert error < np.radians(2.0), np.degrees(error)
+        np.testing.assert_array_equal(position_of(back.objects[name]), np.median(first, axis=0))
+    np.testing.assert_allclose(_rotation(back.objects["cam"]), r_cam.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(position_of(back.objects["cam"]), [0.1, 0.2, 0.3], atol=1e-15)
+
+
+def test_a_pose_without_any_orientation_is_refused(tmp_path: Path, robot: Robot) -> None:
+    # Every quaternion of the first second zero or NaN: no orientation to keep. A valid one on
+    # a message whose position is NaN does not count.
+    msgs = _arm_motion(n=60)
+    for k in range(31):
+        ns = T0 + k * 33_333_333
+        quat = np.zeros(4) if k % 2 else np.array([0.0, np.inf, 0.0, 1.0])
+        msgs.append(
+            (
+                "/mug/pose",
+                "geometry_msgs/msg/PoseStamped",
+                ns,
+                _pose(ns, [0.4, 0.1, 0.2], quat=quat),
+            )
+        )
+        tray = _transform(ns, "base_link", "tray", [0.5, 0.0, 0.0], quat)
+        msgs.append(("/tray/tf", "geometry_msgs/msg/TransformStamped", ns, tray))
+    lost = _pose(T0 + 5_000_000, [np.nan] * 3)  # the identity orientation, no position
+    msgs.append(("/mug/pose", "geometry_msgs/msg/PoseStamped", T0 + 5_000_000, lost))
+    path = _write(tmp_path / "no_orientation", msgs)
+    for name, topic, field in [
+        ("mug", "/mug/pose", "pose.orientation"),
+        ("tray", "/tray/tf", "transform.rotation"),
+    ]:
+        with pytest.raises(
+            ValueError,
+            match=rf"^{re.escape(str(path))}: objects\['{name}'\]: none of the 31 message\(s\) "
+            rf"of '{topic}' with a finite position stamped within the first second of the "
+            rf"demonstration holds an orientation: their quaternions \({re.escape(field)}: x, "
+            r"y, z, w\) are all zero, NaN or infinite\. Give the pose as x,y,z,qw,qx,qy,qz "
+            r"\(quaternion w first\), or choose start",
+        ):
+            read_bag(path, robot=robot, objects={name: topic})
+
+
+def test_fixed_pose_sources(bags: dict[str, list[Path]], robot: Robot) -> None:
+    # A fixed source may be a pose: (x, y, z, qw, qx, qy, qz), the quaternion w first, or 4x4.
+    path = bags["sqlite3"][1]
+    rot = Rotation.from_euler("xyz", [30.0, -60.0, 145.0], degrees=True)
+    x, y, z, w = rot.as_quat()
+    tray = np.eye(4)
+    tray[:3, :3], tray[:3, 3] = rot.inv().as_matrix(), [0.5, -0.2, 0.0]
+    back = read_bag(
+        path,
+        robot=robot,
+        objects={"glass": [0.4, 0.1, 0.2, w, x, y, z], "tray": tray, "basin": (0.5, 0.0, 0.0)},
+    )
+    np.testing.assert_array_equal(position_of(back.objects["glass"]), [0.4, 0.1, 0.2])
+    np.testing.assert_allclose(_rotation(back.objects["glass"]), rot.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(back.objects["tray"], tray, rtol=0, atol=1e-12)
+    assert back.objects["basin"].shape == (3,)
+    forms = r"a topic, 'tf:frame', a position \(3,\) or a pose \(4x4, or x, y, z, qw, qx, qy, qz"
+    for objects, match in [
+        (
+            {"glass": [0.4, 0.1, 0.2, 0.0, 0.0, 0.0, 0.0]},
+            r"objects\['glass'\]: the quaternion "
+            r"\(qw, qx, qy, qz\) = \[0\.0, 0\.0, 0\.0, 0\.0\] has zero norm",
+        ),
+        (
+            {"glass": [1.0, 2.0, 3.0, 4.0]},
+            r"objects\['glass'\] must be a position \(3,\), a "
+            r"4x4 transform or \(x, y, z, qw, qx, qy, qz\) \(quaternion w first\), got an array "
+            r"of shape \(4,\)",
+        ),
+        (
+            {"glass": np.diag([1.0, 1.0, -1.0, 1.0])},
+            r"objects\['glass'\]: the rotation block "
+            r"of a 4x4 transform must be a rotation matrix",
+        ),
+        ({"glass": [0.4, np.nan, 0.2]}, r"objects\['glass'\] must be finite"),
+        ({"glass": ["0.4", "0.1", "0.2"]}, r"objects\['glass'\] must be an array of numbers"),
+        ({"glass": "tf:"}, rf"objects\['glass'\] must be {forms}"),
+        ([0.4, 0.1, 0.2], rf"objects must be a dict mapping object names to {forms}"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            read_bag(path, robot=robot, objects=objects)  # type: ignore[arg-type]
 
 
 def test_fixed_position_source_and_no_objects(bags: dict[str, list[Path]], robot: Robot) -> None:
@@ -464,7 +707,7 @@ def test_start_and_end_cut_a_longer_bag(
     np.testing.assert_array_equal(back.gripper > 0.5, d.gripper[keep] > 0.5)
     assert back.gripper[0] == 1.0
     for name in SOURCES:  # located in the first second after the cut
-        np.testing.assert_array_equal(back.objects[name], d.objects[name])
+        np.testing.assert_array_equal(position_of(back.objects[name]), d.objects[name])
 
 
 def _write_ros1(path: Path, positions: np.ndarray) -> Path:
@@ -651,13 +894,38 @@ def _one_line_error(result: Result, *fragments: str) -> None:
         assert fragment in text, text
 
 
+def _as_points(src: Path, dst: Path, storage: str) -> Path:
+    """The bag ``src`` with its PoseStamped messages on ``/NAME/pose`` rewritten as
+    PointStamped on ``/NAME/point`` (same stamps, frames and positions): objects as positions,
+    as the paper's skills have them (a PoseStamped gives a pose)."""
+    point_cls, point_t = TS.types["geometry_msgs/msg/PointStamped"], "geometry_msgs/msg/Point"
+    messages = []
+    with AnyReader([src], default_typestore=TS) as reader:
+        for conn, log, raw in reader.messages():
+            topic, msgtype = conn.topic, conn.msgtype
+            msg = reader.deserialize(raw, msgtype)
+            if msgtype == "geometry_msgs/msg/PoseStamped":
+                v = msg.pose.position
+                msg = point_cls(
+                    header=_header(_stamp(msg), str(msg.header.frame_id)),
+                    point=_vector(point_t, [v.x, v.y, v.z]),
+                )
+                topic, msgtype = topic.replace("/pose", "/point"), point_t + "Stamped"
+            messages.append((topic, msgtype, log, msg))
+    return _write(dst, messages, storage)
+
+
 def test_cli_learn_from_bags_and_reproduce_to_a_bag(
     tmp_path: Path, bags: dict[str, list[Path]], robot: Robot, skill: Skill
 ) -> None:
     runner = CliRunner()
     out = tmp_path / "skill.npz"
-    paths = [str(bags["mcap"][0]), str(bags["sqlite3"][1]), str(bags["mcap"][2])]
-    args = ["--object", "glass=/glass/pose", "--object", "coaster=/coaster/pose"]
+    # The objects as PointStamped: positions, as the skill of the arrays has them.
+    paths = [
+        str(_as_points(bags[storage][i], tmp_path / f"points_{i}", storage))
+        for i, storage in enumerate(["mcap", "sqlite3", "mcap"])
+    ]
+    args = ["--object", "glass=/glass/point", "--object", "coaster=/coaster/point"]
     result = runner.invoke(
         app,
         [
@@ -801,10 +1069,17 @@ def _damaged(data: bytes, offset: int, fill: bytes) -> bytes:
     return (data[:offset] + fill + data[offset + len(fill) :])[: len(data)]
 
 
-def _pose(ns: int, position: Sequence[float], frame: str = "base_link") -> Any:
+def _pose(
+    ns: int,
+    position: Sequence[float],
+    frame: str = "base_link",
+    quat: Sequence[float] = (0.0, 0.0, 0.0, 1.0),
+) -> Any:
+    """A PoseStamped; ``quat`` in ROS's order (x, y, z, w), as scipy's ``as_quat``."""
+    x, y, z, w = (float(c) for c in quat)
     pose = TS.types["geometry_msgs/msg/Pose"](
         position=_vector("geometry_msgs/msg/Point", position),
-        orientation=TS.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation=TS.types["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
     )
     return TS.types["geometry_msgs/msg/PoseStamped"](header=_header(ns, frame), pose=pose)
 
@@ -964,8 +1239,8 @@ def test_a_nan_pose_in_the_first_second_is_dropped(tmp_path: Path, robot: Robot)
         msgs.append(_tf_entry("/tf", ns, "base_link", "camera", cam, unit))
     path = _write(tmp_path / "nan", msgs)
     back = read_bag(path, robot=robot, objects={"glass": "/glass/pose", "cam": "tf:camera"})
-    np.testing.assert_array_equal(back.objects["glass"], np.median(kept, axis=0))
-    np.testing.assert_allclose(back.objects["cam"], [0.1, 0.2, 0.3], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(position_of(back.objects["glass"]), np.median(kept, axis=0))
+    np.testing.assert_allclose(position_of(back.objects["cam"]), [0.1, 0.2, 0.3], atol=1e-15)
     with pytest.raises(
         ValueError,
         match=r"objects\['glass'\]: the 31 message\(s\) of '/nan/pose' stamped within the first "

@@ -335,15 +335,62 @@ def test_one_object_parser_for_learn_and_reproduce() -> None:
     )
     assert sources["glass"] == "/glass/pose" and sources["coaster"] == "tf:coaster"
     np.testing.assert_array_equal(sources["basin"], [0.5, 0.0, 0.0])
+    forms = (
+        r"expected NAME=x,y,z \(metres\) or NAME=x,y,z,qw,qx,qy,qz \(a pose, quaternion w first\)"
+    )
     for texts, kinds, match in [
-        (["glass=/glass/pose"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=/glass/pose'"),
-        (["glass=1,2"], {}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
-        (["glass=1,2"], {"sources": True}, r"expected NAME=x,y,z \(metres\), got 'glass=1,2'"),
-        (["glass="], {}, r"expected NAME=x,y,z \(metres\), got 'glass='"),
-        (["=1,2,3"], {"sources": True}, r"expected NAME=SOURCE \(a topic, tf:frame or x,y,z\)"),
+        (["glass=/glass/pose"], {}, rf"{forms}, got 'glass=/glass/pose'"),
+        (["glass=1,2"], {}, rf"{forms}, got 'glass=1,2'"),
+        (["glass=1,2"], {"sources": True}, rf"{forms}, got 'glass=1,2'"),
+        (["glass="], {}, rf"{forms}, got 'glass='"),
+        (["=1,2,3"], {"sources": True}, r"expected NAME=SOURCE \(a topic, tf:frame, x,y,z or"),
     ]:
         with pytest.raises(typer.BadParameter, match=match):
             _parse_objects(texts, **kinds)
     for kinds in ({}, {"sources": True}):
         with pytest.raises(typer.Exit):
             _parse_objects(["glass=1,2,3", "glass=1,2,3"], **kinds)
+
+
+def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
+    """Issue 23: --object NAME=x,y,z,qw,qx,qy,qz is a pose (pytransform3d's order, not ROS's
+    x,y,z,w), given on as the 7-vector the library reads; other counts name both forms."""
+    from scipy.spatial.transform import Rotation
+
+    from pbdkit.apps.cli import _parse_objects
+    from pbdkit.learning.placement import check_placements, position_of, rotation_of
+
+    rng = np.random.default_rng(23)
+    rot = Rotation.from_quat(rng.normal(size=4))  # uniform on SO(3)
+    x, y, z, w = (float(v) for v in rot.as_quat())  # scipy: x, y, z, w
+    text = f"mug=0.5,-0.1,0.02,{w!r},{x!r},{y!r},{z!r}"
+    for kinds in ({}, {"sources": True}):
+        parsed = _parse_objects([text, "glass=0.3,0,0.1"], **kinds)
+        np.testing.assert_array_equal(parsed["mug"], [0.5, -0.1, 0.02, w, x, y, z])
+        assert parsed["glass"].shape == (3,)
+        placed = check_placements(parsed)  # what Demonstration and the skill accept
+        np.testing.assert_array_equal(position_of(placed["mug"]), [0.5, -0.1, 0.02])
+        rotation = rotation_of(placed["mug"])
+        assert rotation is not None and rotation_of(placed["glass"]) is None
+        np.testing.assert_allclose(rotation, rot.as_matrix(), rtol=0, atol=1e-12)
+    # A quarter turn about z: w first reads as intended; read as x,y,z,w it would not be.
+    quarter = _parse_objects(["mug=0,0,0,0.7071067811865476,0,0,0.7071067811865476"])
+    rotation = rotation_of(check_placements(quarter)["mug"])
+    assert rotation is not None
+    np.testing.assert_allclose(rotation @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
+
+    forms = r"NAME=x,y,z \(metres\) or NAME=x,y,z,qw,qx,qy,qz \(a pose, quaternion w first\)"
+    for kinds in ({}, {"sources": True}):
+        for values in ["1", "1,2", "1,2,3,4", "1,2,3,1,0,0", "1,2,3,1,0,0,0,0"]:
+            n = values.count(",") + 1
+            with pytest.raises(
+                typer.BadParameter, match=rf"expected {forms}, got 'mug={values}' \({n} numbers\)"
+            ):
+                _parse_objects([f"mug={values}"], **kinds)
+    # On the command line: a usage error (exit code 2) naming the option and both forms.
+    result = CliRunner().invoke(app, ["reproduce", "skill.npz", "--object", "mug=1,2,3,1,0,0"])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.replace("│", " ").split())
+    assert "Invalid value for --object: expected NAME=x,y,z (metres) or" in text, text
+    assert "NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w first)" in text, text
+    assert "got 'mug=1,2,3,1,0,0' (6 numbers)" in text, text

@@ -49,6 +49,7 @@ if TYPE_CHECKING:
     from .learning.probabilistic_ik import ReachWarning, ReproductionResult
     from .learning.skill import Skill
     from .prob import gaussian
+    from .prob.frames import FrameModel
     from .prob.gmm import GMM
     from .robots.kinematics import damped_pinv, nullspace_projector
     from .robots.model import Robot
@@ -58,6 +59,7 @@ if TYPE_CHECKING:
 # SciPy and pinocchio are loaded when a name that needs them is first used.
 _WHERE = {
     "GMM": "prob.gmm",
+    "FrameModel": "prob.frames",
     "Command": "learning.controller",
     "Controller": "learning.controller",
     "Demonstration": "learning.demonstration",
@@ -81,6 +83,7 @@ __all__ = [
     "Command",
     "Controller",
     "Demonstration",
+    "FrameModel",
     "LimitWarning",
     "ReachWarning",
     "ReproductionResult",

@@ -489,8 +489,10 @@ def learn(
         typer.Option(
             "--object",
             help="Bags: NAME=SOURCE, where the object is (repeat for several): a topic of "
-            "PoseStamped, PointStamped or TransformStamped (median over the first second), "
-            "tf:FRAME (a /tf frame), or x,y,z in the robot's base frame (m).",
+            "PoseStamped or TransformStamped (a pose: median position and mean orientation over "
+            "the first second), of PointStamped (a position), tf:FRAME (a /tf frame's pose), "
+            "x,y,z (a position) or x,y,z,qw,qx,qy,qz (a pose, quaternion w first; ROS orders "
+            "x,y,z,w) in the robot's base frame (m).",
         ),
     ] = None,
     gripper_topic: Annotated[
@@ -618,8 +620,10 @@ def _parse_objects(texts: list[str], *, sources: Literal[True]) -> dict[str, str
 def _parse_objects(texts: list[str], *, sources: bool = False) -> dict[str, Any]:
     """The --object NAME=VALUE options as a dict; an object given twice is an error.
 
-    VALUE is a position x,y,z (metres); with ``sources`` (`learn`'s bags), also where to read
-    it: a topic or tf:FRAME (any VALUE that is not numbers).
+    VALUE is a position x,y,z (metres), or a pose x,y,z,qw,qx,qy,qz with the quaternion **w
+    first** (pytransform3d's convention; ROS messages hold x,y,z,w), passed on as a 7-vector;
+    with ``sources`` (`learn`'s bags), also where to read it: a topic or tf:FRAME (any VALUE
+    that is not numbers).
     """
     objects: dict[str, Any] = {}
     for text in texts:
@@ -633,9 +637,9 @@ def _parse_objects(texts: list[str], *, sources: bool = False) -> dict[str, Any]
 def _parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
     """One --object NAME=VALUE option (see :func:`_parse_objects`)."""
     name, sep, rest = text.partition("=")
-    position = "NAME=x,y,z (metres)"
+    forms = "NAME=x,y,z (metres) or NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w first)"
     if not sep or not name or not rest:
-        want = "NAME=SOURCE (a topic, tf:frame or x,y,z)" if sources else position
+        want = "NAME=SOURCE (a topic, tf:frame, x,y,z or x,y,z,qw,qx,qy,qz)" if sources else forms
         raise typer.BadParameter(f"expected {want}, got {text!r}", param_hint="--object")
     try:
         values = [float(v) for v in rest.split(",")]
@@ -643,8 +647,9 @@ def _parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
         if sources:
             return name, rest
         values = []
-    if len(values) != 3:
-        raise typer.BadParameter(f"expected {position}, got {text!r}", param_hint="--object")
+    if len(values) not in (3, 7):
+        got = f"{len(values)} numbers" if values else "not numbers"
+        raise typer.BadParameter(f"expected {forms}, got {text!r} ({got})", param_hint="--object")
     return name, np.array(values)
 
 
@@ -653,7 +658,12 @@ def _parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
 def reproduce(
     skill_path: Annotated[Path, typer.Argument(metavar="SKILL", help="Skill file (.npz).")],
     obj: Annotated[
-        list[str], typer.Option("--object", help="NAME=x,y,z in the robot's base frame (m).")
+        list[str],
+        typer.Option(
+            "--object",
+            help="NAME=x,y,z (a position) or NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w "
+            "first; ROS orders x,y,z,w) in the robot's base frame (m).",
+        ),
     ],
     out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("repro.npz"),
     use: Annotated[

@@ -16,19 +16,21 @@ or a ROS 1 ``.bag``. The message definitions stored in the bag are used; a bag w
 read with ROS 2 Humble's. Written: rosbag2 bags (format version 9), sqlite3 (default) or MCAP
 storage, message definitions included.
 
-=================  ===============================================  =========================
-what               message type                                     field used
-=================  ===============================================  =========================
-joint states       ``sensor_msgs/msg/JointState``                   header.stamp, name,
-                                                                    position
-object (topic)     ``geometry_msgs/msg/PoseStamped``                pose.position
-                   ``geometry_msgs/msg/PointStamped``               point
-                   ``geometry_msgs/msg/TransformStamped``           transform.translation
+=================  ===============================================  ================================
+what               message type                                     fields used
+=================  ===============================================  ================================
+joint states       ``sensor_msgs/msg/JointState``                   header.stamp, name, position
+object (topic)     ``geometry_msgs/msg/PoseStamped``                pose.position, pose.orientation
+                   ``geometry_msgs/msg/TransformStamped``           transform.translation, .rotation
+                   ``geometry_msgs/msg/PointStamped``               point (a position only)
 object (tf)        ``tf2_msgs/msg/TFMessage`` on ``/tf``,           every transform
                    ``/tf_static``
 gripper            ``std_msgs/msg/Bool``, ``Float64``, ``Float32``  data (closed where > 0.5)
 trajectory out     ``trajectory_msgs/msg/JointTrajectory``          joint_names, points
-=================  ===============================================  =========================
+=================  ===============================================  ================================
+
+An object read from a ``PoseStamped``, a ``TransformStamped`` or tf is a pose (its orientation
+is kept); one read from a ``PointStamped`` is a position.
 
 Conventions
 -----------
@@ -49,20 +51,33 @@ Conventions
   does not have (gripper fingers) are ignored, and so are messages that name none of the
   robot's joints (another driver publishing on the same topic). A message that names some of
   them but not all is an error.
-- Objects are positions in the robot's base frame (``robot.base``, the URDF root link), constant
-  during a demonstration (as in the paper). A topic source gives the component-wise median of
-  its messages stamped within the demonstration's first second, [t0, t0 + 1 s]: before the hand
-  moves anything, and robust to a perception outlier. Non-finite positions (a NaN from a
-  tracker that lost the object) are outliers too: dropped before the median, an error only
-  if no finite one remains (tf transforms likewise). A message in another frame than the base
-  (its ``header.frame_id``, neither empty nor ``robot.base``) is expressed in the base frame
-  through tf, as a ``"tf:frame"`` source is.
+- Objects are placed in the robot's base frame (``robot.base``, the URDF root link), constant
+  during a demonstration (as in the paper); see :mod:`pbdkit.learning.placement`. A
+  ``PoseStamped``, ``TransformStamped`` or ``"tf:frame"`` source gives a pose, kept as its 4x4
+  transform [[R, p], [0, 0, 0, 1]] (the orientation as well as the position); a
+  ``PointStamped`` source gives a position (3,); a fixed source is what it is: a position
+  (3,), a 4x4 transform or (x, y, z, qw, qx, qy, qz).
+- Quaternions: a ROS message holds (x, y, z, w), **w last**; pbdkit's own are (qw, qx, qy,
+  qz), **w first** (pytransform3d's convention), as in a fixed source (x, y, z, qw, qx, qy,
+  qz). A message's quaternion is normalized; a zero or non-finite one is dropped.
+- A topic source gives the component-wise median of the positions of its messages stamped
+  within the demonstration's first second, [t0, t0 + 1 s]: before the hand moves anything, and
+  robust to a perception outlier; for a pose, the orientation is the Karcher mean
+  (:func:`pbdkit.prob.rotations.mean_rotation`) of the orientations of the same messages
+  (not robust to a gross outlier as the median is: a flip of 180 degrees in one of N messages
+  turns the mean by about 180/N degrees). Non-finite positions (a NaN from a tracker that lost
+  the object) are outliers too: dropped before the median, an error only if no finite one
+  remains (tf transforms likewise). A message counts for the orientation if its position is
+  finite and its quaternion is finite and not zero; an error if no message does. A message in
+  another frame than the base (its ``header.frame_id``, neither empty nor ``robot.base``) is
+  expressed in the base frame through tf, as a ``"tf:frame"`` source is: position and
+  orientation.
 - tf: the transforms of ``/tf`` stamped within the first second and every transform of
   ``/tf_static``. Each parent -> child link is estimated from its transforms (median
-  translation; the sign-aligned mean of the quaternions, normalized) and a frame's position in
-  the base frame composes the links from the base down to it through their parents (tf2's
-  lookup: the base may itself hang below a common root, such as ``world``). If the base is not
-  reached, the error names both chains up to where they stop.
+  translation; the sign-aligned mean of the finite, non-zero quaternions, normalized) and a
+  frame's pose in the base frame composes the links from the base down to it through their
+  parents (tf2's lookup: the base may itself hang below a common root, such as ``world``). If
+  the base is not reached, the error names both chains up to where they stop.
 - The gripper messages carry no header: they are placed by their recording (log) time against
   the joint states' log times and held between messages (zero-order hold); before the first
   message the gripper is open (0). A NaN or infinite gripper value among the messages that
@@ -75,7 +90,8 @@ bag that does not exist, :class:`ValueError` otherwise, naming the argument and 
 and actual value: a topic not in the bag (the message lists the bag's topics and types), a topic
 of another type (expected and actual types), non-monotonic stamps (the two messages and their
 stamps), a gap in them, a robot joint missing from a message (named), an empty cut, an object
-frame that tf does not join to the base. An error about a bag's content starts with the bag's
+without a finite position or (for a pose) without a valid orientation in the first second, an
+object frame that tf does not join to the base. An error about a bag's content starts with the bag's
 path. A FIFO, a device or a socket (or a bag directory holding one) is refused before it is
 opened: reading one blocks, or never ends. A damaged file makes the reader fail in many ways
 (OverflowError, KeyError, AssertionError, ...): all are a ValueError naming the bag.
@@ -106,7 +122,15 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array, check_positive_float
+from ..prob.rotations import (
+    as_pose,
+    matrix_from_quaternion,
+    mean_rotation,
+    pose_matrix,
+    quaternion_from_matrix,
+)
 from .demonstration import Demonstration
+from .placement import position_of, rotation_of
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -120,6 +144,7 @@ __all__ = [
     "GRIPPER_TYPES",
     "JOINT_STATE_TYPE",
     "OBJECT_TYPES",
+    "POSE_TYPES",
     "STORAGES",
     "TF_TOPICS",
     "TRAJECTORY_TYPE",
@@ -138,6 +163,14 @@ OBJECT_TYPES: Mapping[str, str] = {
     "geometry_msgs/msg/PointStamped": "point",
     "geometry_msgs/msg/TransformStamped": "transform.translation",
 }
+#: The object types that give a pose, and where each holds the orientation: a
+#: ``geometry_msgs/msg/Quaternion``, (x, y, z, w) with w **last** (ROS's order).
+POSE_TYPES: Mapping[str, str] = {
+    "geometry_msgs/msg/PoseStamped": "pose.orientation",
+    "geometry_msgs/msg/TransformStamped": "transform.rotation",
+}
+#: A message's quaternion of a smaller norm is no rotation (a tracker's "unknown"): dropped.
+MIN_QUATERNION_NORM = 1e-9
 GRIPPER_TYPES = ("std_msgs/msg/Bool", "std_msgs/msg/Float64", "std_msgs/msg/Float32")
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPICS = ("/tf", "/tf_static")
@@ -379,14 +412,21 @@ def read_bag(
         or a ROS 1 ``.bag``.
     robot : Robot
         The arm: its ``joint_names`` order the joints, its ``base`` (the URDF root link) is
-        the frame of the object positions.
+        the frame of the object positions and poses.
     joint_topic : str
         Topic of ``sensor_msgs/msg/JointState`` messages (kinesthetic teaching).
-    objects : dict str -> str or array-like of shape (3,), optional
-        Where each object's position comes from: a topic of ``geometry_msgs/msg/PoseStamped``,
-        ``PointStamped`` or ``TransformStamped`` (median over the first second), a tf frame
-        written ``"tf:frame_name"`` (its position in the base frame), or a fixed position
-        (3,) in the base frame (m). Default: none (a joint-space skill).
+    objects : dict str -> str or array-like, optional
+        Where each object is, in the base frame:
+
+        - a topic of ``geometry_msgs/msg/PoseStamped`` or ``TransformStamped``: a pose, the
+          median position and the Karcher mean orientation of the messages of the first
+          second (a ROS quaternion is (x, y, z, w), w last: read so);
+        - a topic of ``geometry_msgs/msg/PointStamped``: a position, their median;
+        - a tf frame written ``"tf:frame_name"``: its pose;
+        - fixed: a position (3,) (m), a 4x4 transform, or (x, y, z, qw, qx, qy, qz) with the
+          quaternion **w first** (pytransform3d's convention, not ROS's).
+
+        Default: none (a joint-space skill).
     gripper_topic : str, optional
         Topic of ``std_msgs/msg/Bool`` or ``Float64`` (``Float32``) messages: closed where
         > 0.5, held between messages, open before the first. Default: no gripper signal.
@@ -398,7 +438,9 @@ def read_bag(
     -------
     demo : Demonstration
         t (T,) seconds from the first kept stamp, joints (T, n) in ``robot.joint_names``
-        order, the objects in the order given, gripper (T,) of 0.0 and 1.0 or None.
+        order, the objects in the order given (a pose as its 4x4 transform, a position as
+        (3,): :func:`pbdkit.learning.placement.position_of` gives the position of either),
+        gripper (T,) of 0.0 and 1.0 or None.
 
     Raises
     ------
@@ -409,8 +451,10 @@ def read_bag(
         message lists the bag's topics), a topic of the wrong type (expected and actual
         types), stamps that do not increase or stop for more than 1 s, a robot joint missing
         from a message, fewer than 2 samples between ``start`` and ``end``, an object without
-        a finite position in the first second, a NaN gripper value, or a frame that tf does
-        not join to the base. An error about the bag's content starts with its path.
+        a finite position (or, from a pose topic, without a finite non-zero quaternion) in
+        the first second, a fixed source that is no position or pose, a NaN gripper value, or
+        a frame that tf does not join to the base. An error about the bag's content starts
+        with its path.
     """
     joint_names = getattr(robot, "joint_names", None)
     base = getattr(robot, "base", None)
@@ -449,27 +493,34 @@ def read_bag(
             reader.close()
 
 
+_SOURCE_FORMS = (
+    "a topic, 'tf:frame', a position (3,) or a pose (4x4, or x, y, z, qw, qx, qy, qz with the "
+    "quaternion w first)"
+)
+
+
 def _check_sources(objects: object) -> dict[str, str | Float]:
+    """Topics and tf frames as given; fixed sources as a position (3,) or a 4x4 pose."""
     if objects is None:
         return {}
     if not isinstance(objects, Mapping):
         raise ValueError(
-            "objects must be a dict mapping object names to a topic, 'tf:frame' or a position "
-            f"(3,), got {type(objects).__name__}"
+            f"objects must be a dict mapping object names to {_SOURCE_FORMS}, got "
+            f"{type(objects).__name__}"
         )
     out: dict[str, str | Float] = {}
     for name, source in objects.items():
         if not isinstance(name, str) or not name:
             raise ValueError(f"objects keys must be non-empty strings, got {name!r}")
+        what = f"objects[{name!r}]"
         if isinstance(source, str):
             if not source or source == TF_PREFIX:
-                raise ValueError(
-                    f"objects[{name!r}] must be a topic, 'tf:frame' or a position (3,), "
-                    f"got {source!r}"
-                )
+                raise ValueError(f"{what} must be {_SOURCE_FORMS}, got {source!r}")
             out[name] = source
         else:
-            out[name] = check_array(source, f"objects[{name!r}]", shape=(3,))
+            # Numbers only (check_array refuses strings, dates, complex), then the forms.
+            position, rotation = as_pose(check_array(source, what, finite=False), what)
+            out[name] = position if rotation is None else pose_matrix(position, rotation)
     return out
 
 
@@ -530,22 +581,22 @@ def _read_demonstration(
             tf = _TfTree.from_bag(bag, t0)
         return tf
 
-    positions: dict[str, Float] = {}
+    placements: dict[str, Float] = {}  # positions (3,) and poses (4, 4)
     for name, source in sources.items():
         what = f"objects[{name!r}]"
         if not isinstance(source, str):
-            positions[name] = source
+            placements[name] = source
         elif source.startswith(TF_PREFIX):
             frame = _frame(source[len(TF_PREFIX) :])
-            positions[name] = tf_tree().position(frame, base, what)
+            placements[name] = tf_tree().pose(frame, base, what)
         else:
-            positions[name] = _object_position(bag, source, t0, base, tf_tree, what)
+            placements[name] = _object_placement(bag, source, t0, base, tf_tree, what)
 
     gripper = None if gripper_topic is None else _gripper(bag, gripper_topic, logs)
     return Demonstration(
         t=(stamps - t0).astype(np.float64) * 1e-9,
         joints=joints,
-        objects=positions,
+        objects=placements,
         gripper=gripper,
     )
 
@@ -660,18 +711,37 @@ def _joint_order(
     return np.array([where[n] for n in joint_names], dtype=np.intp)
 
 
-def _position_of(msg: Any, msgtype: str) -> tuple[Float, str]:
-    """(position (3,), frame) of an object message."""
+def _placement_of(msg: Any, msgtype: str) -> tuple[Float, Float | None, str]:
+    """(position (3,), ROS quaternion (x, y, z, w) or None for a point, frame) of an object
+    message."""
+    quaternion = None
     if msgtype == "geometry_msgs/msg/PoseStamped":
-        v = msg.pose.position
+        v, r = msg.pose.position, msg.pose.orientation
+        quaternion = np.array([r.x, r.y, r.z, r.w], dtype=np.float64)
     elif msgtype == "geometry_msgs/msg/PointStamped":
         v = msg.point
     else:
-        v = msg.transform.translation
-    return np.array([v.x, v.y, v.z], dtype=np.float64), _frame(str(msg.header.frame_id))
+        v, r = msg.transform.translation, msg.transform.rotation
+        quaternion = np.array([r.x, r.y, r.z, r.w], dtype=np.float64)
+    position = np.array([v.x, v.y, v.z], dtype=np.float64)
+    return position, quaternion, _frame(str(msg.header.frame_id))
 
 
-def _object_position(
+def _is_rotation(quaternion: Float) -> bool:
+    """Whether a message's quaternion is a rotation: finite and not zero (then normalized)."""
+    return bool(
+        np.all(np.isfinite(quaternion)) and np.linalg.norm(quaternion) > MIN_QUATERNION_NORM
+    )
+
+
+def _ros_rotation(quaternion: Float) -> Float:
+    """The rotation matrix of a ROS quaternion (x, y, z, w), w LAST, normalized first (the
+    Hamilton convention, as tf2's): pbdkit's quaternions put w first."""
+    x, y, z, w = quaternion
+    return matrix_from_quaternion(np.array([w, x, y, z], dtype=np.float64))
+
+
+def _object_placement(
     bag: _Bag,
     topic: str,
     t0: int,
@@ -679,10 +749,15 @@ def _object_position(
     tf_tree: Callable[[], _TfTree],
     what: str,
 ) -> Float:
+    """The object of a topic source in the base frame: a position (3,) (PointStamped), or a
+    pose (4, 4) (PoseStamped, TransformStamped): the median of the finite positions of the
+    messages of the first second and the Karcher mean of those messages' valid orientations."""
     msgtype = bag.check_topic(topic, tuple(OBJECT_TYPES), what)
     window: list[Float] = []
+    finite: list[Float] = []
+    rotations: list[Float] = []  # of the messages with a finite position
     frames: set[str] = set()
-    n_messages = n_finite = 0
+    n_messages = 0
     first = last = 0  # the earliest and latest stamps (ns), for the error message
     for _, raw, conn in bag.raw(topic):
         msg = None
@@ -694,11 +769,15 @@ def _object_position(
         n_messages += 1
         if not t0 <= ns <= t0 + OBJECT_WINDOW_NS:
             continue  # outside the first second: not deserialized
-        pos, frame = _position_of(bag.message(raw, conn) if msg is None else msg, msgtype)
+        pos, quaternion, frame = _placement_of(
+            bag.message(raw, conn) if msg is None else msg, msgtype
+        )
         window.append(pos)
         if np.all(np.isfinite(pos)):  # a NaN from perception is an outlier too: dropped
-            n_finite += 1
+            finite.append(pos)
             frames.add(frame)
+            if quaternion is not None and _is_rotation(quaternion):
+                rotations.append(_ros_rotation(quaternion))
     if not window:
         span = (
             f"its {n_messages} messages are stamped from {_seconds(first - t0)} to "
@@ -711,7 +790,7 @@ def _object_position(
             f"demonstration ([0, 1] s after the first joint state); {span}. Give the position "
             "as x,y,z, or choose start"
         )
-    if not n_finite:
+    if not finite:
         raise ValueError(
             f"{what}: the {len(window)} message(s) of {topic!r} stamped within the first "
             "second of the demonstration all hold NaN or infinite positions. Give the position "
@@ -721,13 +800,21 @@ def _object_position(
         raise ValueError(
             f"{what}: the messages of {topic!r} are in several frames {sorted(frames)}"
         )
-    finite = [p for p in window if np.all(np.isfinite(p))]
-    position = np.median(np.stack(finite), axis=0)
+    if msgtype in POSE_TYPES and not rotations:
+        raise ValueError(
+            f"{what}: none of the {len(finite)} message(s) of {topic!r} with a finite position "
+            "stamped within the first second of the demonstration holds an orientation: their "
+            f"quaternions ({POSE_TYPES[msgtype]}: x, y, z, w) are all zero, NaN or infinite. "
+            "Give the pose as x,y,z,qw,qx,qy,qz (quaternion w first), or choose start"
+        )
+    position = np.asarray(np.median(np.stack(finite), axis=0), dtype=np.float64)
+    rotation = mean_rotation(np.stack(rotations)) if rotations else None
     (frame,) = frames
-    if frame in ("", base):
-        return np.asarray(position, dtype=np.float64)
-    rot, trans = tf_tree().transform(frame, base, f"{what} (frame {frame!r} of {topic!r})")
-    return np.asarray(rot @ position + trans, dtype=np.float64)
+    if frame not in ("", base):
+        rot, trans = tf_tree().transform(frame, base, f"{what} (frame {frame!r} of {topic!r})")
+        position = np.asarray(rot @ position + trans, dtype=np.float64)
+        rotation = None if rotation is None else rot @ rotation
+    return position if rotation is None else pose_matrix(position, rotation)
 
 
 def _gripper(bag: _Bag, topic: str, joint_logs: NDArray[np.int64]) -> Float:
@@ -764,18 +851,6 @@ def _gripper(bag: _Bag, topic: str, joint_logs: NDArray[np.int64]) -> Float:
 
 
 # ============================================================================ tf
-def _rotation_from_quaternion(q: Float) -> Float:
-    """Rotation matrix of a unit quaternion (x, y, z, w) (Hamilton convention, as tf2)."""
-    x, y, z, w = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 class _TfTree:
     """The tf links of a demonstration's first second: child -> (parent, rotation, translation),
     the child frame's pose in its parent's."""
@@ -841,16 +916,19 @@ class _TfTree:
         # T_base_frame = T_root_base^-1 @ T_root_frame
         return rot_b.T @ rot_f, rot_b.T @ (trans_f - trans_b)
 
-    def position(self, frame: str, base: str, what: str) -> Float:
-        """Origin of ``frame`` in ``base`` (m)."""
-        return self.transform(frame, base, f"{what} (tf:{frame})")[1]
+    def pose(self, frame: str, base: str, what: str) -> Float:
+        """The pose (4, 4) of ``frame`` in ``base``: its origin (m) and axes."""
+        rot, trans = self.transform(frame, base, f"{what} (tf:{frame})")
+        return pose_matrix(trans, rot)
 
 
 def _mean_transform(
     items: Sequence[tuple[Float, Float]], parent: str, child: str
 ) -> tuple[Float, Float]:
-    """Rotation and translation of one link from its samples: median translation, mean of
-    the sign-aligned quaternions, normalized (the chordal mean: exact for equal samples)."""
+    """Rotation and translation of one link from its samples (quaternions (x, y, z, w), ROS's
+    order): median translation, mean of the sign-aligned quaternions, normalized (the chordal
+    mean: exact for equal samples). A zero quaternion (no rotation) counts for the translation
+    only: as the reference of the signs it would leave them unaligned."""
     items = [(p, q) for p, q in items if np.all(np.isfinite(p)) and np.all(np.isfinite(q))]
     if not items:  # non-finite samples are dropped as outliers, as an object topic's are
         raise ValueError(
@@ -858,13 +936,13 @@ def _mean_transform(
             "infinite"
         )
     trans = np.median(np.stack([p for p, _ in items]), axis=0)
-    quats = np.stack([q for _, q in items])
+    quats = np.stack([q for _, q in items if _is_rotation(q)] or [np.zeros(4)])
     quats = quats * np.where(quats @ quats[0] < 0, -1.0, 1.0)[:, None]
     q = quats.mean(axis=0)
     norm = float(np.linalg.norm(q))
     if not (np.isfinite(norm) and norm > 1e-9 and np.all(np.isfinite(trans))):
         raise ValueError(f"tf: the transform {parent!r} -> {child!r} is not a valid rotation")
-    return _rotation_from_quaternion(q / norm), np.asarray(trans, dtype=np.float64)
+    return _ros_rotation(q / norm), np.asarray(trans, dtype=np.float64)
 
 
 # ============================================================================ writing
@@ -1137,8 +1215,10 @@ def write_demonstration_bag(
     """Record a demonstration as a rosbag2 bag, as a real arm's teaching session would be.
 
     For recording simulated demonstrations, and for tests and examples: :func:`read_bag` of
-    the result with the same topics gives the demonstration back (joints and objects exactly,
-    times to 1 ns, the gripper at the 0.5 threshold). Header stamps and log times are equal:
+    the result with the same topics gives the demonstration back (joints and object positions
+    exactly, object orientations to 1e-9, times to 1 ns, the gripper at the 0.5 threshold),
+    except that every object comes back as a pose: a ``PoseStamped`` has an orientation, the
+    identity for an object given as a position. Header stamps and log times are equal:
     ``start_time`` + (t - t[0]).
 
     Parameters
@@ -1155,7 +1235,8 @@ def write_demonstration_bag(
         Topic of the ``sensor_msgs/msg/JointState`` messages, one per sample.
     object_topics : dict str -> str or None, optional
         Topic of each object's ``geometry_msgs/msg/PoseStamped`` messages (default
-        ``"/{name}/pose"``; None: the object is not recorded). Identity orientation.
+        ``"/{name}/pose"``; None: the object is not recorded): its position, and its
+        orientation as a ROS quaternion (x, y, z, w), the identity for a position.
     object_rate : float
         Rate of the object messages (Hz), over the demonstration's duration.
     gripper_topic : str or None
@@ -1248,9 +1329,16 @@ def write_demonstration_bag(
             if topic is None:
                 continue
             oconn = writer.add_connection(topic, "geometry_msgs/msg/PoseStamped", typestore=ts)
-            x, y, z = (float(v) for v in demo.objects[name])
+            x, y, z = (float(v) for v in position_of(demo.objects[name]))
+            rot = rotation_of(demo.objects[name])
+            # pbdkit's quaternions are w first; a ROS Quaternion is (x, y, z, w).
+            qw, qx, qy, qz = (
+                (1.0, 0.0, 0.0, 0.0)
+                if rot is None
+                else (float(v) for v in quaternion_from_matrix(rot))
+            )
             pose = pose_t(
-                position=point_t(x=x, y=y, z=z), orientation=quat_t(x=0.0, y=0.0, z=0.0, w=1.0)
+                position=point_t(x=x, y=y, z=z), orientation=quat_t(x=qx, y=qy, z=qz, w=qw)
             )
             for ns in pose_stamps:
                 msg = pose_cls(header=_header(int(ns), frame_id), pose=pose)

@@ -15,21 +15,20 @@ File formats
 ``.npz`` (:func:`save_demonstrations` / :func:`load_demonstrations`): a NumPy archive with no
 pickled object (``allow_pickle=False`` on load), written atomically. Keys:
 
-====================  ========================  ===============================================
-key                   dtype, shape              meaning
-====================  ========================  ===============================================
-``format``            unicode, ()               ``"pbdkit-demonstrations"``
-``version``           int64, ()                 ``1``
-``n_demos``           int64, ()                 number of demonstrations M
-``object_names``      unicode, (N,)             object names, in a fixed order
-``has_gripper``       bool, ()                  whether ``demo_i_gripper`` keys exist
-``demo_{i}_t``        float64, (T_i,)           time stamps in seconds, strictly increasing
-``demo_{i}_joints``   float64, (T_i, n)         joint angles in radians
-``demo_{i}_objects``  float64, (N, 3)           object positions, rows in ``object_names`` order
-``demo_{i}_rotations`` float64, (N, 3, 3)       version 2 only: each object's rotation matrix
-                                                (a pose), all NaN for a position-only object
-``demo_{i}_gripper``  float64, (T_i,)           gripper signal (0 open, 1 closed), optional
-====================  ========================  ===============================================
+======================  ==================  ==================================================
+key                     dtype, shape        meaning
+======================  ==================  ==================================================
+``format``              unicode, ()         ``"pbdkit-demonstrations"``
+``version``             int64, ()           ``1`` (positions only) or ``2`` (poses)
+``n_demos``             int64, ()           number of demonstrations M
+``object_names``        unicode, (N,)       object names, in a fixed order
+``has_gripper``         bool, ()            whether ``demo_i_gripper`` keys exist
+``demo_{i}_t``          float64, (T_i,)     time stamps in seconds, strictly increasing
+``demo_{i}_joints``     float64, (T_i, n)   joint angles in radians
+``demo_{i}_objects``    float64, (N, 3)     object positions, rows in ``object_names`` order
+``demo_{i}_rotations``  float64, (N, 3, 3)  version 2: rotations (poses), NaN for a position
+``demo_{i}_gripper``    float64, (T_i,)     gripper signal (0 open, 1 closed), optional
+======================  ==================  ==================================================
 
 Version 2 is written when some object has a pose (:mod:`pbdkit.learning.placement`); a file of
 positions only is written as version 1, as before, and both versions load.

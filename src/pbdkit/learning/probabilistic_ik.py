@@ -530,7 +530,7 @@ class ReproductionResult:
         skill of positions only.
     orientation_errors : dict str -> ndarray, shape (T,)
         For every oriented object (in use or not): the angle (rad) between the hand's
-        orientation and the one its constraint expects, |log(R_hand R_target^T)|.
+        orientation and the one its constraint expects, the norm of log(R_hand R_target^T).
 
     With motion limits the result has a sample per step of the skill plus the lead-in samples:
     T = L + n_steps.
@@ -611,7 +611,7 @@ def check_objects(
             if not is_pose(v):
                 raise ValueError(
                     f"{name}[{k!r}] must be a pose (a 4x4 transform or x, y, z, qw, qx, qy, qz): "
-                    f"the skill learned the hand's position and orientation in {k!r}'s frame; "
+                    f"the skill learned the hand's position and orientation in the frame of {k!r}; "
                     f"got a position {v.tolist()}"
                 )
             out[k] = v
@@ -1734,7 +1734,7 @@ class PoseFusedStep(ControllerStep):
         """theta_j from theta_{j-1} = ``theta`` (x, the 6-D jac and the orientation ``axes``
         from :meth:`kinematics`)."""
         assert x is not None and jac is not None and axes is not None
-        lam_t, grad_t, _ = self._terms(j, x, jac, axes)
+        lam_t, grad_t, task_energy = self._terms(j, x, jac, axes)
         lam = self.prec_list[j] + lam_t
         grad = self.prec_list[j].dot(theta) - self.eta_list[j] + grad_t
         _, step, info = dposv(lam, -grad)
@@ -1750,7 +1750,10 @@ class PoseFusedStep(ControllerStep):
         new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
         x_new, rot_new, jac_new = self.kin(new)
         if self.line_search:
-            before = self._energy(j, theta, x, axes)
+            prec_t = self.prec_list[j]
+            before = float(
+                0.5 * theta.dot(prec_t.dot(theta)) - self.eta_list[j].dot(theta) + task_energy
+            )
             halvings = 0
             while self._energy(j, new, x_new, rot_new) > before and halvings < MAX_HALVINGS:
                 halvings += 1
@@ -1773,6 +1776,25 @@ class PoseFusedStep(ControllerStep):
         """Sigma_j = (sum of the precisions)^-1 with the 6-D Jacobian ``jac`` used."""
         inv = np.linalg.inv(sum(self.precisions(j, jac).values()))
         return np.asarray(0.5 * (inv + inv.T))
+
+    def outputs(self, start: int, jacs: Float) -> tuple[Float, dict[str, Float], dict[str, Float]]:
+        """:meth:`covariance`, :meth:`influence` and :meth:`influence_joint_space` for the
+        steps ``start`` .. T - 1 at once, with the 6-D Jacobians ``jacs`` (T - start, 6, n)
+        used at them."""
+        jt = np.swapaxes(jacs, -1, -2)
+        prec = {JOINT: self.c.joint_prec[start:]}
+        for k in self.tasks:
+            w = self.world[k]
+            if w.rotation is None:
+                prec[k] = jt[:, :, :3] @ w.precision[start:] @ jacs[:, :3]
+            else:
+                prec[k] = jt @ w.precision[start:] @ jacs
+        cov = _spd_inverse(np.sum(list(prec.values()), axis=0))
+        traces = {k: np.einsum("tij,tji->t", cov, p) for k, p in prec.items()}
+        shares = {k: traces[k] / 6 for k in self.tasks}
+        influence = {JOINT: np.clip(1.0 - sum(shares.values()), 0.0, 1.0), **shares}
+        influence_js = {k: tr / self.n for k, tr in traces.items()}
+        return cov, influence, influence_js
 
     def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
         """Hand pose space (6-D): share_n = tr(Sigma Lambda_n) / 6, the joint constraint the
@@ -1933,6 +1955,16 @@ def _pose_loop(
         positions_l.append(x)
         jacs_l.append(jac)
     jac_used = [jacs_l[0], *jacs_l[:-1]]
+    if isinstance(step, PoseFusedStep):
+        covs_b, influence_b, influence_js_b = step.outputs(start, np.array(jac_used))
+        return (
+            np.array(joints_l),
+            np.array(positions_l),
+            covs_b,
+            influence_b,
+            influence_js_b,
+            _limited_mask(n_steps, limited),
+        )
     covs = np.empty((n_steps, c.n_joints, c.n_joints))
     influence: dict[str, list[float]] = {}
     influence_js: dict[str, list[float]] = {}

@@ -156,8 +156,8 @@ def matrix_from_quaternion(q: npt.ArrayLike) -> Float:
 def log_map(rot: npt.ArrayLike) -> Float:
     """Rotation vectors (..., 3), angle in [0, pi], of rotation matrices (..., 3, 3).
 
-    Through the quaternion (:func:`quaternion_from_matrix`): r = 2 atan2(|v|, w) v / |v|, exact
-    near 0 and near pi, where arccos of the trace loses its digits.
+    Through the quaternion (:func:`quaternion_from_matrix`): r = 2 atan2(s, w) v / s with
+    s = norm(v), exact near 0 and near pi, where arccos of the trace loses its digits.
     """
     q = quaternion_from_matrix(rot)
     w, v = q[..., 0], q[..., 1:]
@@ -211,7 +211,8 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
         (x, y, z, qw, qx, qy, qz), the quaternion **w first** (pytransform3d's convention; a
         ROS message's quaternion is (x, y, z, w): reorder it). The quaternion is normalized;
         a rotation matrix within :data:`ORTHONORMAL_TOLERANCE` of orthonormal is
-        re-orthonormalized, and must have determinant +1.
+        re-orthonormalized (one orthonormal to 1e-12 is kept as given), and must have
+        determinant +1.
     name : str
         The argument's name, for errors.
 
@@ -255,6 +256,8 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
             f"(orthonormal, determinant +1); it is off by {dev:.3g} with determinant "
             f"{np.linalg.det(rot):.3g}"
         )
+    if dev <= 1e-12:  # orthonormal to rounding: kept as given (files round-trip exactly)
+        return arr[:3, 3].copy(), rot.copy()
     u, _, vt = np.linalg.svd(rot)
     return arr[:3, 3].copy(), np.asarray(u @ vt, dtype=np.float64)
 
@@ -276,7 +279,7 @@ def check_rotation(value: object, name: str = "rotation") -> Float:
 
 def mean_rotation(rotations: npt.ArrayLike, weights: npt.ArrayLike | None = None) -> Float:
     """The (weighted) Karcher mean of rotation matrices (M, 3, 3): the rotation R minimizing
-    sum_i w_i |log(R_i R^T)|^2, from the chordal mean (the projection of sum_i w_i R_i onto
+    sum_i w_i norm(log(R_i R^T))^2, from the chordal mean (the projection of sum_i w_i R_i onto
     SO(3)) by Gauss-Newton. Unique for rotations within a ball of radius pi/2."""
     rs = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
     w = np.ones(rs.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
@@ -364,7 +367,7 @@ def log3(rot: Float) -> Float:
 
 def left_jacobian_inverse3(r: Float) -> Float:
     """:func:`left_jacobian_inverse` of one rotation vector (3,), for control loops
-    ([r]x^2 = r r^T - |r|^2 I)."""
+    ([r]x^2 = r r^T - norm(r)^2 I)."""
     x, y, z = float(r[0]), float(r[1]), float(r[2])
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
