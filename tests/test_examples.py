@@ -1,6 +1,7 @@
 """The scripts in examples/ run as a user runs them (a fresh interpreter, an output folder) and
 do what they print: bags read back by rosbags' own reader, a trajectory for the new objects
-within the arm's limits, and the Panda's 1 kHz setpoints within Franka's."""
+within the arm's limits, the Panda's grasps of turned mugs (its pose skill's and its
+position-only skill's, recomputed) and its 1 kHz setpoints within Franka's."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from pbdkit.robots import panda
 from pbdkit.robots.model import Robot
 
 # Every test reads the runs of both example scripts (a fresh interpreter each; the Panda's takes
-# about 12 s, 40 reproductions of a 1000-step skill among them).
+# about 8 s, 41 reproductions of a 1000-step skill among them).
 pytestmark = pytest.mark.slow
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -83,28 +84,14 @@ def _trajectory(path: Path) -> Trajectory:
     )
 
 
-def _assert_is_reproduction(
-    traj: Trajectory, res: ReproductionResult, *, reloaded_rotation: bool = False
-) -> None:
+def _assert_is_reproduction(traj: Trajectory, res: ReproductionResult) -> None:
     """The bag holds the reproduction: its samples (lead-in included), its timing (to the
-    nanosecond of time_from_start), and the velocities and accelerations of that timing.
-
-    ``reloaded_rotation``: ``res`` comes from a skill with an oriented constraint reloaded from
-    its file. Skill.load re-orthonormalizes the stored rotation base (check_rotation), which
-    moves it by about 1e-16 and the reproduction by about 1e-8 rad, 4e-7 s and 1e-4 rad/s^2
-    (measured): the bag is compared to those, not to the bit.
-    """
+    nanosecond of time_from_start), and the velocities and accelerations of that timing."""
     assert res.times is not None and res.velocities is not None and res.accelerations is not None
-    if reloaded_rotation:
-        np.testing.assert_allclose(traj.q, res.joints, rtol=0, atol=1e-7)
-        np.testing.assert_allclose(traj.t, res.times, rtol=0, atol=1e-5)
-        np.testing.assert_allclose(traj.v, res.velocities, rtol=0, atol=1e-4)
-        np.testing.assert_allclose(traj.a, res.accelerations, rtol=0, atol=1e-2)
-    else:
-        np.testing.assert_array_equal(traj.q, res.joints)
-        np.testing.assert_allclose(traj.t, res.times, rtol=0, atol=1e-9)
-        np.testing.assert_array_equal(traj.v, res.velocities)
-        np.testing.assert_array_equal(traj.a, res.accelerations)
+    np.testing.assert_array_equal(traj.q, res.joints)
+    np.testing.assert_allclose(traj.t, res.times, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(traj.v, res.velocities)
+    np.testing.assert_array_equal(traj.a, res.accelerations)
     np.testing.assert_allclose(traj.v[[0, -1]], 0.0, atol=1e-12)  # at rest at both ends
 
 
@@ -253,7 +240,7 @@ def test_panda_from_bags(runs: dict[str, tuple[Path, str]]) -> None:
     n_lead = int(np.count_nonzero(res.lead_in))
     assert n_lead == _number(r"offline: (\d+) lead-in points", text) > 0
     assert traj.names == robot.joint_names and traj.q.shape == (skill.n_steps + n_lead, 7)
-    _assert_is_reproduction(traj, res, reloaded_rotation=True)
+    _assert_is_reproduction(traj, res)
     assert traj.t[0] == 0.0 and np.all(np.diff(traj.t) > 0)
     assert abs(traj.t[-1] - _number(r"(\d+\.\d+) s\n", text.split("wrote")[-1])) < 0.01
     assert traj.gripper == [False, True]
