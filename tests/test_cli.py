@@ -398,15 +398,15 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
 
 # ----------------------------------------------------------------------------- poses (issue 23)
 def _mug_demos(path: Path) -> np.ndarray:
-    """Five Panda demonstrations grasping a mug given as a pose (``tests/mug_demos.py``);
+    """Five Panda demonstrations grasping a mug given as a pose (``tests/pose_teacher.py``);
     returns a new pose of the mug, as the --object parser gives it (x, y, z, qw, qx, qy, qz)."""
-    from mug_demos import mug_demos, mug_pose
+    import pose_teacher
 
     from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit.robots import panda
 
-    _, demos = mug_demos(n=30)
-    save_demonstrations(demos, path)
-    pose = mug_pose(0.6, np.array([0.5, 0.05, 0.0]))
+    save_demonstrations(pose_teacher.demonstrations(panda()), path)
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
     return np.r_[pose[:3, 3], quaternion_from_matrix(pose[:3, :3])]
 
 

@@ -210,14 +210,16 @@ def mug() -> dict[str, Any]:
     """A Panda grasping a mug by its handle, the mug at yaws -80 .. 80 degrees: the skill with
     orientation, the position-only one of the same demonstrations, and a reproduction of each
     for a new pose of the mug (given as x, y, z, qw, qx, qy, qz)."""
-    from mug_demos import mug_demos, mug_pose
+    import pose_teacher
 
     from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit.robots import panda
 
-    robot, demos = mug_demos()
+    robot = panda()
+    demos = pose_teacher.demonstrations(robot)
     posed = Skill.learn(demos, robot, n_steps=40, n_components=3)
     flat = Skill.learn(demos, robot, n_steps=40, n_components=3, orientation=False)
-    pose = mug_pose(0.6, np.array([0.5, 0.05, 0.0]))
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
     seven = np.r_[pose[:3, 3], quaternion_from_matrix(pose[:3, :3])]
     return {
         "demos": demos,

@@ -44,14 +44,16 @@ def test_booleans_render_as_yes_no() -> None:
 
 # ----------------------------------------------------------------------------- poses (issue 23)
 def test_orientation_section_shows_which_objects_are_oriented_and_the_angles() -> None:
-    from mug_demos import mug_demos, mug_pose
+    import pose_teacher
 
     from pbdkit.apps.report import closest_approach, orientation_section
     from pbdkit.learning.skill import Skill
+    from pbdkit.robots import panda
 
-    robot, demos = mug_demos()
+    robot = panda()
+    demos = pose_teacher.demonstrations(robot)
     skill = Skill.learn(demos, robot, n_steps=40, n_components=3)
-    pose = mug_pose(0.6, np.array([0.5, 0.05, 0.0]))
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
     fused, joint = skill.reproduce({"mug": pose}), skill.reproduce({"mug": pose}, use=["joint"])
     # Closest approach: the smallest distance, and the angle at that same sample.
     approach = closest_approach(fused)
