@@ -394,3 +394,108 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
     assert "Invalid value for --object: expected NAME=x,y,z (metres) or" in text, text
     assert "NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w first)" in text, text
     assert "got 'mug=1,2,3,1,0,0' (6 numbers)" in text, text
+
+
+# ----------------------------------------------------------------------------- poses (issue 23)
+def _mug_demos(path: Path) -> np.ndarray:
+    """Five Panda demonstrations grasping a mug given as a pose (``tests/pose_teacher.py``);
+    returns a new pose of the mug, as the --object parser gives it (x, y, z, qw, qx, qy, qz)."""
+    import pose_teacher
+
+    from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit.robots import panda
+
+    save_demonstrations(pose_teacher.demonstrations(panda()), path)
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
+    return np.r_[pose[:3, 3], quaternion_from_matrix(pose[:3, :3])]
+
+
+def _learn_mug(tmp_path: Path, *options: str) -> tuple[Result, Path]:
+    out = tmp_path / "skill.npz"
+    result = CliRunner().invoke(
+        app,
+        [
+            "learn",
+            str(tmp_path / "demos.npz"),
+            "--robot",
+            "panda",
+            "--n-steps",
+            "30",
+            "--max-components",
+            "2",
+            "--out",
+            str(out),
+            *options,
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    return result, out
+
+
+def test_learn_orientation_option_says_which_objects_are_oriented(tmp_path: Path) -> None:
+    _mug_demos(tmp_path / "demos.npz")
+    result, out = _learn_mug(tmp_path)
+    assert Skill.load(out).oriented == ["mug"]
+    assert "relative to it): mug" in result.output
+    assert "learned as positions only" not in result.output
+    result, out = _learn_mug(tmp_path, "--no-orientation")
+    assert Skill.load(out).oriented == []
+    assert "given as poses, learned as positions only (--no-orientation): mug" in result.output
+    assert "oriented" not in result.output.replace(str(tmp_path), "")
+    # Demonstrations of positions (the paper's): no word of orientation.
+    _tiny_demos(tmp_path / "tiny.npz")
+    result = CliRunner().invoke(
+        app, ["learn", str(tmp_path / "tiny.npz"), "--out", str(out), "--n-steps", "20"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "orient" not in result.output.replace(str(tmp_path), "")
+
+
+def test_reproduce_a_posed_object_prints_degrees_and_writes_orientations(tmp_path: Path) -> None:
+    from pbdkit.apps.report import closest_approach
+
+    seven = _mug_demos(tmp_path / "demos.npz")
+    _, skill_path = _learn_mug(tmp_path)
+    out = tmp_path / "repro.npz"
+    where = ",".join(repr(float(v)) for v in seven)
+    result = CliRunner().invoke(
+        app, ["reproduce", str(skill_path), "--object", f"mug={where}", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    expected = Skill.load(skill_path).reproduce({"mug": seven})
+    mm, deg = closest_approach(expected)["mug"]
+    assert deg is not None
+    text = " ".join(result.output.split())
+    assert "(distance, and the angle to the expected orientation there)" in text
+    assert f"mug {mm:.1f} mm and {deg:.1f} deg" in text
+    with np.load(out) as data:
+        assert str(data["format"]) == "pbdkit-reproduction" and int(data["version"]) == 1
+        rot = data["orientations"]
+        assert rot.shape == (len(data["t"]), 3, 3)
+        np.testing.assert_allclose(rot, expected.orientations)
+        np.testing.assert_allclose(
+            rot @ np.swapaxes(rot, 1, 2), np.broadcast_to(np.eye(3), rot.shape), atol=1e-9
+        )
+        np.testing.assert_allclose(
+            data["orientation_error_mug"], expected.orientation_errors["mug"]
+        )
+        np.testing.assert_allclose(data["task_error_mug"], expected.task_errors["mug"])
+
+
+def test_reproduce_positions_writes_no_orientation(tmp_path: Path) -> None:
+    glass = _tiny_demos(tmp_path / "demos.npz")
+    skill = tmp_path / "skill.npz"
+    runner = CliRunner()
+    args = ["learn", str(tmp_path / "demos.npz"), "--out", str(skill), "--n-steps", "20"]
+    assert runner.invoke(app, args).exit_code == 0
+    out = tmp_path / "repro.npz"
+    where = ",".join(f"{v:.4f}" for v in glass)
+    result = runner.invoke(
+        app, ["reproduce", str(skill), "--object", f"glass={where}", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert " deg" not in text and text.endswith("; closest approach: glass 0.3 mm")
+    with np.load(out) as data:
+        assert int(data["version"]) == 1 and "task_error_glass" in data.files
+        assert not [k for k in data.files if k.startswith("orientation")]

@@ -109,6 +109,7 @@ def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, li
     for k in skill.object_names:
         runs[k] = skill.reproduce(objects, use=[k])
     fig6 = plot_reproductions(skill, runs)
+    assert len(fig6.axes) == 2 * (5 + 1)  # positions only: no axis of angles (issue 23)
     labels = fig6.axes[0].get_legend_handles_labels()[1]
     assert labels == [
         "fused (all constraints)",
@@ -201,3 +202,149 @@ def test_new_figure_is_outside_pyplot() -> None:
     assert fig.canvas.manager is None  # pyplot's figures have a manager
     fig.subplots().plot([0, 1], [0, 1])
     assert figure_png(fig, dpi=50).startswith(b"\x89PNG")
+
+
+# ----------------------------------------------------------------------------- poses (issue 23)
+@pytest.fixture(scope="module")
+def mug() -> dict[str, Any]:
+    """A Panda grasping a mug by its handle, the mug at yaws -80 .. 80 degrees: the skill with
+    orientation, the position-only one of the same demonstrations, and a reproduction of each
+    for a new pose of the mug (given as x, y, z, qw, qx, qy, qz)."""
+    import pose_teacher
+
+    from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit.robots import panda
+
+    robot = panda()
+    demos = pose_teacher.demonstrations(robot)
+    posed = Skill.learn(demos, robot, n_steps=40, n_components=3)
+    flat = Skill.learn(demos, robot, n_steps=40, n_components=3, orientation=False)
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
+    seven = np.r_[pose[:3, 3], quaternion_from_matrix(pose[:3, :3])]
+    return {
+        "demos": demos,
+        "posed": posed,
+        "flat": flat,
+        "pose": pose,
+        "seven": seven,
+        "posed_res": posed.reproduce({"mug": seven}),
+        "flat_res": flat.reproduce({"mug": seven}),
+    }
+
+
+def test_constraint_figure_shows_the_orientation_of_an_oriented_object(
+    mug: dict[str, Any],
+) -> None:
+    skill, demos = mug["posed"], mug["demos"]
+    assert skill.oriented == ["mug"]
+    fig = plot_constraints(skill, demos)
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 6 + 8  # mug: position x3, orientation x3; joints x7 + gripper
+    by_label = {ax.get_ylabel(): ax for ax in visible}
+    assert [f"R^T(x - p){i} (mug frame) [m]" in by_label for i in (1, 2, 3)] == [True] * 3
+    titled = [ax for ax in visible if "orientation" in ax.get_title()]
+    assert [ax.get_title() for ax in titled] == [
+        "orientation relative to the mug (rad, tangent at the mean)"
+    ]
+    assert titled[0] is by_label["r1 (mug) [rad]"]
+    # Each orientation panel: the demonstrations' rotation vectors, the GMR mean, +- 2 sd.
+    data = skill.training_data(demos)["mug"]  # (M, T, 7): t, R^T (x - p), r
+    c = skill.constraints()
+    for i in range(3):
+        ax = by_label[f"r{i + 1} (mug) [rad]"]
+        thin = [ln for ln in ax.get_lines() if ln.get_linewidth() < 1]
+        assert len(thin) == len(demos)
+        for line, demo in zip(thin, data, strict=True):
+            np.testing.assert_allclose(line.get_ydata(), demo[:, 4 + i])
+        (gmr,) = [ln for ln in ax.get_lines() if ln.get_linewidth() == 2]
+        mean = c.task_mean["mug"][:, 3 + i]
+        sd = np.sqrt(c.task_cov["mug"][:, 3 + i, 3 + i])
+        np.testing.assert_allclose(gmr.get_ydata(), mean, atol=1e-12)
+        (band,) = ax.collections[-1:]
+        y = band.get_paths()[0].vertices[:, 1]
+        assert y.max() == pytest.approx((mean + 2 * sd).max())
+        assert y.min() == pytest.approx((mean - 2 * sd).min())
+
+
+def test_constraint_figure_of_the_position_only_skill_has_no_orientation(
+    mug: dict[str, Any],
+) -> None:
+    # The position-only skill of the same demonstrations: x - o, no orientation panel.
+    fig = plot_constraints(mug["flat"], mug["demos"])
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 3 + 8
+    labels = [ax.get_ylabel() for ax in visible]
+    assert [s for s in labels if "mug" in s] == [f"x{i} - o{i} (mug) [m]" for i in (1, 2, 3)]
+    assert not any("orientation" in ax.get_title() or "r1" in ax.get_ylabel() for ax in visible)
+
+
+def _frame_lines(ax: Any, gid: str) -> list[tuple[Any, np.ndarray, np.ndarray]]:
+    """The frame lines of ``ax`` with that gid: (colour, start, end)."""
+    out = []
+    for line in ax.get_lines():
+        if line.get_gid() == gid:
+            xyz = np.array(line.get_data_3d(), dtype=float)
+            out.append((line.get_color(), xyz[:, 0], xyz[:, 1]))
+    return out
+
+
+def test_3d_figure_draws_the_frames_of_posed_objects_and_of_the_hand(
+    mug: dict[str, Any],
+) -> None:
+    from matplotlib.colors import to_rgb
+
+    from pbdkit.apps.plots import FRAME_COLORS, HAND_FRAME_GID, OBJECT_FRAME_GID
+
+    skill, demos, res = mug["posed"], mug["demos"], mug["posed_res"]
+    fig = plot_demonstrations_3d(
+        skill, demos, objects={"mug": mug["seven"]}, reproduction=res, hand_frames=4
+    )
+    left, right = fig.axes
+    rgb = [to_rgb(c) for c in FRAME_COLORS]
+    assert [int(np.argmax(c)) for c in rgb] == [0, 1, 2]  # x red, y green, z blue
+    # One frame per demonstration: x, y, z in red, green, blue along the mug's axes.
+    lines = _frame_lines(left, OBJECT_FRAME_GID)
+    assert len(lines) == 3 * len(demos)
+    for k, demo in enumerate(demos):
+        pose = demo.objects["mug"]
+        for axis in range(3):
+            color, start, end = lines[3 * k + axis]
+            assert to_rgb(color) == rgb[axis]
+            np.testing.assert_allclose(start, pose[:3, 3])
+            np.testing.assert_allclose(end - start, 0.05 * pose[:3, axis], atol=1e-12)
+    assert "frames: x red, y green, z blue" in left.get_title()
+    # The new pose's frame: its x axis turned by the yaw (0.6 rad) about z.
+    lines = _frame_lines(right, OBJECT_FRAME_GID)
+    assert len(lines) == 3
+    _, start, end = lines[0]
+    np.testing.assert_allclose(start, mug["seven"][:3])
+    np.testing.assert_allclose((end - start) / 0.05, [np.cos(0.6), np.sin(0.6), 0.0], atol=1e-12)
+    # The hand's frame at 4 samples along the path, from the reproduced orientations.
+    hand = _frame_lines(right, HAND_FRAME_GID)
+    assert len(hand) == 3 * 4
+    samples = np.linspace(0, len(res.t) - 1, 4).round().astype(int)
+    for s, j in enumerate(samples):
+        for axis in range(3):
+            color, start, end = hand[3 * s + axis]
+            assert to_rgb(color) == rgb[axis]
+            np.testing.assert_allclose(start, res.positions[j])
+            np.testing.assert_allclose(end - start, 0.05 * res.orientations[j][:, axis])
+    # A position-only skill: the objects' frames, and no hand frame (no orientation reproduced).
+    fig = plot_demonstrations_3d(
+        mug["flat"], demos, objects={"mug": mug["pose"]}, reproduction=mug["flat_res"]
+    )
+    assert len(_frame_lines(fig.axes[1], OBJECT_FRAME_GID)) == 3
+    assert _frame_lines(fig.axes[1], HAND_FRAME_GID) == []
+
+
+def test_controllers_figure_shows_the_angle_to_an_oriented_target(mug: dict[str, Any]) -> None:
+    skill, res = mug["posed"], mug["posed_res"]
+    fig = plot_reproductions(skill, {"fused": res})
+    rows = skill.robot.n_joints + 1
+    assert len(fig.axes) == 2 * rows + 1  # and the right axis of the error panel
+    twin = fig.axes[-1]
+    assert twin.get_ylabel() == "[deg] (dashed)"
+    (line,) = twin.get_lines()
+    np.testing.assert_allclose(line.get_ydata(), np.degrees(res.orientation_errors["mug"]))
+    assert "expected pose" in fig.axes[-2].get_title()
+    # (A position-only skill's figure has no such axis: test_figures_are_drawn_with_one_...)

@@ -39,6 +39,13 @@ app = typer.Typer(
 )
 console = Console(stderr=True)
 
+#: The ``format`` and ``version`` of the file `pbdkit reproduce` writes (see its --out help).
+#: Version 1 is the layout the command always wrote, now labelled; the keys of oriented
+#: constraints (orientations, orientation_error_NAME) and task_error_NAME are optional within
+#: it: a reader that looks keys up by name reads every file.
+REPRODUCTION_FORMAT = "pbdkit-reproduction"
+REPRODUCTION_VERSION = 1
+
 
 @app.callback()
 def _root() -> None:
@@ -508,6 +515,16 @@ def learn(
         float | None,
         typer.Option(help="Bags: seconds after the first joint state where it ends."),
     ] = None,
+    orientation: Annotated[
+        bool,
+        typer.Option(
+            "--orientation/--no-orientation",
+            help="For objects the demonstrations give as poses: also learn the hand's "
+            "orientation relative to each, with its position in the object's frame (default); "
+            "--no-orientation learns the paper's position-only skill from the same data, for "
+            "comparison.",
+        ),
+    ] = True,
 ) -> None:
     """Learn a skill (one GMM per space, K chosen by cross-validation) from demonstrations:
     an .npz file, or ROS bags (see pbdkit.learning.bags for the topics and conventions)."""
@@ -566,11 +583,35 @@ def learn(
             n_steps=n_steps,
             max_components=max_components,
             task_objects=task_space or None,
+            orientation=orientation,
         )
         seconds = time.perf_counter() - t_start
     skill.save(out)
     ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components.items())
     console.print(f"learned in {seconds:.2f} s; K per space: {ks}; wrote {out}")
+    _print_oriented(skill, items)
+
+
+def _print_oriented(skill: Skill, demos: Sequence[Demonstration]) -> None:
+    """Say which objects the skill learned with orientation (those the demonstrations give as
+    poses, unless --no-orientation); nothing when every object is a position (the paper's)."""
+    from ..learning.placement import is_pose
+
+    posed = [k for k in skill.object_names if is_pose(demos[0].objects[k])]
+    if not posed:
+        return
+    if skill.oriented:
+        console.print(
+            f"oriented (the hand's position in the object's frame and its orientation "
+            f"relative to it): {', '.join(skill.oriented)}",
+            soft_wrap=True,
+        )
+    flat = [k for k in posed if k not in skill.oriented]
+    if flat:
+        console.print(
+            f"given as poses, learned as positions only (--no-orientation): {', '.join(flat)}",
+            soft_wrap=True,
+        )
 
 
 def _load_demos(
@@ -662,10 +703,20 @@ def reproduce(
         typer.Option(
             "--object",
             help="NAME=x,y,z (a position) or NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w "
-            "first; ROS orders x,y,z,w) in the robot's base frame (m).",
+            "first; ROS orders x,y,z,w) in the robot's base frame (m). An object the skill "
+            "learned with orientation needs a pose.",
         ),
     ],
-    out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("repro.npz"),
+    out: Annotated[
+        Path,
+        typer.Option(
+            help="Output .npz file (format pbdkit-reproduction, version 1): t, joints, "
+            "positions, gripper, covariances, influence_NAME, task_error_NAME (m) and, with "
+            "the robot's limits, times, velocities, accelerations, lead_in; for a skill with "
+            "oriented constraints also orientations (T, 3, 3: the hand's axes in the base "
+            "frame) and orientation_error_NAME (rad) per oriented object.",
+        ),
+    ] = Path("repro.npz"),
     use: Annotated[
         list[str] | None, typer.Option(help="Constraints to use (default: all, fused).")
     ] = None,
@@ -679,7 +730,7 @@ def reproduce(
         ),
     ] = None,
 ) -> None:
-    """Reproduce a skill for new object positions (paper Table II)."""
+    """Reproduce a skill for new object positions or poses (paper Table II)."""
     from .._io import save_npz_atomic
     from ..learning.skill import Skill
 
@@ -694,6 +745,8 @@ def reproduce(
     # joint names, times beyond what a bag holds), so that an error leaves no --out behind.
     timing = None if bag is None else _bag_timing(skill, res, bag)
     arrays = {
+        "format": np.array(REPRODUCTION_FORMAT),
+        "version": np.array(REPRODUCTION_VERSION, dtype=np.int64),
         "t": res.t,
         "joints": res.joints,
         "positions": res.positions,
@@ -701,6 +754,10 @@ def reproduce(
         "covariances": res.covariances,
     }
     arrays.update({f"influence_{k}": v for k, v in res.influence.items()})
+    arrays.update({f"task_error_{k}": v for k, v in res.task_errors.items()})
+    if res.orientations is not None:
+        arrays["orientations"] = res.orientations
+    arrays.update({f"orientation_error_{k}": v for k, v in res.orientation_errors.items()})
     timed = ""
     if res.times is not None and res.lead_in is not None:
         # Within the robot's motion limits: the timing (s), its derivatives, the lead-in.
@@ -717,14 +774,28 @@ def reproduce(
             f"the robot's limits, the skill's steps {res.stretch:.2f}x their demonstrated pace"
         )
     save_npz_atomic(out, arrays)
-    errs = ", ".join(f"{k} {1000 * v.min():.1f} mm" for k, v in res.task_errors.items())
-    console.print(f"wrote {out} ({len(res.t)} samples{timed}); closest approach: {errs}")
+    console.print(f"wrote {out} ({len(res.t)} samples{timed}); {_closest_approach(res)}")
     if bag is not None and timing is not None:
         from ..learning.bags import write_trajectory_bag
 
         t, names = timing
         write_trajectory_bag(bag, t, res.joints, names, **_bag_extras(skill, res))
         console.print(f"wrote {bag}: /joint_trajectory, {len(t)} points over {t[-1]:.2f} s")
+
+
+def _closest_approach(res: ReproductionResult) -> str:
+    """How close the hand came to where each object's constraint expects it: the smallest
+    distance (mm) and, for an oriented object, the angle (degrees) to the orientation it
+    expects at that sample."""
+    from .report import closest_approach
+
+    parts = []
+    for k, (mm, deg) in closest_approach(res).items():
+        parts.append(f"{k} {mm:.1f} mm" + ("" if deg is None else f" and {deg:.1f} deg"))
+    what = "closest approach"
+    if res.orientation_errors:
+        what += " (distance, and the angle to the expected orientation there)"
+    return f"{what}: {', '.join(parts)}"
 
 
 def _check_bag_output(bag: Path) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import io
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -56,6 +56,11 @@ OBJECT_STYLES = ["-.", ":", (0, (5, 1, 1, 1, 1, 1)), (0, (1, 3))]
 SPACE_COLORS = ["tab:red", "tab:blue", "tab:purple", "tab:brown"]
 JOINT_COLOR = "tab:green"
 UNCONSTRAINED_COLOR = "0.3"  # an object the skill has no constraint on (the fixed basin)
+# A frame's x, y and z axes in the 3-D figure (red, green, blue, as in RViz).
+FRAME_COLORS = ("#d62728", "#2ca02c", "#1f77b4")
+# The gid of the lines drawing frames in the 3-D figure: objects' poses, and the hand's.
+OBJECT_FRAME_GID = "object frame"
+HAND_FRAME_GID = "hand frame"
 
 Float = NDArray[np.float64]
 
@@ -231,6 +236,12 @@ def _dim_labels(skill: Skill, name: str) -> list[str]:
         if skill.has_gripper:
             labels.append("gripper")
         return labels
+    if name in skill.oriented:
+        # {R^T (x - p), r}: the hand's position in the object's frame, then its orientation
+        # relative to the object (rotation vector in the tangent space at the mean, object axes).
+        return [f"R^T(x - p){i + 1} ({name} frame) [m]" for i in range(3)] + [
+            f"r{i + 1} ({name}) [rad]" for i in range(3)
+        ]
     return [f"x{i + 1} - o{i + 1} ({name}) [m]" for i in range(3)]
 
 
@@ -244,6 +255,12 @@ def plot_constraints(
 
     One column per space (each object's frame, then joint space), one row per dimension. A
     narrow tube means the demonstrations agreed: that constraint matters at that time.
+
+    An oriented object (:attr:`pbdkit.Skill.oriented`) has six rows: the hand's position in the
+    object's frame, R^T (x - p), then the three components of its orientation relative to the
+    object, the rotation vector r in the tangent space at the demonstrations' mean relative
+    orientation (R^T R_hand = exp([r]x) M, object axes; rad), titled "orientation relative to
+    the <object> (rad, tangent at the mean)". Position-only objects have three rows, x - o.
     """
     data = skill.training_data(demos)
     names = [*skill.object_names, "joint"]
@@ -271,6 +288,10 @@ def plot_constraints(
             if row == 0:
                 title = "joint space" if name == "joint" else f"relative to the {name}"
                 ax.set_title(f"{title}: K = {gmm.n_components_}", fontsize=9)
+            elif row == 3 and name in skill.oriented:
+                ax.set_title(
+                    f"orientation relative to the {name} (rad, tangent at the mean)", fontsize=9
+                )
             if row == d_out - 1:
                 ax.set_xlabel("time step", fontsize=8)
     fig.suptitle("Constraints extracted from the demonstrations (GMM, and GMR mean +- 2 sd)")
@@ -283,20 +304,32 @@ def plot_demonstrations_3d(
     skill: Skill,
     demos: Sequence[Demonstration],
     *,
-    objects: dict[str, Float] | None = None,
+    objects: Mapping[str, npt.ArrayLike] | None = None,
     reproduction: ReproductionResult | None = None,
+    frame_length: float = 0.05,
+    hand_frames: int = 6,
 ) -> Figure:
     """The paper's Fig. 3: demonstrated hand paths in 3-D with the objects' positions (left) and
     the reproduction for a new situation (right).
 
     Every recorded object is drawn: those of the skill in their constraint's colour, the others
     (a fixed basin the skill has no constraint on) in grey, labelled "(no constraint)".
+
+    An object given as a pose (in the demonstrations, or in ``objects``: a 4x4 transform or
+    x, y, z, qw, qx, qy, qz) is also drawn with its frame: a line of ``frame_length`` m along
+    each of its axes, x, y and z in red, green and blue (:data:`FRAME_COLORS`; the lines' gid
+    is :data:`OBJECT_FRAME_GID`). When the reproduction has the hand's orientations (a skill
+    with oriented constraints), the hand's frame is drawn so at ``hand_frames`` samples evenly
+    spaced along the path (gid :data:`HAND_FRAME_GID`).
     """
+    from ..learning.placement import check_placements, is_pose, position_of
+
     markers = ["+", "x", "^", "s"]
+    placed = None if objects is None else check_placements(objects, "objects")
     recorded = list(dict.fromkeys(k for demo in demos for k in demo.objects))
     extra = [k for k in recorded if k not in skill.object_names]
-    if objects is not None:
-        extra += [k for k in objects if k not in skill.object_names and k not in extra]
+    if placed is not None:
+        extra += [k for k in placed if k not in skill.object_names and k not in extra]
     shown = [*skill.object_names, *extra]
 
     def color(name: str) -> str:
@@ -305,6 +338,7 @@ def plot_demonstrations_3d(
     def label(name: str) -> str:
         return name if name in skill.object_names else f"{name} (no constraint)"
 
+    framed = False  # whether any frame is drawn (said in the title)
     ncols = 2 if reproduction is not None else 1
     fig = new_figure(figsize=(6.0 * ncols, 5.2))
     ax = fig.add_subplot(1, ncols, 1, projection="3d")
@@ -322,14 +356,19 @@ def plot_demonstrations_3d(
         for i, name in enumerate(shown):
             if name not in demo.objects:
                 continue
+            where = demo.objects[name]
             ax.scatter(
-                *demo.objects[name],
+                *position_of(where),
                 marker=markers[i % 4],
                 color=color(name),
                 s=50,
                 label=label(name) if k == 0 else None,
             )
-    ax.set_title(f"{len(demos)} demonstrations (dots: start)")
+            if is_pose(where):
+                _draw_frame(ax, where, frame_length, OBJECT_FRAME_GID)
+                framed = True
+    frames = "; frames: x red, y green, z blue" if framed else ""
+    ax.set_title(f"{len(demos)} demonstrations (dots: start{frames})")
     _label_3d(ax)
     ax.legend(fontsize=8, loc="upper left")
     if reproduction is not None:
@@ -338,21 +377,42 @@ def plot_demonstrations_3d(
         ax2.plot(p[:, 0], p[:, 1], p[:, 2], color="k", lw=2, label="reproduction")
         ax2.scatter(*p[0], color="k", s=12)
         for i, name in enumerate(shown):
-            if objects is not None and name in objects:
+            if placed is not None and name in placed:
+                where = placed[name]
                 ax2.scatter(
-                    *objects[name],
+                    *position_of(where),
                     marker=markers[i % 4],
                     color=color(name),
                     s=90,
                     linewidths=2.5,
                     label=f"{label(name)} (new)" if name in skill.object_names else label(name),
                 )
-        ax2.set_title("reproduction for a new situation")
+                if is_pose(where):
+                    _draw_frame(ax2, where, frame_length, OBJECT_FRAME_GID)
+        title = "reproduction for a new situation"
+        rot = reproduction.orientations
+        if rot is not None and hand_frames > 0:
+            samples = np.unique(np.linspace(0, len(p) - 1, hand_frames).round().astype(np.intp))
+            for j in samples:
+                pose = np.eye(4)
+                pose[:3, :3], pose[:3, 3] = rot[j], p[j]
+                _draw_frame(ax2, pose, frame_length, HAND_FRAME_GID, lw=1.0)
+            title += f" (the hand's frame at {len(samples)} samples)"
+        ax2.set_title(title)
         _label_3d(ax2)
         ax2.legend(fontsize=8, loc="upper left")
     fig.tight_layout()
     figure: Figure = fig
     return figure
+
+
+def _draw_frame(ax: Any, pose: Float, length: float, gid: str, *, lw: float = 1.8) -> None:
+    """A frame as three lines of ``length`` from its origin along its x, y and z axes (the
+    columns of its rotation), coloured :data:`FRAME_COLORS`."""
+    origin = pose[:3, 3]
+    for axis, axis_color in enumerate(FRAME_COLORS):
+        tip = origin + length * pose[:3, axis]
+        ax.plot(*np.stack([origin, tip]).T, color=axis_color, lw=lw, gid=gid)
 
 
 def _label_3d(ax: Any) -> None:
@@ -389,7 +449,9 @@ def plot_reproductions(
 
     ``results`` maps a controller name ("fused", "joint", or an object name for its task-only
     controller) to its reproduction. Line styles follow the paper: fused solid, task-only
-    dash-dot (first object) and dotted (second), joint-only dashed.
+    dash-dot (first object) and dotted (second), joint-only dashed. For a skill with oriented
+    constraints, the fused controller's angle to each oriented object's expected orientation
+    (degrees, dashed) shares the bottom-right panel, on its right axis.
     """
     n = skill.robot.n_joints
     rows = max(n, 3) + 1
@@ -444,8 +506,28 @@ def plot_reproductions(
         ax.set_ylabel("[mm]", fontsize=8)
         ax.set_xlabel("time step", fontsize=8)
         ax.set_yscale("log")
-        ax.legend(fontsize=7)
-        ax.set_title("fused: hand to each object's expected position", fontsize=9)
+        angles = results["fused"].orientation_errors
+        if angles:
+            # Oriented objects: the angle to the orientation each expects, on a second axis.
+            ax_deg = ax.twinx()
+            for name, err in angles.items():
+                ax_deg.plot(
+                    results["fused"].t,
+                    np.degrees(err),
+                    color=_space_color(skill, name),
+                    ls="--",
+                    label=f"angle to the {name} target orientation",
+                )
+            ax_deg.set_ylabel("[deg] (dashed)", fontsize=8)
+            ax_deg.set_yscale("log")
+            ax_deg.tick_params(labelsize=7)
+            handles, labels = ax.get_legend_handles_labels()
+            more = ax_deg.get_legend_handles_labels()
+            ax_deg.legend(handles + more[0], labels + more[1], fontsize=7)
+            ax.set_title("fused: hand to each object's expected pose", fontsize=9)
+        else:
+            ax.legend(fontsize=7)
+            ax.set_title("fused: hand to each object's expected position", fontsize=9)
     else:
         axes[rows - 1, 0].set_visible(False)
         axes[rows - 1, 1].set_visible(False)
