@@ -29,7 +29,7 @@ from .plots import (
     plot_reproductions,
     plot_selection,
 )
-from .report import Figure, Section, write_report
+from .report import Figure, Section, orientation_section, write_report
 
 if TYPE_CHECKING:
     from ..sim.task_skill import TaskSkill
@@ -674,6 +674,10 @@ def _write_html(demo: DemoRun) -> None:
             ],
             figures=[Figure(fig6, "Controllers compared, and the influence of each constraint.")],
             anchor="controllers",
+        ),
+        # Oriented constraints (pose tasks): None, and no section, for the paper's tasks.
+        *filter(
+            None, [orientation_section(ts.skill, {n: r.reproduction for n, r in runs.items()})]
         ),
         *_online_sections(demo),
         _limits_section(demo),
