@@ -187,7 +187,6 @@ def _run_robot_demo(
 ) -> dict[str, Any]:
     """:func:`run_robot_demo` once its arguments are checked, writing to ``out``."""
     from ..sim.metrics import tracking_errors
-    from ..sim.naming import controller_names
     from ..sim.runs import run_controller, run_online
     from ..sim.sensing import calibrate_tracker, observe
     from ..sim.task_skill import start_posture
@@ -219,7 +218,7 @@ def _run_robot_demo(
             "calibration_seconds": calib_s,
         }
     runs = {}
-    for name in controller_names(ts.skill.object_names):
+    for name in ts.controllers:
         say(f"reproducing and executing the {name} controller ...")
         camera = "cam_left" if name == "fused" else None
         runs[name] = run_controller(ts, objects, name, camera=camera, sim_objects=truth)

@@ -314,7 +314,7 @@ def _run(
     from .plots import figure_png
 
     ts = learn(spec, n_demos=5, seed=seed)
-    names = list(size.map_controllers or controller_names(ts.skill.object_names))
+    names = list(size.map_controllers or ts.controllers)
     maps_of = list(spec.tracked_objects)
     total = size.runs(len(maps_of), len(names))
     done = 0

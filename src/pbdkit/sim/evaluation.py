@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from .metrics import tracking_summary
-from .naming import controller_names, controller_use
 from .parallel import session
 from .perturb import check_perturb
 from .sensing import calibrate_tracker
@@ -200,7 +199,7 @@ def evaluate(
         Seeds the demonstrations and the placements.
     n_demos : int
     controllers : sequence of str, optional
-        Default: every controller (:func:`controller_names`).
+        Default: every controller (:attr:`pbdkit.sim.task_skill.TaskSkill.controllers`).
     progress : callable, optional
         ``progress(done, total)`` after every execution.
     task_skill : TaskSkill, optional
@@ -237,9 +236,9 @@ def evaluate(
         ts = task_skill or learn_task(
             spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed
         )
-        names = list(controllers) if controllers else controller_names(ts.skill.object_names)
+        names = list(controllers) if controllers else ts.controllers
         for name in names:
-            controller_use(name, ts.skill.object_names)
+            ts.skill_for(name)  # an unknown name: ValueError before anything runs
         # Placements come from their own stream so that they do not depend on the teacher's
         # draws.
         rng = np.random.default_rng([seed, 1])

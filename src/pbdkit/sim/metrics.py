@@ -3,12 +3,14 @@ servo stream's peaks over the limits) and the statistics of the cameras' trackin
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..learning.placement import position_of
 from ..motion.limits import MotionPeaks
 from .execute import ExecutionResult, stream_peaks
 
@@ -19,6 +21,7 @@ __all__ = [
     "servo_peaks",
     "tracking_errors",
     "tracking_summary",
+    "yaw_errors",
 ]
 
 Float = NDArray[np.float64]
@@ -95,8 +98,28 @@ def _finite(v: float) -> float | None:
 def tracking_errors(
     observed: dict[str, Float], truth: dict[str, Float], names: Sequence[str]
 ) -> dict[str, float]:
-    """3-D distance (mm) between observed and true positions of the objects ``names``."""
-    return {k: 1e3 * float(np.linalg.norm(observed[k] - truth[k])) for k in names}
+    """3-D distance (mm) between observed and true positions of the objects ``names`` (the
+    position of a pose)."""
+    return {
+        k: 1e3 * float(np.linalg.norm(position_of(observed[k]) - position_of(truth[k])))
+        for k in names
+    }
+
+
+def yaw_errors(
+    observed: dict[str, Float], truth: dict[str, Float], names: Sequence[str]
+) -> dict[str, float]:
+    """Yaw error (degrees, absolute, wrapped to [0, 180]) between observed and true poses of
+    the objects ``names`` that are poses in both (others are left out)."""
+    out: dict[str, float] = {}
+    for k in names:
+        a, b = observed[k], truth[k]
+        if a.shape == (4, 4) and b.shape == (4, 4):
+            d = math.atan2(float(a[1, 0]), float(a[0, 0])) - math.atan2(
+                float(b[1, 0]), float(b[0, 0])
+            )
+            out[k] = abs(math.degrees(math.remainder(d, 2 * math.pi)))
+    return out
 
 
 def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:

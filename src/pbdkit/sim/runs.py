@@ -13,9 +13,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..learning.probabilistic_ik import ReachWarning, ReproductionResult
+from ..learning.skill import Skill
 from .execute import ExecutionResult, execute
 from .metrics import run_summary
-from .naming import controller_use
 from .online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
 from .perturb import Disturbance
 from .scene import Simulation
@@ -96,13 +96,14 @@ def _prepare_run(
     objects: dict[str, Float],
     controller: str,
     sim_objects: dict[str, Float] | None,
-) -> tuple[list[str] | None, dict[str, Float], dict[str, Float]]:
-    """The controller's ``use``, the positions the skill is told (its own objects) and the
-    world's (every object), for :func:`run_controller` and :func:`run_online`."""
-    use = controller_use(controller, ts.skill.object_names)
+) -> tuple[Skill, list[str] | None, dict[str, Float], dict[str, Float]]:
+    """The controller's skill (:meth:`TaskSkill.skill_for`) and ``use``, the placements the
+    skill is told (its own objects) and the world's (every object), for
+    :func:`run_controller` and :func:`run_online`."""
+    skill, use = ts.skill_for(controller)
     known = ts.task.full_placement(objects)
     world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
-    return use, {k: known[k] for k in ts.skill.object_names}, world
+    return skill, use, {k: known[k] for k in skill.object_names}, world
 
 
 def run_controller(
@@ -131,17 +132,17 @@ def run_controller(
     ValueError
         An unknown controller or object, or a moving object without a position.
     """
-    use, told, world = _prepare_run(ts, objects, controller, sim_objects)
+    skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        res = ts.skill.reproduce(told, use=use, on_unreachable="warn")
+        res = skill.reproduce(told, use=use, on_unreachable="warn")
     rep_s = time.perf_counter() - start
     sim = Simulation.from_task(ts.task, world)
     try:
         ex = execute(
             sim,
-            ts.skill.times(res),
+            skill.times(res),
             res.joints,
             res.gripper,
             camera=camera,
@@ -179,12 +180,12 @@ def run_online(
     ``tracker``, else the true ones (:class:`pbdkit.sim.online.TruthObserver`). Arguments as
     :func:`run_controller`.
     """
-    use, told, world = _prepare_run(ts, objects, controller, sim_objects)
-    names = ts.skill.object_names
+    skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
+    names = skill.object_names
     observer: Observer = TruthObserver(names) if tracker is None else VisionObserver(tracker, names)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        ctrl = ts.skill.controller(told, use=use, on_unreachable="warn")
+        ctrl = skill.controller(told, use=use, on_unreachable="warn")
         sim = Simulation.from_task(ts.task, world)
         try:
             run = execute_online(

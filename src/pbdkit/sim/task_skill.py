@@ -26,6 +26,7 @@ from ..learning.demonstration import Demonstration
 from ..learning.skill import Skill
 from ..prob.gmm import MAX_COMPONENTS
 from ..robots import katana
+from .naming import FUSED_POSITION, controller_names, controller_use
 from .tasks import TaskSpec, get_task
 from .teacher import teach
 
@@ -79,9 +80,26 @@ class TaskSkill:
     skill: Skill
     learn_seconds: float
     teach_seconds: float
+    #: For a skill with oriented constraints: the position-only skill of the same
+    #: demonstrations (``orientation=False``, the paper's), for the ``"fused-position"``
+    #: controller. None otherwise.
+    position_skill: Skill | None = None
 
     def __post_init__(self) -> None:
         self.task = get_task(self.task)
+
+    @property
+    def controllers(self) -> list[str]:
+        """The controllers of this skill, by name (:func:`pbdkit.sim.naming.controller_names`)."""
+        return controller_names(self.skill.object_names, oriented=self.position_skill is not None)
+
+    def skill_for(self, controller: str) -> tuple[Skill, list[str] | None]:
+        """The skill a controller reproduces and its ``use`` (ValueError for an unknown name)."""
+        oriented = self.position_skill is not None
+        use = controller_use(controller, self.skill.object_names, oriented=oriented)
+        if controller == FUSED_POSITION and self.position_skill is not None:
+            return self.position_skill, use
+        return self.skill, use
 
     @property
     def constrain_fixed(self) -> bool:
@@ -110,15 +128,24 @@ def learn_task(
     demos = teach(spec, n_demos, seed=seed)
     teach_s = time.perf_counter() - start
     start = time.perf_counter()
+    robot = katana()
+    names = _constrained(spec, constrain_fixed)
     skill = Skill.learn(
-        demos,
-        katana(),
-        n_steps=n_steps,
-        max_components=max_components,
-        task_objects=_constrained(spec, constrain_fixed),
+        demos, robot, n_steps=n_steps, max_components=max_components, task_objects=names
     )
     learn_s = time.perf_counter() - start
-    return TaskSkill(spec, demos, skill, learn_s, teach_s)
+    # Objects placed as poses: the paper's skill of the same demonstrations, for comparison.
+    position_skill = None
+    if skill.oriented:
+        position_skill = Skill.learn(
+            demos,
+            robot,
+            n_steps=n_steps,
+            max_components=max_components,
+            task_objects=names,
+            orientation=False,
+        )
+    return TaskSkill(spec, demos, skill, learn_s, teach_s, position_skill)
 
 
 def start_posture(ts: TaskSkill) -> Float:

@@ -105,6 +105,7 @@ script itself knows the built-in tasks only: a module of :mod:`pbdkit.sim.taskde
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -114,6 +115,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_positions
+from ..learning.placement import check_placements, is_pose, position_of
 from ._registry import Registry
 
 __all__ = [
@@ -135,6 +137,8 @@ __all__ = [
     "task_names",
     "tracked_objects",
     "unregister_task",
+    "yaw_of",
+    "yaw_pose",
 ]
 
 Float = NDArray[np.float64]
@@ -167,23 +171,54 @@ LIQUID_RADIUS = 0.0055
 
 @dataclass(frozen=True)
 class PlacementRange:
-    """Range of positions of one object: a box, uniform sampling.
+    """Range of placements of one object: a box of positions, and for an object that turns a
+    range of yaws; uniform sampling.
 
     Attributes
     ----------
     low, high : ndarray, shape (3,)
         Corners of the box (equal for a fixed object).
+    yaw : tuple of float, optional
+        (low, high) yaw about the vertical (rad) for an object placed as a pose: its placements
+        are then 4x4 transforms (:mod:`pbdkit.learning.placement`); None (default): positions.
     """
 
     low: Float
     high: Float
+    yaw: tuple[float, float] | None = None
 
     @classmethod
     def box(
-        cls, low: tuple[float, float, float], high: tuple[float, float, float]
+        cls,
+        low: tuple[float, float, float],
+        high: tuple[float, float, float],
+        yaw: tuple[float, float] | None = None,
     ) -> PlacementRange:
-        """The box between two corners given as tuples."""
-        return cls(np.array(low, dtype=np.float64), np.array(high, dtype=np.float64))
+        """The box between two corners given as tuples (and a yaw range, rad, for a pose)."""
+        return cls(
+            np.array(low, dtype=np.float64),
+            np.array(high, dtype=np.float64),
+            None if yaw is None else (float(yaw[0]), float(yaw[1])),
+        )
+
+    @property
+    def posed(self) -> bool:
+        """True if the object is placed as a pose (it has a yaw range)."""
+        return self.yaw is not None
+
+    def sample(self, rng: np.random.Generator) -> Float:
+        """A placement drawn uniformly: a position (3,), or a 4x4 pose for a posed range
+        (position first, then yaw, from ``rng``)."""
+        p = rng.uniform(self.low, self.high)
+        if self.yaw is None:
+            return p
+        return yaw_pose(p, float(rng.uniform(self.yaw[0], self.yaw[1])))
+
+    def nominal(self) -> Float:
+        """The centre: a position (3,), or the pose at the centre of the yaw range."""
+        if self.yaw is None:
+            return self.center.copy()
+        return yaw_pose(self.center, 0.5 * (self.yaw[0] + self.yaw[1]))
 
     @property
     def fixed(self) -> bool:
@@ -199,6 +234,20 @@ class PlacementRange:
         """True if ``position`` (3,) lies in the box (up to ``tol``)."""
         p = np.asarray(position, dtype=np.float64)
         return bool(np.all(p >= self.low - tol) and np.all(p <= self.high + tol))
+
+
+def yaw_pose(position: npt.ArrayLike, yaw: float) -> Float:
+    """The 4x4 pose at ``position`` turned by ``yaw`` (rad) about the vertical."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.eye(4)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:3, 3] = np.asarray(position, dtype=np.float64)
+    return out
+
+
+def yaw_of(pose: Float) -> float:
+    """The yaw (rad) of a pose's x axis about the vertical, in (-pi, pi]."""
+    return math.atan2(float(pose[1, 0]), float(pose[0, 0]))
 
 
 @dataclass(frozen=True)
@@ -405,13 +454,20 @@ class TaskSpec:
         """Objects that never move, in range order; known without vision."""
         return tuple(name for name, r in self.ranges.items() if r.fixed)
 
+    @property
+    def posed_objects(self) -> tuple[str, ...]:
+        """Objects placed as poses (with a yaw range), in range order."""
+        return tuple(name for name, r in self.ranges.items() if r.posed)
+
     def nominal_objects(self) -> dict[str, Float]:
-        """Centre of every placement range: name -> position (3,)."""
-        return {name: r.center.copy() for name, r in self.ranges.items()}
+        """Centre of every placement range: name -> position (3,), or pose (4, 4) at the
+        centre of its yaw range."""
+        return {name: r.nominal() for name, r in self.ranges.items()}
 
     def sample_objects(self, rng: np.random.Generator) -> dict[str, Float]:
-        """Object positions drawn uniformly inside the ranges, name -> (3,) (see the function)."""
-        return {name: rng.uniform(r.low, r.high) for name, r in self.ranges.items()}
+        """Placements drawn uniformly inside the ranges, name -> (3,) or (4, 4) (see the
+        function)."""
+        return {name: r.sample(rng) for name, r in self.ranges.items()}
 
     def check_placement(
         self, objects: Mapping[str, npt.ArrayLike], *, fill_moving: bool = False
@@ -423,7 +479,18 @@ class TaskSpec:
         fixed place (within 1e-6 m) and is filled in when left out; a moving object left out
         is an error, or its range's centre with ``fill_moving``.
         """
-        given = check_positions(objects, "objects")
+        if self.posed_objects:
+            given = check_placements(objects, "objects")
+            for k, v in given.items():
+                r = self.ranges.get(k)
+                if r is not None and r.posed != is_pose(v):
+                    want = "a pose (4x4 or x, y, z, qw, qx, qy, qz)" if r.posed else "a position"
+                    raise ValueError(
+                        f"objects[{k!r}] must be {want} for task {self.name!r}, got "
+                        f"{'a pose' if is_pose(v) else 'a position'}"
+                    )
+        else:
+            given = check_positions(objects, "objects")
         unknown = [k for k in given if k not in self.ranges]
         if unknown:
             raise ValueError(
@@ -440,9 +507,9 @@ class TaskSpec:
         out: dict[str, Float] = {}
         for name, r in self.ranges.items():
             if name not in given:
-                out[name] = r.low.copy() if r.fixed else r.center.copy()
+                out[name] = r.nominal()  # a fixed range's centre is its place
                 continue
-            if r.fixed and not np.allclose(given[name], r.low, rtol=0.0, atol=1e-6):
+            if r.fixed and not np.allclose(position_of(given[name]), r.low, rtol=0.0, atol=1e-6):
                 raise ValueError(
                     f"objects[{name!r}]: the {name} is fixed at {r.low.tolist()}, "
                     f"got {given[name].tolist()}"

@@ -20,7 +20,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .metrics import tracking_errors
-from .naming import controller_use
 from .parallel import run_fanout
 from .perturb import Disturbance, DisturbanceSetup, check_perturb, make_disturbance
 from .runs import run_controller, run_online
@@ -303,7 +302,7 @@ def run_trials(
         In the order of ``placements``.
     """
     for name in controllers:
-        controller_use(name, ts.skill.object_names)
+        ts.skill_for(name)  # an unknown name: ValueError before anything runs
     check_perturb(perturb, ts.task)
     job = TrialJob(ts, tuple(controllers), tracker, online, perturb, seed, noise_mm)
     if workers is not None or scheduler is not None or client is not None:

@@ -32,9 +32,10 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from ..learning.placement import position_of
 from ..robots import katana
 from . import tasks as T
-from .tasks import TaskSpec
+from .tasks import TaskSpec, yaw_of, yaw_pose
 
 __all__ = [
     "ARM_JOINTS",
@@ -144,14 +145,18 @@ def _check_objects(spec: TaskSpec, objects: Mapping[str, npt.ArrayLike] | None) 
         return spec.nominal_objects()
     out = spec.check_placement(objects, fill_moving=True)
     for name, r in spec.ranges.items():
-        p = out[name]
+        placed = out[name]
+        p = position_of(placed)
         # Objects rest on their support: the height is not free.
         if abs(p[2] - r.low[2]) > 0.02:
             raise ValueError(
                 f"objects[{name!r}]: z must be {r.low[2]:.4f} (the {name} rests on its support), "
                 f"got {p[2]:.4f}"
             )
-        out[name] = np.array([p[0], p[1], r.low[2]])
+        if placed.shape == (4, 4):  # a pose: on its support, turned about the vertical only
+            out[name] = yaw_pose([p[0], p[1], r.low[2]], yaw_of(placed))
+        else:
+            out[name] = np.array([p[0], p[1], r.low[2]])
     return out
 
 
