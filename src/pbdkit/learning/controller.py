@@ -89,10 +89,9 @@ from .._validation import check_array
 from ..motion.limits import LIMIT_SAFETY, MotionLimits
 from ..motion.otg import Motion, follow
 from ..prob.rotations import log3
+from .constraints import Constraints, KinematicModel
 from .placement import check_placements, position_of, rotation_of
 from .probabilistic_ik import (
-    Constraints,
-    KinematicModel,
     ReproductionResult,
     RunOptions,
     _check_reach,
