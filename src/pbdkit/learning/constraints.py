@@ -8,8 +8,9 @@ constraint (theta_hat, Sigma^theta) and, for each object n, the task-space const
 object's new position or pose (a :class:`WorldTask`). :class:`KinematicModel` is what
 reproduction needs from an arm (:class:`pbdkit.Robot` satisfies it).
 
-The controllers that fuse these constraints step by step are in :mod:`pbdkit.learning.steps`;
-the loop of Table II that runs them, and the math, in :mod:`pbdkit.learning.probabilistic_ik`.
+The controllers that fuse these constraints step by step are in :mod:`pbdkit.learning.steps`
+(and, for oriented constraints, :mod:`pbdkit.learning.pose_steps`); the loop of Table II that
+runs them, and the math, in :mod:`pbdkit.learning.probabilistic_ik`.
 """
 
 from __future__ import annotations

@@ -9,8 +9,7 @@ own targets is the offline reproduction. :class:`ControllerStep` is the interfac
 :class:`JointStep` follows theta_hat, :class:`FusedStep` is eq. (1) in information form and
 :class:`TaskStep` a task-only controller. Beside each step is its loop over the time grid, which
 also computes the covariances and the influence of the constraints, batched. The steps of
-oriented constraints are :class:`~pbdkit.learning.probabilistic_ik.PoseFusedStep` and
-:class:`~pbdkit.learning.probabilistic_ik.PoseTaskStep`.
+oriented constraints are in :mod:`pbdkit.learning.pose_steps`.
 
 Every step is bounded alike: ``step_limit`` (per joint) and ``max_step`` (over the joints) scale
 it down uniformly, keeping its direction; the fused step is also line-searched on the fused
