@@ -86,11 +86,11 @@ tight task constraint (P_n ~ 1e6 m^-2 at a 1 mm spread) meets a loose joint cons
 curvature outweighs the joint precision in the directions the task leaves free, and the loop
 oscillates with growing amplitude (``benchmarks/bench_skill.py``'s skill; a velocity limit
 alone only turns that into chatter at top speed). So every step is checked: if it raises E_j,
-it is halved (up to ``MAX_HALVINGS`` times; a Gauss-Newton step is a descent direction of E_j,
-so a short enough step lowers it), the standard line search that globalizes Gauss-Newton
-(Nocedal & Wright, Numerical Optimization, ch. 10). The check reuses f(theta_{j+1}), which the
-next step needs anyway, and changes nothing where Table II converges (the steps lower E_j
-already). ``line_search=False`` gives the paper's loop as written.
+it is halved (up to ``MAX_HALVINGS`` times, :mod:`pbdkit.learning.steps`; a Gauss-Newton step
+is a descent direction of E_j, so a short enough step lowers it), the standard line search that
+globalizes Gauss-Newton (Nocedal & Wright, Numerical Optimization, ch. 10). The check reuses
+f(theta_{j+1}), which the next step needs anyway, and changes nothing where Table II converges
+(the steps lower E_j already). ``line_search=False`` gives the paper's loop as written.
 
 The line search alone leaves a limit cycle whose steps each lower E_j: a joint reversing at every
 step at the velocity bound (measured on the simulated teacher's coaster skills, seeds 0-9 and 4
