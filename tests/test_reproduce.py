@@ -14,6 +14,7 @@ import numpy.typing as npt
 import pytest
 from numpy.typing import NDArray
 
+from pbdkit.learning import constraints, pose_steps, probabilistic_ik, steps
 from pbdkit.learning.probabilistic_ik import (
     VELOCITY_SAFETY,
     Constraints,
@@ -610,6 +611,16 @@ def test_the_old_spelling_of_solve_warns_and_gives_the_same_result() -> None:
         old = reproduce(arm, c, objs, use=["joint", "a"], max_step=None)
     new = solve(arm, c, objs, RunOptions(use=["joint", "a"], max_step=None))
     np.testing.assert_array_equal(old.joints, new.joints)
+
+
+def test_the_names_split_out_of_probabilistic_ik_are_still_its_own() -> None:
+    # Constraints, the controllers' steps and the oriented steps moved to modules of their own;
+    # probabilistic_ik still exports each of them, the same object (isinstance keeps working).
+    for module in (constraints, steps, pose_steps):
+        for name in module.__all__:
+            assert name in probabilistic_ik.__all__
+            assert getattr(probabilistic_ik, name) is getattr(module, name)
+    assert probabilistic_ik.JOINT == constraints.JOINT
 
 
 def test_reproduce_rejects_mismatched_robot_and_constraints() -> None:

@@ -7,7 +7,7 @@ object positions) and returns the next command. With motion limits (the default 
 that declares them) the commands follow a plan within the limits, made again when objects move
 or the arm is pushed (section "Motion limits" below). Without (this section), each call closes
 the loop of Table II on q and runs the same step as the offline reproduction (a
-:class:`pbdkit.learning.probabilistic_ik.ControllerStep` from
+:class:`pbdkit.learning.steps.ControllerStep` from
 :func:`~pbdkit.learning.probabilistic_ik.make_step`), linearized at q instead of at the
 previous target: fed its own targets with constant objects, a controller reproduces
 :meth:`Skill.reproduce` step for step. Objects may move: ``step(q, objects={...})`` updates
@@ -89,10 +89,9 @@ from .._validation import check_array
 from ..motion.limits import LIMIT_SAFETY, MotionLimits
 from ..motion.otg import Motion, follow
 from ..prob.rotations import log3
+from .constraints import Constraints, KinematicModel
 from .placement import check_placements, position_of, rotation_of
 from .probabilistic_ik import (
-    Constraints,
-    KinematicModel,
     ReproductionResult,
     RunOptions,
     _check_reach,

@@ -20,8 +20,8 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array, check_int, check_positive_float
+from .constraints import KinematicModel
 from .demonstration import Demonstration
-from .probabilistic_ik import KinematicModel
 
 __all__ = [
     "LASA_MULTI_MODEL",

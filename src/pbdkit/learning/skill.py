@@ -42,7 +42,7 @@ orientation (Karcher mean over all their samples), not at the identity (a hand p
 an upright object is 90 degrees or more from it; near 180 degrees the rotation vector would
 flip). Relative orientations up to 90 degrees from M (a spread of +-90 degrees) are
 represented without wrap-around. At reproduction each constraint is mapped to the world with
-the object's new pose (:meth:`pbdkit.learning.probabilistic_ik.Constraints.world_task`).
+the object's new pose (:meth:`pbdkit.learning.constraints.Constraints.world_task`).
 """
 
 from __future__ import annotations
@@ -67,13 +67,11 @@ from ..motion.limits import LimitSpec, MotionLimits
 from ..prob.gmm import GMM, MAX_COMPONENTS, ModelSelection
 from ..prob.gmr import CovarianceMode
 from ..prob.rotations import check_rotation, log_map, mean_rotation
+from .constraints import JOINT, Constraints, KinematicModel
 from .controller import Controller
 from .demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from .placement import is_pose, position_of
 from .probabilistic_ik import (
-    JOINT,
-    Constraints,
-    KinematicModel,
     ReproductionResult,
     RunOptions,
     reach_from_samples,
