@@ -99,7 +99,10 @@ class ControllerStep:
     The interface :func:`~pbdkit.learning.probabilistic_ik.solve`'s loops and
     :class:`pbdkit.Controller` run every controller through
     (:func:`~pbdkit.learning.probabilistic_ik.make_step` builds the one a run asks for):
-    :class:`FusedStep`, :class:`TaskStep` or :class:`JointStep`.
+    :class:`FusedStep`, :class:`TaskStep` or :class:`JointStep`, and for oriented constraints
+    :class:`~pbdkit.learning.pose_steps.PoseFusedStep` or
+    :class:`~pbdkit.learning.pose_steps.PoseTaskStep` (whose ``jac`` is the 6-D Jacobian and
+    whose ``axes`` slot carries the hand's orientation).
     """
 
     #: "fused", "task" or "joint".
