@@ -5,6 +5,15 @@ built by :func:`pbdkit.sim.world.build_scene`, re-exported here with its constan
 :class:`Simulation` holds the model and its data: joints, tool position, object positions (ground
 truth), stepping, rendering and the cameras' OpenCV parameters.
 
+The grasped object (:attr:`pbdkit.sim.tasks.TaskSpec.grasped`) is a glass
+(:func:`pbdkit.sim.world.add_glass`) or a block (:func:`pbdkit.sim.parts.add_block`); the
+simulation tells which from the scene (a block has a geom ``NAME_box``) and handles both alike:
+its pose (:meth:`Simulation.grasped_pose`, :meth:`Simulation.glass_pose`), tilt, grasp and
+release checks (finger contacts with the glass's walls or the block's box), its point
+(:meth:`Simulation.object_positions`: on the glass's axis at its red band's height, the centre
+of the block's top face) and :meth:`Simulation.place_object`. The ``glass_*`` methods keep their
+names for the paper's tasks; with a block they are about the block.
+
 Camera conventions. A MuJoCo camera looks along its local -z with y up and x to the right. OpenCV's
 pinhole model looks along +z with y down. :meth:`Simulation.camera_parameters` returns OpenCV's
 ``K, R, t`` with ``u ~ K (R X + t)`` for a world (base-frame) point X and pixel coordinates whose
@@ -23,6 +32,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from . import tasks as T
+from .parts import block_geom
 from .tasks import TaskSpec
 from .world import (
     ARM_JOINTS,
@@ -56,6 +66,24 @@ __all__ = [
 ]
 
 Float = NDArray[np.float64]
+
+
+def _quat_mat(quat: npt.ArrayLike) -> Float:
+    """Rotation matrix (3, 3) of a unit quaternion (w, x, y, z)."""
+    out = np.empty(9)
+    mujoco.mju_quat2Mat(out, np.asarray(quat, dtype=np.float64))
+    return out.reshape(3, 3)
+
+
+def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of a turn by ``yaw`` (rad) about the vertical."""
+    return (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+
+
+def _heading(xmat: npt.ArrayLike) -> float:
+    """Yaw (rad) of a body's x axis, from its flattened rotation matrix (9,)."""
+    r = np.asarray(xmat, dtype=np.float64)
+    return math.atan2(float(r[3]), float(r[0]))
 
 
 def _as_slice(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
@@ -99,21 +127,36 @@ class Simulation:
         self._finger_act = np.array([m.actuator(f"pos_{j}").id for j in FINGER_JOINTS])
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(j).id] for j in FINGER_JOINTS])
         self._tool_site = m.site("tool").id
-        # The object the gripper holds (the task's glass, TaskSpec.grasped).
+        # The object the gripper holds (TaskSpec.grasped): a glass, or a block (it has a box
+        # geom). What differs: the geoms the fingers touch, and the object's point on its body's
+        # z axis (the glass's body frame is its bottom centre, the block's its top face's).
         self._held = info.spec.grasped
-        self._held_wall = wall_prefix(self._held)
+        if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, block_geom(self._held)) >= 0:
+            self._held_kind = "block"
+            self._held_wall = block_geom(self._held)
+            self._held_point_z = 0.0
+        else:
+            self._held_kind = "glass"
+            self._held_wall = wall_prefix(self._held)
+            self._held_point_z = T.GLASS_PATCH_CENTER
         self._glass_body = m.body(self._held).id
         self._liquid_bodies = np.array(
             [m.body(f"liquid{i}").id for i in range(info.n_liquid)], dtype=np.intp
         )
-        # Objects built as mocap bodies (a disturbance may slide them): body id -> mocap id,
-        # and the object's reference point relative to the body's origin.
+        # Objects built as mocap bodies (a disturbance may slide or turn them): body id ->
+        # mocap id, and the object's reference point in the body's frame.
         self._mocap: dict[str, tuple[int, Float]] = {}
+        # The other objects that are bodies (static): their orientation, for object_poses.
+        self._bodies: dict[str, int] = {}
         for name, pos in info.objects.items():
             bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
             if bid >= 0 and m.body_mocapid[bid] >= 0:
                 mid = int(m.body_mocapid[bid])
-                self._mocap[name] = (mid, np.asarray(pos - m.body_pos[bid], dtype=np.float64))
+                rot0 = _quat_mat(m.body_quat[bid])
+                offset = rot0.T @ (pos - m.body_pos[bid])
+                self._mocap[name] = (mid, np.asarray(offset, dtype=np.float64))
+            elif bid >= 0:
+                self._bodies[name] = bid
         self._glass_qadr = int(m.jnt_qposadr[m.joint(free_joint(self._held)).id])
         self._glass_vadr = int(m.jnt_dofadr[m.joint(free_joint(self._held)).id])
         self._renderer: Any = None
@@ -217,16 +260,39 @@ class Simulation:
         """Orientation of the tool frame in the base frame, shape (3, 3) (columns = axes)."""
         return np.array(self.data.site_xmat[self._tool_site], dtype=np.float64).reshape(3, 3)
 
+    @property
+    def grasped_kind(self) -> str:
+        """What the grasped object is: ``"glass"`` or ``"block"`` (module docstring)."""
+        return self._held_kind
+
     def glass_pose(self) -> tuple[Float, Float]:
-        """Glass bottom centre (3,) and rotation (3, 3) in the base frame."""
+        """Glass bottom centre (3,) and rotation (3, 3) in the base frame.
+
+        For a grasped block: its body frame, whose origin is the centre of its top face
+        (:func:`pbdkit.sim.parts.add_block`), as :meth:`grasped_pose` gives it.
+        """
         b = self._glass_body
         return (
             np.array(self.data.xpos[b], dtype=np.float64),
             np.array(self.data.xmat[b], dtype=np.float64).reshape(3, 3),
         )
 
+    def grasped_pose(self) -> Float:
+        """Pose of the grasped object's body frame in the base frame, shape (4, 4).
+
+        The glass's frame is the centre of its bottom face, z along its axis; a block's is the
+        centre of its top face, x along the block from mark a to mark b, z up
+        (:mod:`pbdkit.sim.parts`). Its yaw is :func:`pbdkit.sim.parts.pose_yaw` of it.
+        """
+        pos, rot = self.glass_pose()
+        out = np.eye(4)
+        out[:3, :3] = rot
+        out[:3, 3] = pos
+        return out
+
     def glass_tilt(self) -> float:
-        """Angle between the glass's axis and the vertical (rad)."""
+        """Angle between the glass's axis (a block's vertical, its z axis) and the vertical
+        (rad)."""
         # rot[2, 2] of glass_pose(), read in place: this runs at every physics step.
         c = float(self.data.xmat[self._glass_body, 8])
         return math.acos(min(1.0, max(-1.0, c)))
@@ -235,31 +301,64 @@ class Simulation:
         """Ground-truth object positions o (base frame), name -> (3,), as the cameras define them.
 
         The grasped glass's point (:attr:`pbdkit.sim.tasks.TaskSpec.grasped`) is on its axis at
-        the height of the red band's centre; the other objects are static bodies, at their
-        build positions, or mocap bodies where they are now (:meth:`place_object`).
+        the height of the red band's centre, a grasped block's the centre of its top face; the
+        other objects are static bodies, at their build positions, or mocap bodies where they
+        are now (:meth:`place_object`).
         """
         out = {k: v.copy() for k, v in self.info.objects.items()}
         for name, (mid, offset) in self._mocap.items():
-            out[name] = np.asarray(self.data.mocap_pos[mid] + offset, dtype=np.float64)
+            rot = _quat_mat(self.data.mocap_quat[mid])
+            out[name] = np.asarray(self.data.mocap_pos[mid] + rot @ offset, dtype=np.float64)
         bottom, rot = self.glass_pose()
-        out[self._held] = bottom + rot[:, 2] * T.GLASS_PATCH_CENTER
+        out[self._held] = bottom + rot[:, 2] * self._held_point_z
+        return out
+
+    def object_poses(self) -> dict[str, Float]:
+        """Ground-truth object poses (base frame), name -> (4, 4): :meth:`object_positions`'
+        points with the objects' orientations.
+
+        The orientation is that of the object's body: the grasped object's (free), a mocap
+        body's as it is now, a static body's as built; an object that is no body of its own
+        (e.g. a geom of the world) has the identity. The yaw of a block or a tray is
+        :func:`pbdkit.sim.parts.pose_yaw` of its pose.
+        """
+        out: dict[str, Float] = {}
+        for name, pos in self.object_positions().items():
+            pose = np.eye(4)
+            pose[:3, 3] = pos
+            if name == self._held:
+                pose[:3, :3] = self.glass_pose()[1]
+            elif name in self._mocap:
+                pose[:3, :3] = _quat_mat(self.data.mocap_quat[self._mocap[name][0]])
+            elif name in self._bodies:
+                pose[:3, :3] = np.asarray(self.data.xmat[self._bodies[name]]).reshape(3, 3)
+            out[name] = pose
         return out
 
     def place_object(
-        self, name: str, position: npt.ArrayLike, velocity: npt.ArrayLike | None = None
+        self,
+        name: str,
+        position: npt.ArrayLike,
+        velocity: npt.ArrayLike | None = None,
+        *,
+        yaw: float | None = None,
     ) -> None:
         """Move an object so that its reference point (:meth:`object_positions`) is at
-        ``position``, for a disturbance that slides it.
+        ``position``, for a disturbance that slides (or turns) it.
 
-        The glass (a free body) is set upright and translated, with the linear velocity
+        The grasped object (a free body) is set upright and translated, with the linear velocity
         ``velocity`` (default zero) and no angular velocity, as a hand sliding it would hold
-        it; its contents follow through contacts. An object built as a
-        mocap body (the coaster) is moved kinematically. Static objects cannot move.
+        it; a glass's contents follow through contacts. Upright means: a glass with the
+        identity orientation (it is round), a block at its present yaw; ``yaw`` (rad, about the
+        vertical: :func:`pbdkit.sim.parts.pose_yaw`) sets the yaw instead. An object built as a
+        mocap body (the coaster, a tray) is moved kinematically, keeping its orientation, or
+        turned to ``yaw`` about its reference point. Static objects cannot move.
 
         Raises
         ------
         ValueError
-            An unknown or static object, or a position that is not a finite (3,) vector.
+            An unknown or static object, a position that is not a finite (3,) vector, or a yaw
+            that is not finite.
         """
         p = np.asarray(position, dtype=np.float64)
         v = np.zeros(3) if velocity is None else np.asarray(velocity, dtype=np.float64)
@@ -271,11 +370,17 @@ class Simulation:
             raise ValueError(
                 f"position and velocity must be finite (3,) vectors, got {position!r}, {velocity!r}"
             )
+        if yaw is not None and not math.isfinite(yaw):
+            raise ValueError(f"yaw must be finite (rad) or None, got {yaw!r}")
         if name == self._held:
             a, d = self._glass_qadr, self._glass_vadr
-            # Upright (the glass is built with the identity orientation), as a hand sliding it
-            # would hold it; its reference point is then on the vertical through its bottom.
-            self.data.qpos[a + 3 : a + 7] = (1.0, 0.0, 0.0, 0.0)
+            # Upright, as a hand sliding it would hold it; its reference point is then on the
+            # vertical through its body's origin. The glass is built with the identity
+            # orientation; a block keeps its heading unless told one.
+            if yaw is None and self._held_kind == "block":
+                yaw = _heading(self.data.xmat[self._glass_body])
+            quat = (1.0, 0.0, 0.0, 0.0) if yaw is None else _yaw_quat(yaw)
+            self.data.qpos[a + 3 : a + 7] = quat
             self.data.qvel[d + 3 : d + 6] = 0.0
             mujoco.mj_kinematics(self.model, self.data)
             now = self.object_positions()[self._held]
@@ -283,7 +388,9 @@ class Simulation:
             self.data.qvel[d : d + 3] = v
         elif name in self._mocap:
             mid, offset = self._mocap[name]
-            self.data.mocap_pos[mid] = p - offset
+            if yaw is not None:
+                self.data.mocap_quat[mid] = _yaw_quat(yaw)
+            self.data.mocap_pos[mid] = p - _quat_mat(self.data.mocap_quat[mid]) @ offset
         else:
             movable = [self._held, *self._mocap]
             raise ValueError(f"object {name!r} cannot move; movable objects: {movable}")
@@ -312,14 +419,14 @@ class Simulation:
         return int(np.count_nonzero(hits))
 
     def glass_grasped(self) -> bool:
-        """True if both fingers touch the grasped glass."""
+        """True if both fingers touch the grasped glass (its walls; a grasped block: its box)."""
         return (
             self.contacts("finger_left", self._held_wall) > 0
             and self.contacts("finger_right", self._held_wall) > 0
         )
 
     def glass_released(self) -> bool:
-        """True if no finger touches the grasped glass."""
+        """True if no finger touches the grasped glass (or block)."""
         left = self.contacts("finger_left", self._held_wall)
         return not (left or self.contacts("finger_right", self._held_wall))
 
