@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from pbdkit.robots import katana
 from pbdkit.sim import Outcome, PlacementRange, Simulation, TaskSpec, solve_ik
 from pbdkit.sim import parts as P
+from pbdkit.sim.tasks import yaw_of, yaw_pose
 from pbdkit.sim.teacher import LIMIT_MARGIN
 from pbdkit.vision.color import CBCR_FROM_RGB, cbcr_from_rgb
 
@@ -39,17 +40,21 @@ def _wrap(a: float) -> float:
 
 
 def _spec(block: Float, tray: Float, *, mocap: bool = False) -> TaskSpec:
-    """A task with a block (grasped) and a tray at the given 4x4 poses."""
-    bp, tp = tuple(block[:3, 3]), tuple(tray[:3, 3])
+    """A task with a block (grasped) and a tray at the given 4x4 poses: posed ranges of one
+    placement each, whose poses add_objects hands on to the builders."""
 
     def add_objects(world: Any, objects: Mapping[str, Float], rng: np.random.Generator) -> None:
-        P.add_block(world, block)
-        P.add_tray(world, tray, mocap=mocap)
+        P.add_block(world, objects["block"])
+        P.add_tray(world, objects["tray"], mocap=mocap)
+
+    def posed(pose: Float) -> PlacementRange:
+        p, yaw = tuple(pose[:3, 3]), yaw_of(pose)
+        return PlacementRange.box(p, p, yaw=(yaw, yaw))
 
     return TaskSpec(
         name="slot_world_test",
         description="A block and a tray.",
-        ranges={"block": PlacementRange.box(bp, bp), "tray": PlacementRange.box(tp, tp)},
+        ranges={"block": posed(block), "tray": posed(tray)},
         add_objects=add_objects,
         via_points=lambda objects, rng, speed: [],
         judge=lambda sim, run: Outcome(True, {}),
@@ -59,11 +64,11 @@ def _spec(block: Float, tray: Float, *, mocap: bool = False) -> TaskSpec:
 
 
 def _block(x: float, y: float, yaw: float) -> Float:
-    return P.yaw_pose((x, y, P.BLOCK_HEIGHT), yaw)
+    return yaw_pose((x, y, P.BLOCK_HEIGHT), yaw)
 
 
 def _tray(x: float, y: float, yaw: float) -> Float:
-    return P.yaw_pose((x, y, P.TRAY_RIM_HEIGHT), yaw)
+    return yaw_pose((x, y, P.TRAY_RIM_HEIGHT), yaw)
 
 
 @pytest.fixture
@@ -80,10 +85,7 @@ def _bottom_above_floor(block: Float) -> float:
 
 
 # ---------------------------------------------------------------------------------- geometry
-def test_poses_yaw_and_footprint_margin() -> None:
-    pose = P.yaw_pose((0.1, 0.2, 0.3), 0.7)
-    assert P.pose_yaw(pose) == pytest.approx(0.7, abs=1e-12)
-    np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
+def test_footprint_margin_and_pose_checks() -> None:
     tray = _tray(0.2, -0.1, -0.4)
     for turn in (0.0, math.pi):
         aligned = _block(0.2, -0.1, -0.4 + turn)
@@ -149,7 +151,7 @@ def test_marks_exist_with_their_colors_and_are_visual_only(scene: Simulation) ->
         mid = 0.5 * (a + b) - np.array([0.0, 0.0, P.MARK_THICKNESS / 2])
         np.testing.assert_allclose(mid, poses[obj][:3, 3], atol=1e-9)
         d = b - a
-        assert math.atan2(d[1], d[0]) == pytest.approx(P.pose_yaw(poses[obj]), abs=1e-9)
+        assert math.atan2(d[1], d[0]) == pytest.approx(yaw_of(poses[obj]), abs=1e-9)
     # Four hues apart from each other and from the red band and the coaster's blue
     # (hue = direction of (Cb, Cr) - 128, degrees).
     hues = {
@@ -201,10 +203,13 @@ def test_block_rests_on_the_table_at_its_pose() -> None:
             assert sim.grasped_kind == "block"
             sim.set_joints(_REST)
             np.testing.assert_allclose(sim.object_positions()["block"], pose[:3, 3], atol=1e-12)
+            placements = sim.object_placements()  # posed ranges: poses, as the task gives them
+            np.testing.assert_allclose(placements["block"], pose, atol=1e-12)
+            np.testing.assert_allclose(placements["tray"], _tray(0.30, -0.30, 0.0), atol=1e-12)
             sim.step(1000)  # 2 s
             now = sim.object_poses()["block"]
             np.testing.assert_allclose(now[:3, 3], pose[:3, 3], atol=1e-3)
-            assert abs(_wrap(P.pose_yaw(now) - P.pose_yaw(pose))) < math.radians(0.5)
+            assert abs(_wrap(yaw_of(now) - yaw_of(pose))) < math.radians(0.5)
             assert sim.glass_tilt() < math.radians(0.1)
             np.testing.assert_allclose(sim.grasped_pose(), now, atol=1e-12)
             assert sim.glass_released() and not sim.glass_grasped()
@@ -215,7 +220,7 @@ def _drop(sim: Simulation, dx: float, dy: float, yaw_off: float, height: float =
     (dx, dy) in the tray's frame, turned by ``yaw_off`` from the tray; its pose 2 s later."""
     tray = sim.object_poses()["tray"]
     p = tray[:3, 3] + tray[:3, :3] @ np.array([dx, dy, height + P.BLOCK_HEIGHT])
-    sim.place_object("block", p, yaw=P.pose_yaw(tray) + yaw_off)
+    sim.place_object("block", p, yaw=yaw_of(tray) + yaw_off)
     sim.step(1000)
     return sim.object_poses()["block"]
 
@@ -251,20 +256,20 @@ def test_place_object_keeps_or_sets_a_blocks_yaw_and_turns_a_mocap_tray() -> Non
         sim.place_object("block", target)
         poses = sim.object_poses()
         np.testing.assert_allclose(poses["block"][:3, 3], target, atol=1e-12)
-        assert P.pose_yaw(poses["block"]) == pytest.approx(0.5, abs=1e-9)
+        assert yaw_of(poses["block"]) == pytest.approx(0.5, abs=1e-9)
         sim.place_object("block", target, yaw=-0.2)
-        assert P.pose_yaw(sim.object_poses()["block"]) == pytest.approx(-0.2, abs=1e-9)
+        assert yaw_of(sim.object_poses()["block"]) == pytest.approx(-0.2, abs=1e-9)
         # The mocap tray turns about its point, and slides keeping its yaw.
         centre = sim.object_positions()["tray"]
         sim.place_object("tray", centre, yaw=0.1)
         tray = sim.object_poses()["tray"]
         np.testing.assert_allclose(tray[:3, 3], centre, atol=1e-12)
-        assert P.pose_yaw(tray) == pytest.approx(0.1, abs=1e-12)
+        assert yaw_of(tray) == pytest.approx(0.1, abs=1e-12)
         moved = centre + np.array([0.01, 0.0, 0.0])
         sim.place_object("tray", moved)
         tray = sim.object_poses()["tray"]
         np.testing.assert_allclose(tray[:3, 3], moved, atol=1e-12)
-        assert P.pose_yaw(tray) == pytest.approx(0.1, abs=1e-12)
+        assert yaw_of(tray) == pytest.approx(0.1, abs=1e-12)
         with pytest.raises(ValueError, match="yaw"):
             sim.place_object("tray", centre, yaw=math.nan)
     static = _spec(_block(0.22, 0.1, 0.0), _tray(0.2, -0.12, 0.0))
@@ -327,7 +332,7 @@ def test_grasp_checks_for_a_block_closed_between_the_fingers() -> None:
         np.testing.assert_allclose(
             sim.tool_position() - now, [0.0, 0.0, P.BLOCK_GRASP_HEIGHT], atol=1e-3
         )
-        assert abs(_wrap(P.pose_yaw(sim.grasped_pose()) - yaw)) < math.radians(0.5)
+        assert abs(_wrap(yaw_of(sim.grasped_pose()) - yaw)) < math.radians(0.5)
         assert sim.glass_tilt() < math.radians(1.0)
         sim.set_gripper(False)
         sim.step(500)
@@ -344,6 +349,10 @@ def test_a_glass_is_still_the_grasped_object_of_the_papers_tasks() -> None:
         np.testing.assert_array_equal(pose[:3, :3], rot)
         positions, poses = sim.object_positions(), sim.object_poses()
         assert list(poses) == list(positions)
+        placements = sim.object_placements()  # positions only: the paper's task is not posed
+        assert list(placements) == list(positions)
+        for name, p in positions.items():
+            np.testing.assert_array_equal(placements[name], p)
         for name, p in positions.items():
             np.testing.assert_array_equal(poses[name][:3, 3], p)
             np.testing.assert_array_equal(poses[name][:3, :3], np.eye(3))

@@ -3,7 +3,9 @@
 :func:`add_block` adds a free rectangular block lying on the table, :func:`add_tray` a tray whose
 rectangular pocket is the block's footprint plus :data:`POCKET_CLEARANCE` on every side. Both take
 a pose (a 4x4 homogeneous matrix in the robot's base frame) whose rotation is a yaw about the
-vertical: they lie flat.
+vertical: they lie flat. A task places them with posed ranges (``PlacementRange.box(low, high,
+yaw=(lo, hi))``), whose placements are such poses (:func:`pbdkit.sim.tasks.yaw_pose`), and hands
+its ``add_objects``' ``objects[name]`` on as it is.
 
 Reference points and yaw (what the cameras measure)
 ---------------------------------------------------
@@ -13,7 +15,7 @@ Reference points and yaw (what the cameras measure)
   :data:`BLOCK_MARK_B_RGBA`), the same size and at the same distance from the centre: the midpoint
   of the two marks' centres is the block's point (0.2 mm above it, the marks' half thickness), and
   the block's yaw is the heading of the direction from mark a to mark b, ``atan2(dy, dx)``
-  (:func:`pose_yaw` of its pose).
+  (:func:`pbdkit.sim.tasks.yaw_of` of its pose).
 - The tray's point is the centre of the pocket's rim plane (the top faces of its walls; the
   pocket's floor is :data:`TRAY_DEPTH` lower), and its body frame sits there: x along the
   pocket's length, from end a to end b, z up. The tops of its two end walls carry its marks
@@ -70,6 +72,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .tasks import yaw_of
 from .world import FINGER_HALF, SOLID, TIMESTEP, free_joint
 
 __all__ = [
@@ -104,8 +107,6 @@ __all__ = [
     "block_geom",
     "footprint_margin",
     "mark_prefix",
-    "pose_yaw",
-    "yaw_pose",
 ]
 
 Float = NDArray[np.float64]
@@ -177,24 +178,6 @@ def mark_prefix(name: str, end: str) -> str:
     return f"{name}_mark_{end}"
 
 
-def yaw_pose(position: npt.ArrayLike, yaw: float) -> Float:
-    """The 4x4 pose at ``position`` (3,) turned by ``yaw`` (rad) about the vertical."""
-    p = np.asarray(position, dtype=np.float64)
-    if p.shape != (3,) or not np.all(np.isfinite(p)) or not math.isfinite(yaw):
-        raise ValueError(f"position must be a finite (3,) vector and yaw finite, got {position!r}")
-    c, s = math.cos(yaw), math.sin(yaw)
-    pose = np.eye(4)
-    pose[:2, :2] = [[c, -s], [s, c]]
-    pose[:3, 3] = p
-    return pose
-
-
-def pose_yaw(pose: npt.ArrayLike) -> float:
-    """Heading of a pose's x axis about the vertical (rad, in (-pi, pi]): an object's yaw."""
-    r = np.asarray(pose, dtype=np.float64)
-    return math.atan2(float(r[1, 0]), float(r[0, 0]))
-
-
 def _check_flat_pose(pose: npt.ArrayLike, what: str) -> tuple[Float, float]:
     """Position (3,) and yaw of a 4x4 pose whose rotation turns about the vertical only."""
     p = np.asarray(pose, dtype=np.float64)
@@ -206,7 +189,7 @@ def _check_flat_pose(pose: npt.ArrayLike, what: str) -> tuple[Float, float]:
             f"{what}: the pose's rotation must be a yaw about the vertical (z up), got "
             f"{np.round(rot, 6).tolist()}"
         )
-    return p[:3, 3].copy(), pose_yaw(p)
+    return p[:3, 3].copy(), yaw_of(p)
 
 
 def _yaw_quat(yaw: float) -> list[float]:
@@ -351,8 +334,8 @@ def footprint_margin(block_pose: npt.ArrayLike, tray_pose: npt.ArrayLike) -> flo
     """
     b = np.asarray(block_pose, dtype=np.float64)
     t = np.asarray(tray_pose, dtype=np.float64)
-    yaw = pose_yaw(b) - pose_yaw(t)
-    ct, st = math.cos(pose_yaw(t)), math.sin(pose_yaw(t))
+    yaw = yaw_of(b) - yaw_of(t)
+    ct, st = math.cos(yaw_of(t)), math.sin(yaw_of(t))
     d = b[:2, 3] - t[:2, 3]
     centre = np.array([ct * d[0] + st * d[1], -st * d[0] + ct * d[1]])  # in the tray's frame
     c, s = math.cos(yaw), math.sin(yaw)

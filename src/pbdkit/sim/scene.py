@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from ..learning.placement import position_of, rotation_of
 from . import tasks as T
 from .parts import block_geom
 from .tasks import TaskSpec
@@ -148,7 +149,8 @@ class Simulation:
         self._mocap: dict[str, tuple[int, Float]] = {}
         # The other objects that are bodies (static): their orientation, for object_poses.
         self._bodies: dict[str, int] = {}
-        for name, pos in info.objects.items():
+        for name, placed in info.objects.items():
+            pos = position_of(placed)
             bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
             if bid >= 0 and m.body_mocapid[bid] >= 0:
                 mid = int(m.body_mocapid[bid])
@@ -282,7 +284,7 @@ class Simulation:
 
         The glass's frame is the centre of its bottom face, z along its axis; a block's is the
         centre of its top face, x along the block from mark a to mark b, z up
-        (:mod:`pbdkit.sim.parts`). Its yaw is :func:`pbdkit.sim.parts.pose_yaw` of it.
+        (:mod:`pbdkit.sim.parts`). Its yaw is :func:`pbdkit.sim.tasks.yaw_of` of it.
         """
         pos, rot = self.glass_pose()
         out = np.eye(4)
@@ -305,7 +307,7 @@ class Simulation:
         other objects are static bodies, at their build positions, or mocap bodies where they
         are now (:meth:`place_object`).
         """
-        out = {k: v.copy() for k, v in self.info.objects.items()}
+        out = {k: position_of(v).copy() for k, v in self.info.objects.items()}
         for name, (mid, offset) in self._mocap.items():
             rot = _quat_mat(self.data.mocap_quat[mid])
             out[name] = np.asarray(self.data.mocap_pos[mid] + rot @ offset, dtype=np.float64)
@@ -319,8 +321,8 @@ class Simulation:
 
         The orientation is that of the object's body: the grasped object's (free), a mocap
         body's as it is now, a static body's as built; an object that is no body of its own
-        (e.g. a geom of the world) has the identity. The yaw of a block or a tray is
-        :func:`pbdkit.sim.parts.pose_yaw` of its pose.
+        (e.g. a geom of the world) has its placement's (the identity for a position). The yaw
+        of a block or a tray is :func:`pbdkit.sim.tasks.yaw_of` of its pose.
         """
         out: dict[str, Float] = {}
         for name, pos in self.object_positions().items():
@@ -332,8 +334,23 @@ class Simulation:
                 pose[:3, :3] = _quat_mat(self.data.mocap_quat[self._mocap[name][0]])
             elif name in self._bodies:
                 pose[:3, :3] = np.asarray(self.data.xmat[self._bodies[name]]).reshape(3, 3)
+            else:
+                rot = rotation_of(self.info.objects[name])
+                if rot is not None:
+                    pose[:3, :3] = rot
             out[name] = pose
         return out
+
+    def object_placements(self) -> dict[str, Float]:
+        """Ground-truth placements in the task's form, name -> (3,) or (4, 4): the pose
+        (:meth:`object_poses`) of an object whose range has a yaw
+        (:attr:`pbdkit.sim.tasks.PlacementRange.posed`, e.g. the block and the tray), the
+        position (:meth:`object_positions`) of the others; what a skill is told of a scene."""
+        ranges = self.info.spec.ranges
+        if not any(r.posed for r in ranges.values()):
+            return self.object_positions()
+        poses = self.object_poses()
+        return {k: p if ranges[k].posed else p[:3, 3].copy() for k, p in poses.items()}
 
     def place_object(
         self,
@@ -350,7 +367,7 @@ class Simulation:
         ``velocity`` (default zero) and no angular velocity, as a hand sliding it would hold
         it; a glass's contents follow through contacts. Upright means: a glass with the
         identity orientation (it is round), a block at its present yaw; ``yaw`` (rad, about the
-        vertical: :func:`pbdkit.sim.parts.pose_yaw`) sets the yaw instead. An object built as a
+        vertical: :func:`pbdkit.sim.tasks.yaw_of`) sets the yaw instead. An object built as a
         mocap body (the coaster, a tray) is moved kinematically, keeping its orientation, or
         turned to ``yaw`` about its reference point. Static objects cannot move.
 
