@@ -187,11 +187,9 @@ def fast_cli(monkeypatch: pytest.MonkeyPatch, small_skill: E.TaskSkill) -> None:
 def test_evaluate_with_vision_reports_tracking_error(
     fast_cli: None, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(evaluation, "controller_names", lambda names: ["fused"])
     path = tmp_path / "eval.json"
-    r = CliRunner().invoke(
-        app, ["evaluate", "--task", "coaster", "--trials", "1", "--seed", "3", "--json", str(path)]
-    )
+    args = ["evaluate", "--task", "coaster", "--trials", "1", "--seed", "3", "--json", str(path)]
+    r = CliRunner().invoke(app, [*args, "--controller", "fused"])
     assert r.exit_code == 0, r.output
     data = json.loads(path.read_text())
     assert data["vision"] is True
