@@ -206,13 +206,17 @@ class PlacementRange:
         """True if the object is placed as a pose (it has a yaw range)."""
         return self.yaw is not None
 
-    def sample(self, rng: np.random.Generator) -> Float:
+    def sample(self, rng: np.random.Generator, yaw_stratum: tuple[int, int] | None = None) -> Float:
         """A placement drawn uniformly: a position (3,), or a 4x4 pose for a posed range
-        (position first, then yaw, from ``rng``)."""
+        (position first, then yaw, from ``rng``). ``yaw_stratum`` (i, n): the yaw is drawn in
+        the i-th of n equal parts of the yaw range (so that n draws span it)."""
         p = rng.uniform(self.low, self.high)
         if self.yaw is None:
             return p
-        return yaw_pose(p, float(rng.uniform(self.yaw[0], self.yaw[1])))
+        u = float(rng.uniform())
+        if yaw_stratum is not None:
+            u = (yaw_stratum[0] + u) / yaw_stratum[1]
+        return yaw_pose(p, self.yaw[0] + (self.yaw[1] - self.yaw[0]) * u)
 
     def nominal(self) -> Float:
         """The centre: a position (3,), or the pose at the centre of the yaw range."""
@@ -464,10 +468,14 @@ class TaskSpec:
         centre of its yaw range."""
         return {name: r.nominal() for name, r in self.ranges.items()}
 
-    def sample_objects(self, rng: np.random.Generator) -> dict[str, Float]:
+    def sample_objects(
+        self, rng: np.random.Generator, yaw_strata: Mapping[str, tuple[int, int]] | None = None
+    ) -> dict[str, Float]:
         """Placements drawn uniformly inside the ranges, name -> (3,) or (4, 4) (see the
-        function)."""
-        return {name: r.sample(rng) for name, r in self.ranges.items()}
+        function); ``yaw_strata``: for some posed objects, the part (i, n) of the yaw range
+        to draw from (:meth:`PlacementRange.sample`)."""
+        strata = yaw_strata or {}
+        return {name: r.sample(rng, strata.get(name)) for name, r in self.ranges.items()}
 
     def check_placement(
         self, objects: Mapping[str, npt.ArrayLike], *, fill_moving: bool = False

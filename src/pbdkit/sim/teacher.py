@@ -479,15 +479,21 @@ def teach(
     -------
     list of Demonstration
         Object positions drawn uniformly in the task's placement ranges
-        (:meth:`pbdkit.sim.tasks.TaskSpec.sample_objects`).
+        (:meth:`pbdkit.sim.tasks.TaskSpec.sample_objects`); a posed object's yaws spread over
+        its yaw range, one demonstration in each of ``n_demos`` equal parts of it.
     """
     spec = T.get_task(task)
     if n_demos < 1:
         raise ValueError(f"n_demos must be >= 1, got {n_demos}")
     rng = np.random.default_rng(seed)
     robot = katana()
+    # A person spans the turns to be learned: each posed object's yaw range is cut in n_demos
+    # parts, one demonstration in each, in a random order per object (no draws for the
+    # paper's tasks, which have no posed object).
+    orders = {k: rng.permutation(n_demos) for k in spec.posed_objects}
     demos = []
-    for _ in range(n_demos):
-        objects = spec.sample_objects(rng)
+    for i in range(n_demos):
+        strata = {k: (int(order[i]), n_demos) for k, order in orders.items()}
+        objects = spec.sample_objects(rng, strata or None)
         demos.append(teach_one(spec, objects, rng, robot, speed))
     return demos

@@ -11,8 +11,10 @@ demonstrations (frames that translate only) is the ``"fused-position"`` controll
 Reach. With the hand pointing down, the Katana's wrist-roll joint sits about 0.30 m above the
 tool point; at the grasp height the tool reaches the table 0.05-0.29 m from the base axis, and
 closer than about 0.13 m an open finger or the palm hits the base column
-(:mod:`pbdkit.sim.parts`, "Reach"). Both objects lie 0.14-0.25 m from the base axis: the block to
-the robot's left, the tray to its right. The yaw of the hand is free (pan + roll): the wrist
+(:mod:`pbdkit.sim.parts`, "Reach"). Both objects lie 0.14-0.22 m from the base axis: the block to
+the robot's left, the tray to its right, boxes of 4 x 6 cm (their far corners 0.22 m from the
+axis: the hand rises 35 mm above the grasp and the release, where farther out it cannot point
+down without a joint near its limit). The yaw of the hand is free (pan + roll): the wrist
 roll ``yaw - pan`` closes the fingers across a block of yaw ``yaw``.
 
 Symmetry. The gripper, the block and the pocket look the same turned by 180 degrees. Yaw is
@@ -61,18 +63,18 @@ Float = NDArray[np.float64]
 DOWN = -math.pi / 2
 YAW_RANGE = (-math.radians(60.0), math.radians(60.0))
 #: Above the grasp and the release (m): the hand comes down vertically from there.
-HOVER = 0.04
+HOVER = 0.035
 #: The block's bottom above the pocket's floor when the fingers open (m): it drops onto it.
 RELEASE_GAP = 0.001
 MAX_HEIGHT_ERROR = 0.003  # m
 
-#: Placement ranges: the block to the robot's left, the tray to its right, 0.14-0.25 m from the
+#: Placement ranges: the block to the robot's left, the tray to its right, 0.14-0.22 m from the
 #: base axis (module docstring, "Reach"); positions are each object's point (the block's top
 #: face centre, the tray's rim plane centre).
 RANGES: dict[str, PlacementRange] = {
-    "block": PlacementRange.box((0.12, 0.09, BLOCK_HEIGHT), (0.17, 0.16, BLOCK_HEIGHT), YAW_RANGE),
+    "block": PlacementRange.box((0.12, 0.09, BLOCK_HEIGHT), (0.16, 0.15, BLOCK_HEIGHT), YAW_RANGE),
     "tray": PlacementRange.box(
-        (0.12, -0.16, TRAY_RIM_HEIGHT), (0.17, -0.09, TRAY_RIM_HEIGHT), YAW_RANGE
+        (0.12, -0.15, TRAY_RIM_HEIGHT), (0.16, -0.09, TRAY_RIM_HEIGHT), YAW_RANGE
     ),
 }
 
@@ -123,7 +125,7 @@ def via_points(
         # A free swing (joint space) to above the block, the hand turned for the grasp.
         ViaPoint(
             p.duration(3.0),
-            grasp + UP * (HOVER + 0.02) + p.jitter(0.008),
+            grasp + UP * (HOVER + 0.01) + p.jitter(0.005),
             DOWN,
             roll_b,
             False,
@@ -138,7 +140,7 @@ def via_points(
         ViaPoint(p.duration(0.8), release + UP * HOVER, DOWN, roll_t, True),
         ViaPoint(p.duration(1.3), release, DOWN, roll_t, True),
         ViaPoint(p.duration(0.6), release, DOWN, roll_t, False),  # open and wait
-        ViaPoint(p.duration(1.2), release + UP * (HOVER + 0.02), DOWN, roll_t, False),
+        ViaPoint(p.duration(1.2), release + UP * HOVER, DOWN, roll_t, False),
     ]
 
 
