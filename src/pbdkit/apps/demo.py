@@ -7,6 +7,7 @@ is imported only by the command line.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ import numpy as np
 from .._io import atomic_write_bytes, write_json
 from .._validation import check_int
 from ..learning.demonstration import save_demonstrations
+from ..learning.placement import position_of
 from ..prob.gmm import CV_TOLERANCE, MAX_COMPONENTS
 from ._staging import staged_output
 from .plots import (
@@ -513,8 +515,8 @@ def _vision_section(
         rows.append(
             [
                 name,
-                ", ".join(f"{1e3 * v:.1f}" for v in p),
-                ", ".join(f"{1e3 * v:.1f}" for v in q) if err is not None else "(fixed, known)",
+                _placement_text(p, mm=True),
+                _placement_text(q, mm=True) if err is not None else "(fixed, known)",
                 err if err is not None else "-",
             ]
         )
@@ -588,6 +590,18 @@ class DemoRun:
     online: dict[str, Any] = field(default_factory=dict)
 
 
+def _placement_text(value: Any, *, mm: bool = False) -> str:
+    """A placement for the report: "(x, y, z) m" (or the numbers in mm), and a pose's yaw."""
+    v = np.asarray(value, dtype=np.float64)
+    p = position_of(v)
+    text = (
+        ", ".join(f"{1e3 * c:.1f}" for c in p) if mm else f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+    )
+    if v.shape == (4, 4):
+        text += f", yaw {math.degrees(math.atan2(v[1, 0], v[0, 0])):.1f} deg"
+    return text
+
+
 def _write_html(demo: DemoRun) -> None:
     out, spec, ts, truth, objects = demo.out, demo.spec, demo.ts, demo.truth, demo.objects
     runs, metrics, figures, video_path = demo.runs, demo.metrics, demo.figures, demo.video
@@ -605,7 +619,7 @@ def _write_html(demo: DemoRun) -> None:
         for name, sel in ts.skill.selection_.items()
     ]
     secs = metrics["seconds"]
-    place = ", ".join(f"{k} at ({v[0]:.3f}, {v[1]:.3f}, {v[2]:.3f}) m" for k, v in truth.items())
+    place = ", ".join(f"{k} at {_placement_text(v)}" for k, v in truth.items())
     sections = [
         Section(
             "What happened",
