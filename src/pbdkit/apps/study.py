@@ -168,11 +168,13 @@ def grid_placements(
 ) -> tuple[Float, Float, list[dict[str, Float]]]:
     """An n x n grid of placements of ``obj`` spanning twice its range's half-width on each side
     of the range's centre (x, y; z at its support), the other objects at their nominal place.
+    For an object placed as a pose (a yaw range), the grid is over x and the yaw instead (y at
+    the range's centre), the yaw spanning twice its range's half-width on each side too.
 
     Returns
     -------
     xs, ys : ndarray, shape (n,)
-        The grid's coordinates (m).
+        The grid's coordinates: x (m), and y (m) or the yaw (rad) for a posed object.
     placements : list of dict
         Row-major: placement ``i * n + j`` has ``obj`` at ``(xs[j], ys[i])``.
     """
@@ -181,15 +183,33 @@ def grid_placements(
         raise ValueError(f"{obj!r} is fixed in the {spec.name!r} task: there is nothing to map")
     c, h = r.center, 0.5 * (r.high - r.low)
     xs = np.linspace(c[0] - 2 * h[0], c[0] + 2 * h[0], n)
-    ys = np.linspace(c[1] - 2 * h[1], c[1] + 2 * h[1], n)
+    if r.yaw is not None:
+        yc, yh = 0.5 * (r.yaw[0] + r.yaw[1]), 0.5 * (r.yaw[1] - r.yaw[0])
+        ys = np.linspace(yc - 2 * yh, yc + 2 * yh, n)
+    else:
+        ys = np.linspace(c[1] - 2 * h[1], c[1] + 2 * h[1], n)
     nominal = spec.nominal_objects()
     out = []
     for y in ys:
         for x in xs:
             p = {k: v.copy() for k, v in nominal.items()}
-            p[obj] = np.array([x, y, c[2]])
+            p[obj] = np.array([x, y, c[2]]) if r.yaw is None else T.yaw_pose([x, c[1], c[2]], y)
             out.append(p)
     return xs, ys, out
+
+
+def _map_box(r: T.PlacementRange) -> tuple[Float, Float]:
+    """The demonstrated range in a map's coordinates: (x, y), or (x, yaw) for a pose."""
+    if r.yaw is None:
+        return r.low[:2].copy(), r.high[:2].copy()
+    return np.array([r.low[0], r.yaw[0]]), np.array([r.high[0], r.yaw[1]])
+
+
+def _map_point(r: T.PlacementRange, placed: Float) -> Float:
+    """A placement in a map's coordinates (:func:`_map_box`)."""
+    if r.yaw is None:
+        return np.asarray(placed[:2], dtype=np.float64)
+    return np.array([placed[0, 3], T.yaw_of(placed)])
 
 
 def _rate(trials: Sequence[Any], name: str) -> float:
@@ -343,16 +363,18 @@ def _run(
             for k in names
         }
         r = spec.ranges[obj]
+        low, high = _map_box(r)
         result["maps"][obj] = {
             "x": xs.tolist(),
-            "y": ys.tolist(),
-            "range": [r.low[:2].tolist(), r.high[:2].tolist()],
+            # y (m), or for a posed object its yaw (rad)
+            ("yaw" if r.posed else "y"): ys.tolist(),
+            "range": [low.tolist(), high.tolist()],
             "success": {k: v.astype(int).tolist() for k, v in success.items()},
-            "inside_range": {k: _inside_rate(v, xs, ys, r.low, r.high) for k, v in success.items()},
+            "inside_range": {k: _inside_rate(v, xs, ys, low, high) for k, v in success.items()},
             "overall": {k: float(v.mean()) for k, v in success.items()},
         }
-        demos_at = np.array([d.objects[obj][:2] for d in ts.demos])
-        fig = _plot_map(spec, obj, xs, ys, success, r.low, r.high, demos_at)
+        demos_at = np.array([_map_point(r, d.objects[obj]) for d in ts.demos])
+        fig = _plot_map(spec, obj, xs, ys, success, low, high, demos_at, yaw=r.posed)
         atomic_write_bytes(out / f"map_{obj}.png", figure_png(fig))
     # 2. Learning curve (fused).
     rng = np.random.default_rng([seed, 5])
@@ -404,6 +426,8 @@ def _plot_map(
     low: Float,
     high: Float,
     demos_at: Float,
+    *,
+    yaw: bool = False,
 ) -> Any:
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Rectangle
@@ -414,20 +438,23 @@ def _plot_map(
     axes = fig.subplots(1, len(success), squeeze=False)[0]
     dx, dy = (xs[1] - xs[0]) / 2, (ys[1] - ys[0]) / 2
     cmap = ListedColormap(["#d9534f", "#5cb85c"])
+    sy = float(np.degrees(1.0)) if yaw else 1e3  # the y axis: yaw in degrees, or y in mm
     for ax, (name, ok) in zip(axes, success.items(), strict=True):
-        extent = (1e3 * (xs[0] - dx), 1e3 * (xs[-1] + dx), 1e3 * (ys[0] - dy), 1e3 * (ys[-1] + dy))
+        extent = (1e3 * (xs[0] - dx), 1e3 * (xs[-1] + dx), sy * (ys[0] - dy), sy * (ys[-1] + dy))
         ax.imshow(ok.astype(float), origin="lower", extent=extent, cmap=cmap, vmin=0, vmax=1,
-                  aspect="equal")  # fmt: skip
-        ax.add_patch(Rectangle((1e3 * low[0], 1e3 * low[1]), 1e3 * (high[0] - low[0]),
-                               1e3 * (high[1] - low[1]), fill=False, lw=1.5, ec="k"))  # fmt: skip
-        ax.plot(1e3 * demos_at[:, 0], 1e3 * demos_at[:, 1], "k+", ms=6, label="demonstrated")
+                  aspect="auto" if yaw else "equal")  # fmt: skip
+        ax.add_patch(Rectangle((1e3 * low[0], sy * low[1]), 1e3 * (high[0] - low[0]),
+                               sy * (high[1] - low[1]), fill=False, lw=1.5, ec="k"))  # fmt: skip
+        ax.plot(1e3 * demos_at[:, 0], sy * demos_at[:, 1], "k+", ms=6, label="demonstrated")
         ax.set_title(f"{name}: {100 * ok.mean():.0f} %", fontsize=9)
         ax.set_xlabel(f"{obj} x (mm)", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_ylabel(f"{obj} y (mm)", fontsize=8)
+    axes[0].set_ylabel(f"{obj} yaw (deg)" if yaw else f"{obj} y (mm)", fontsize=8)
     axes[0].legend(fontsize=7, loc="lower left")
     fig.suptitle(
-        f"{spec.name} task: success (green) with the {obj} placed over the table; box: the "
+        f"{spec.name} task: success (green) with the {obj} "
+        + ("placed along x and turned" if yaw else "placed over the table")
+        + "; box: the "
         "demonstrated range, +: the demonstrations",
         fontsize=9,
     )
