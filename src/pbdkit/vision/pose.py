@@ -22,8 +22,8 @@ by the object's own rim) turns with it: a world offset measured at one yaw is wr
 ``2 |offset| sin(delta / 2)`` at a yaw ``delta`` away (8.7 mm for a 10 mm offset turned 60
 degrees). The offset is therefore kept in the object's frame. What depends on the cameras
 rather than on the object (the visible side of a raised patch) does not turn; it is small for
-flat patches seen from above (the slot task's marks: ``benchmarks/bench_tracking.py`` measures
-both kinds of offset).
+flat patches seen from above (the slot task's marks: ``benchmarks/bench_pose_tracking.py``
+measures both kinds of offset).
 
 A pose is given only when both ends are: an end that the tracker refuses (hidden, clipped,
 ambiguous, inconsistent) makes the object's status that end's (:class:`PoseTrack`); and when the
