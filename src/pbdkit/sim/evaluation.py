@@ -169,10 +169,11 @@ def summarize(
             )
         stats[name] = ControllerStats(successes / len(rows), successes, metrics)
     errors = [t.tracking_error_mm for t in trials if t.tracking_error_mm is not None]
-    # The yaw error of the tracked objects placed as poses, where the cameras saw them.
-    posed = [k for k in ts.task.posed_objects if k in ts.task.tracked_objects]
+    # The yaw error of the tracked objects placed as poses (4x4 placements), where the
+    # cameras saw them.
+    posed = any(v.shape == (4, 4) for t in trials for v in t.truth.values())
     yaws = [
-        yaw_errors(t.observed, t.truth, posed)
+        yaw_errors(t.observed, t.truth, list(t.tracking_error_mm))
         for t in trials
         if t.observed is not None and t.tracking_error_mm is not None
     ]
@@ -191,7 +192,7 @@ def summarize(
         online=online,
         perturb=perturb,
         tracking_error_deg=yaw_summary(yaws) if vision else None,
-        posed=bool(posed),
+        posed=posed,
     )
 
 

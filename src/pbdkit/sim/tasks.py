@@ -381,10 +381,13 @@ class _GraspedPatch(dict[str, str]):
     """``TaskSpec.patches`` left out: filled in with the grasped glass's red band only."""
 
 
-def _check_patch(task: str, obj: str, prefix: object, posed: bool) -> str | tuple[str, str]:
+def _check_patch(
+    task: str, obj: str, prefix: object, posed: bool, moves: bool
+) -> str | tuple[str, str]:
     """``TaskSpec.patches[obj]`` checked: a non-empty prefix, or for an object placed as a
-    pose a pair of two different ones."""
-    if posed:
+    pose a pair of two different ones (required when it moves: the cameras track it; a fixed
+    one may name one prefix for all its patches' geoms)."""
+    if posed and (moves or not isinstance(prefix, str)):
         if (
             not isinstance(prefix, (tuple, list))
             or len(prefix) != 2
@@ -393,8 +396,9 @@ def _check_patch(task: str, obj: str, prefix: object, posed: bool) -> str | tupl
         ):
             raise ValueError(
                 f"patches[{obj!r}] of task {task!r}: {obj!r} is placed as a pose (its range has "
-                "a yaw), so it needs two patches, one at each end: a pair (prefix_a, prefix_b) "
-                f"of different geom name prefixes, the yaw pointing from a to b; got {prefix!r}"
+                "a yaw), so the cameras need two patches, one at each end: a pair (prefix_a, "
+                f"prefix_b) of different geom name prefixes, the yaw pointing from a to b; got "
+                f"{prefix!r}"
             )
         return (prefix[0], prefix[1])
     if not isinstance(prefix, str) or not prefix:
@@ -460,9 +464,9 @@ class TaskSpec:
     patches : dict str -> str or (str, str)
         For each object the cameras can track, the name prefix of its patch's geoms; default:
         the grasped glass's red band only (``{grasped: patch_prefix(grasped)}``). An object
-        placed as a pose (its range has a yaw) has two patches, one at each end: the pair
-        ``(prefix_a, prefix_b)``, whose midpoint the cameras locate and whose heading from a
-        to b is its yaw (:mod:`pbdkit.sim.tracking`); the other objects have one.
+        placed as a pose (its range has a yaw) that moves has two patches, one at each end:
+        the pair ``(prefix_a, prefix_b)``, whose midpoint the cameras locate and whose heading
+        from a to b is its yaw (:mod:`pbdkit.sim.tracking`); the other objects have one.
     cameras : CameraRig, optional
         Where the two cameras stand for this task; None (default): the paper's rig
         (:data:`pbdkit.sim.world.CAMERA_POSITIONS`, looking across the table from in front
@@ -513,7 +517,8 @@ class TaskSpec:
             )
         patches: dict[str, str | tuple[str, str]] = {}
         for obj, prefix in self.patches.items():
-            patches[obj] = _check_patch(self.name, obj, prefix, ranges[obj].posed)
+            r = ranges[obj]
+            patches[obj] = _check_patch(self.name, obj, prefix, r.posed, not r.fixed)
         if self.cameras is not None and not isinstance(self.cameras, CameraRig):
             raise ValueError(
                 f"cameras of task {self.name!r} must be a CameraRig or None (the paper's rig), "

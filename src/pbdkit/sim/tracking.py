@@ -305,8 +305,8 @@ class SimTracker:
     tracker : StereoTracker
     cameras : (str, str)
     objects : tuple of str
-        Tracked objects (:attr:`pbdkit.vision.StereoTracker.objects`: its models, a posed
-        object in place of its two ends).
+        Tracked objects (the tracker's ``objects``: its color models, a posed object in place
+        of its two ends; the keys of :meth:`pbdkit.vision.StereoTracker.track_objects`).
     calibration : Calibration or None
     """
 
