@@ -302,3 +302,17 @@ def test_coaster_tracking_is_unchanged() -> None:
         np.testing.assert_array_equal(tr.position, plain[name].position)
         np.testing.assert_array_equal(seen[name], tr.position)
         assert seen[name].shape == (3,)
+
+
+def test_observation_noise_moves_a_pose_and_keeps_its_yaw() -> None:
+    from pbdkit.sim.sensing import observation_noise
+
+    spec = get_task("slot")
+    truth = spec.sample_objects(np.random.default_rng(5))
+    noisy = observation_noise(spec, truth, 3.0, seed=0, index=1)
+    for name, p in noisy.items():
+        assert p.shape == (4, 4)
+        np.testing.assert_array_equal(p[:3, :3], truth[name][:3, :3])
+        assert 0.0 < 1e3 * np.linalg.norm(p[:3, 3] - truth[name][:3, 3]) < 20.0
+    again = observation_noise(spec, truth, 3.0, seed=0, index=1)
+    assert all(np.array_equal(noisy[k], v) for k, v in again.items())

@@ -3,7 +3,8 @@
 Vision in the loop (default of :func:`pbdkit.sim.evaluation.evaluate`): the skill is told the
 positions the stereo tracker measures (:mod:`pbdkit.sim.tracking`, calibrated once per
 evaluation, :func:`calibrate_tracker`), while the simulated world keeps the true ones
-(:func:`observe`). A placement whose objects the cameras cannot locate raises
+(:func:`observe`); an object placed as a pose (the slot task's block and tray) is told as the
+pose its two marks give. A placement whose objects the cameras cannot locate raises
 :class:`pbdkit.sim.tracking.ObjectNotSeenError`; it never falls back to the true positions.
 Without the cameras the skill is told the truth, with :func:`observation_noise` if asked.
 """

@@ -73,7 +73,7 @@ def _wrap(angle: float) -> float:
     return math.remainder(angle, 2.0 * math.pi)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PoseModel:
     """How a posed object's pose follows from the points of its two end patches.
 
