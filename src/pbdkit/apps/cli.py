@@ -918,7 +918,7 @@ def evaluate(
         table.add_row(name, f"{100 * row.success_rate:.0f}%", med)
     console.print(table)
     _print_components(spec, result.n_components)
-    _print_tracking(result.vision, result.tracking_error_mm)
+    _print_tracking(result.vision, result.tracking_error_mm, result.tracking_error_deg)
     if result.tracking_failures:
         console.print(
             f"[red]{result.tracking_failures} placement(s) where the cameras did not locate "
@@ -993,16 +993,20 @@ def _print_components(spec: TaskSpec, n_components: dict[str, int]) -> None:
     console.print(f"K per space (chosen by leaving one demonstration out): {ks}{note}")
 
 
-def _print_tracking(vision: bool, stats: dict[str, Any] | None) -> None:
+def _print_tracking(
+    vision: bool, stats: dict[str, Any] | None, yaw: dict[str, Any] | None = None
+) -> None:
     if not vision:
         console.print("object positions: ground truth (--ground-truth)")
         return
     if stats is None:
         console.print("object positions: stereo cameras, no object located")
         return
+    # The yaw of the objects placed as poses (evaluate's "tracking_error_deg"), when there are.
+    turn = "" if yaw is None else f", yaw {yaw['mean']:.2f} +- {yaw['sd']:.2f} deg"
     console.print(
-        f"object positions: stereo cameras, error {stats['mean']:.1f} +- {stats['std']:.1f} mm "
-        "(paper: 5.9 +- 2.8 mm)"
+        f"object positions: stereo cameras, error {stats['mean']:.1f} +- {stats['std']:.1f} mm"
+        f"{turn} (paper: 5.9 +- 2.8 mm)"
     )
 
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .metrics import tracking_summary
+from .metrics import tracking_summary, yaw_errors, yaw_summary
 from .parallel import session
 from .perturb import check_perturb
 from .sensing import calibrate_tracker
@@ -53,7 +53,13 @@ class ControllerStats:
 
 @dataclass(frozen=True)
 class Evaluation:
-    """The result of :func:`evaluate`; :meth:`as_dict` is ``pbdkit evaluate``'s JSON."""
+    """The result of :func:`evaluate`; :meth:`as_dict` is ``pbdkit evaluate``'s JSON.
+
+    ``tracking_error_mm`` and ``tracking_error_deg`` summarise the cameras' errors over the
+    placements they located (:func:`pbdkit.sim.metrics.tracking_summary`,
+    :func:`pbdkit.sim.metrics.yaw_summary`; None with ``--ground-truth``); ``posed`` says that
+    the task tracks objects placed as poses, whose yaw error the JSON then reports.
+    """
 
     task: str
     seed: int
@@ -68,6 +74,8 @@ class Evaluation:
     trials: list[Trial]
     online: bool = False
     perturb: str = "none"
+    tracking_error_deg: dict[str, Any] | None = None
+    posed: bool = False
 
     @property
     def tracking_failures(self) -> int:
@@ -80,9 +88,12 @@ class Evaluation:
         {NAME: {"success_rate", "successes", "metrics"}}, "tracking_error_mm",
         "tracking_failures", "placements", "observed", "perturbations", "runs"}`` (``runs``:
         per controller, one summary per trial; ``perturbations``: one disturbance per
-        trial)."""
+        trial); for a task with objects placed as poses (:attr:`posed`), also
+        ``"tracking_error_deg"`` after ``"tracking_error_mm"``: the cameras' yaw error,
+        ``{"mean", "sd", "max", "n", "per_object"}`` (:func:`pbdkit.sim.metrics.yaw_summary`;
+        None with ``--ground-truth``)."""
         names = list(self.controllers)
-        return {
+        out: dict[str, Any] = {
             "task": self.task,
             "trials": len(self.trials),
             "seed": self.seed,
@@ -108,6 +119,14 @@ class Evaluation:
             "perturbations": [dict(t.perturb) for t in self.trials],
             "runs": {k: [t.runs[k] for t in self.trials] for k in names},
         }
+        if not self.posed:
+            return out
+        # "tracking_error_deg" right after "tracking_error_mm".
+        keys = list(out)
+        at = keys.index("tracking_error_mm") + 1
+        keys.insert(at, "tracking_error_deg")
+        out["tracking_error_deg"] = self.tracking_error_deg
+        return {k: out[k] for k in keys}
 
 
 def summarize(
@@ -150,6 +169,14 @@ def summarize(
             )
         stats[name] = ControllerStats(successes / len(rows), successes, metrics)
     errors = [t.tracking_error_mm for t in trials if t.tracking_error_mm is not None]
+    # The yaw error of the tracked objects placed as poses (4x4 placements), where the
+    # cameras saw them.
+    posed = any(v.shape == (4, 4) for t in trials for v in t.truth.values())
+    yaws = [
+        yaw_errors(t.observed, t.truth, list(t.tracking_error_mm))
+        for t in trials
+        if t.observed is not None and t.tracking_error_mm is not None
+    ]
     return Evaluation(
         task=ts.task.name,
         seed=seed,
@@ -164,6 +191,8 @@ def summarize(
         trials=list(trials),
         online=online,
         perturb=perturb,
+        tracking_error_deg=yaw_summary(yaws) if vision else None,
+        posed=posed,
     )
 
 

@@ -1,5 +1,6 @@
 """What the experiment measures: a run's summary (the task's metrics, the arm's speeds and the
-servo stream's peaks over the limits) and the statistics of the cameras' tracking errors."""
+servo stream's peaks over the limits) and the statistics of the cameras' tracking errors: in
+position (mm, every tracked object) and in yaw (degrees, the objects placed as poses)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ __all__ = [
     "tracking_errors",
     "tracking_summary",
     "yaw_errors",
+    "yaw_summary",
 ]
 
 Float = NDArray[np.float64]
@@ -139,6 +141,33 @@ def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | Non
 
     def stats(v: NDArray[np.float64]) -> dict[str, Any]:
         return {"mean": float(v.mean()), "std": float(v.std()), "max": float(v.max()), "n": len(v)}
+
+    pooled = np.array([e for row in errors for e in row.values()], dtype=np.float64)
+    if pooled.size == 0:
+        return None
+    names = list(dict.fromkeys(k for row in errors for k in row))
+    per = {k: stats(np.array([row[k] for row in errors if k in row])) for k in names}
+    return {**stats(pooled), "per_object": per}
+
+
+def yaw_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:
+    """Mean and standard deviation (degrees) of yaw errors, pooled and per object.
+
+    Parameters
+    ----------
+    errors : sequence of dict str -> float
+        One dict per observed placement (from :func:`yaw_errors`: the posed objects only).
+
+    Returns
+    -------
+    summary : dict or None
+        ``{"mean", "sd", "max", "n", "per_object": {name: {"mean", "sd", "max", "n"}}}``
+        (``"sd"``: the population standard deviation, as ``tracking_summary``'s ``"std"``);
+        None when no posed object was observed.
+    """
+
+    def stats(v: NDArray[np.float64]) -> dict[str, Any]:
+        return {"mean": float(v.mean()), "sd": float(v.std()), "max": float(v.max()), "n": len(v)}
 
     pooled = np.array([e for row in errors for e in row.values()], dtype=np.float64)
     if pooled.size == 0:

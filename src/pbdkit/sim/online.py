@@ -17,6 +17,11 @@ Object positions reach the controller from an :class:`Observer`, at 15 Hz (the p
   patch, refuses implausible jumps and says which;
 - :class:`TruthObserver`: the simulator's true positions (``--ground-truth``).
 
+An object placed as a pose (the slot task's block and tray) is observed as its pose (4, 4): the
+tracker's from its two end patches (:mod:`pbdkit.sim.tracking`), filtered as a whole (either end
+hidden: the last good pose holds), or the true one; the controller takes poses as it takes
+positions (:meth:`pbdkit.Controller.step`).
+
 Both follow one rule for the grasped object (the task's
 :attr:`~pbdkit.sim.tasks.TaskSpec.grasped`, the glass): from the first command that closes the
 gripper on, its position stays where it was grasped. The skill's constraint relative to it is
@@ -37,6 +42,7 @@ from numpy.typing import NDArray
 from ..learning.controller import Command, Controller
 from ..vision import TrackFilter
 from .execute import ExecutionResult, Recorder, start_at
+from .metrics import yaw_errors
 from .perturb import Disturbance, NoDisturbance
 from .scene import TIMESTEP, Simulation
 from .tracking import SimTracker
@@ -90,10 +96,11 @@ class Observer:
 
 
 class TruthObserver(Observer):
-    """The simulator's true positions (no vision)."""
+    """The simulator's true positions (no vision); a posed object's true pose
+    (:meth:`Simulation.object_placements`)."""
 
     def observe(self, sim: Simulation, t: float, held: tuple[str, ...]) -> dict[str, Float]:
-        truth = sim.object_positions()
+        truth = sim.object_placements()
         return {k: truth[k] for k in self.names if k not in held}
 
 
@@ -125,24 +132,42 @@ class VisionObserver(Observer):
         options = {"cameras": centres, **filter_options}
         self.filter = TrackFilter(tracker.objects, **options)
         self.errors_mm: dict[str, list[float]] = {k: [] for k in tracker.objects}
+        self.errors_deg: dict[str, list[float]] = {}
 
     def observe(self, sim: Simulation, t: float, held: tuple[str, ...]) -> dict[str, Float]:
         tracks = self.tracker.locate(sim)
         accepted = self.filter.update(t, tracks, held=held)
-        truth = sim.object_positions()
-        for k, p in accepted.items():
-            self.errors_mm[k].append(1e3 * float(np.linalg.norm(p - truth[k])))
+        if any(p.shape == (4, 4) for p in accepted.values()):
+            poses = sim.object_poses()
+            for k, p in accepted.items():
+                if p.shape == (4, 4):
+                    err = float(np.linalg.norm(p[:3, 3] - poses[k][:3, 3]))
+                    self.errors_mm[k].append(1e3 * err)
+                    self.errors_deg.setdefault(k, []).append(yaw_errors({k: p}, poses, [k])[k])
+                else:
+                    self.errors_mm[k].append(1e3 * float(np.linalg.norm(p - poses[k][:3, 3])))
+        else:
+            truth = sim.object_positions()
+            for k, p in accepted.items():
+                self.errors_mm[k].append(1e3 * float(np.linalg.norm(p - truth[k])))
         return {k: v for k, v in accepted.items() if k in self.names}
 
     def summary(self) -> dict[str, Any]:
         """Frames per status and status changes (:meth:`TrackFilter.summary`), and the error
-        of the accepted estimates against the truth (mm): mean and max per object."""
+        of the accepted estimates against the truth (mm): mean and max per object; for posed
+        objects also their yaw error (degrees, ``"accepted_error_deg"``)."""
         out = self.filter.summary()
         out["accepted_error_mm"] = {
             k: {"mean": float(np.mean(v)), "max": float(np.max(v)), "n": len(v)}
             for k, v in self.errors_mm.items()
             if v
         }
+        if self.errors_deg:
+            out["accepted_error_deg"] = {
+                k: {"mean": float(np.mean(v)), "max": float(np.max(v)), "n": len(v)}
+                for k, v in self.errors_deg.items()
+                if v
+            }
         return out
 
 
@@ -168,8 +193,8 @@ class OnlineRun:
     replans : int
         How many times the controller planned again (moved objects, pushes; 0 without motion
         limits).
-    objects : dict str -> ndarray, shape (K, 3)
-        The positions the controller used at each command.
+    objects : dict str -> ndarray, shape (K, 3) or (K, 4, 4)
+        The positions the controller used at each command (a posed object's poses).
     tracking : dict or None
         The observer's summary (vision: frames per status, status changes, errors).
     disturbance : dict

@@ -3,7 +3,8 @@
 Vision in the loop (default of :func:`pbdkit.sim.evaluation.evaluate`): the skill is told the
 positions the stereo tracker measures (:mod:`pbdkit.sim.tracking`, calibrated once per
 evaluation, :func:`calibrate_tracker`), while the simulated world keeps the true ones
-(:func:`observe`). A placement whose objects the cameras cannot locate raises
+(:func:`observe`); an object placed as a pose (the slot task's block and tray) is told as the
+pose its two marks give. A placement whose objects the cameras cannot locate raises
 :class:`pbdkit.sim.tracking.ObjectNotSeenError`; it never falls back to the true positions.
 Without the cameras the skill is told the truth, with :func:`observation_noise` if asked.
 """
@@ -44,9 +45,9 @@ def observe(
     ----------
     spec : TaskSpec
         The task (:func:`pbdkit.sim.tasks.get_task` resolves a name).
-    truth : dict str -> ndarray, shape (3,)
-        True positions of the objects of the task; fixed ones may be left out (they are added
-        from the task's ranges).
+    truth : dict str -> ndarray, shape (3,) or (4, 4)
+        True placements of the objects of the task (a posed object's pose); fixed ones may be
+        left out (they are added from the task's ranges).
     tracker : SimTracker
         Calibrated on the task.
     arm : array-like, shape (n,), optional
@@ -55,9 +56,10 @@ def observe(
 
     Returns
     -------
-    objects : dict str -> ndarray, shape (3,)
+    objects : dict str -> ndarray, shape (3,) or (4, 4)
         Every object of the task, whatever the skill constrains: tracked positions for the
-        tracked objects, the true ones for the others (fixed objects, known without vision).
+        tracked objects (a posed object's tracked pose: :mod:`pbdkit.sim.tracking`), the true
+        ones for the others (fixed objects, known without vision).
 
     Raises
     ------
@@ -91,10 +93,20 @@ def observation_noise(
     task: TaskSpec, objects: dict[str, Float], noise_mm: float, *, seed: int, index: int
 ) -> dict[str, Float]:
     """``objects`` with Gaussian noise on the moving objects, of mean 3-D length ``noise_mm``
-    (see :func:`pbdkit.sim.trials.run_trial`), drawn from ``seed`` and ``index``."""
+    (see :func:`pbdkit.sim.trials.run_trial`), drawn from ``seed`` and ``index``; a pose's
+    position gets the noise, its orientation is kept."""
     if not (noise_mm >= 0.0 and math.isfinite(noise_mm)):
         raise ValueError(f"noise_mm must be a finite number >= 0, got {noise_mm!r}")
     rng = np.random.default_rng([seed, 3, index])
     sd = 1e-3 * noise_mm / math.sqrt(8.0 / math.pi)
     moving = set(task.tracked_objects)
-    return {k: (v + rng.normal(0.0, sd, 3) if k in moving else v) for k, v in objects.items()}
+    out: dict[str, Float] = {}
+    for k, v in objects.items():
+        if k not in moving:
+            out[k] = v
+        elif v.shape == (4, 4):
+            out[k] = v.copy()
+            out[k][:3, 3] += rng.normal(0.0, sd, 3)
+        else:
+            out[k] = v + rng.normal(0.0, sd, 3)
+    return out

@@ -53,10 +53,13 @@ before use (the built-in tasks are imported by :mod:`pbdkit.sim.taskdefs`). A sp
 - ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
   what was measured during the run (:class:`RunStats`);
 - ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
-  patch (default: the grasped glass's red band only); ``n_liquid``: spheres in the glass
-  (default 0); ``move``: the object that ``--perturb move`` slides (:class:`ObjectMove`,
-  optional); ``grasped``: the name of the glass the gripper holds (default ``"glass"``; its
-  bodies and geoms are named after it, :func:`pbdkit.sim.world.add_glass`).
+  patch (default: the grasped glass's red band only), or for an object placed as a pose the
+  pair of its two end patches' prefixes (a, b: the yaw points from a to b); ``cameras``: where
+  the stereo pair stands (:class:`CameraRig`; default: the paper's rig); ``n_liquid``: spheres
+  in the glass (default 0); ``move``: the object that ``--perturb move`` slides
+  (:class:`ObjectMove`, optional); ``grasped``: the name of the glass the gripper holds
+  (default ``"glass"``; its bodies and geoms are named after it,
+  :func:`pbdkit.sim.world.add_glass`).
 
 For example, a third task, "put the glass from the table on a green mark on the table"
 (``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
@@ -121,6 +124,7 @@ from ._registry import Registry
 __all__ = [
     "GLASS_PATCH_PREFIX",
     "GRASP_OFFSET",
+    "CameraRig",
     "ObjectMove",
     "Outcome",
     "PlacementRange",
@@ -328,8 +332,85 @@ ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], list[Via
 Judge = Callable[[Any, RunStats], Outcome]
 
 
+@dataclass(frozen=True)
+class CameraRig:
+    """Where a task's stereo pair stands (:attr:`TaskSpec.cameras`): two 320x240 cameras
+    ``cam_left`` and ``cam_right`` looking at one point.
+
+    Attributes
+    ----------
+    left, right : tuple of float
+        Positions (x, y, z) of the cameras ``cam_left`` and ``cam_right``, base frame (m).
+    target : tuple of float
+        The point both look at (the image centres' rays meet there; the horizon stays level).
+    fovy : float
+        Vertical field of view (degrees).
+    """
+
+    left: tuple[float, float, float]
+    right: tuple[float, float, float]
+    target: tuple[float, float, float]
+    fovy: float
+
+    def __post_init__(self) -> None:
+        pts = {}
+        for what in ("left", "right", "target"):
+            p = tuple(float(v) for v in getattr(self, what))
+            if len(p) != 3 or not all(math.isfinite(v) for v in p):
+                raise ValueError(f"CameraRig.{what} must be 3 finite numbers, got {p!r}")
+            object.__setattr__(self, what, p)
+            pts[what] = np.array(p)
+        if not (0.0 < float(self.fovy) < 180.0):
+            raise ValueError(f"CameraRig.fovy must be in (0, 180) degrees, got {self.fovy!r}")
+        object.__setattr__(self, "fovy", float(self.fovy))
+        if np.array_equal(pts["left"], pts["right"]):
+            raise ValueError("CameraRig.left and right must be different positions")
+        for what in ("left", "right"):
+            d = pts["target"] - pts[what]
+            if np.linalg.norm(d[:2]) < 1e-6:
+                raise ValueError(
+                    f"CameraRig.{what} must not look straight up or down (its horizon is level)"
+                )
+
+    def position(self, camera: str) -> tuple[float, float, float]:
+        """Position of ``camera`` ("cam_left" or "cam_right")."""
+        if camera == "cam_left":
+            return self.left
+        if camera == "cam_right":
+            return self.right
+        raise ValueError(f"camera must be 'cam_left' or 'cam_right', got {camera!r}")
+
+
 class _GraspedPatch(dict[str, str]):
     """``TaskSpec.patches`` left out: filled in with the grasped glass's red band only."""
+
+
+def _check_patch(
+    task: str, obj: str, prefix: object, posed: bool, moves: bool
+) -> str | tuple[str, str]:
+    """``TaskSpec.patches[obj]`` checked: a non-empty prefix, or for an object placed as a
+    pose a pair of two different ones (required when it moves: the cameras track it; a fixed
+    one may name one prefix for all its patches' geoms)."""
+    if posed and (moves or not isinstance(prefix, str)):
+        if (
+            not isinstance(prefix, (tuple, list))
+            or len(prefix) != 2
+            or not all(isinstance(p, str) and p for p in prefix)
+            or prefix[0] == prefix[1]
+        ):
+            raise ValueError(
+                f"patches[{obj!r}] of task {task!r}: {obj!r} is placed as a pose (its range has "
+                "a yaw), so the cameras need two patches, one at each end: a pair (prefix_a, "
+                f"prefix_b) of different geom name prefixes, the yaw pointing from a to b; got "
+                f"{prefix!r}"
+            )
+        return (prefix[0], prefix[1])
+    if not isinstance(prefix, str) or not prefix:
+        raise ValueError(
+            f"patches[{obj!r}] of task {task!r} must be the name prefix of its patch's geoms (a "
+            f"non-empty string; a pair is for an object placed as a pose), got {prefix!r}"
+        )
+    return prefix
 
 
 @dataclass(frozen=True)
@@ -384,9 +465,16 @@ class TaskSpec:
     judge : callable
         ``judge(sim, run) -> Outcome``: success and metrics of a run, from the simulation after
         it and its :class:`RunStats`.
-    patches : dict str -> str
+    patches : dict str -> str or (str, str)
         For each object the cameras can track, the name prefix of its patch's geoms; default:
-        the grasped glass's red band only (``{grasped: patch_prefix(grasped)}``).
+        the grasped glass's red band only (``{grasped: patch_prefix(grasped)}``). An object
+        placed as a pose (its range has a yaw) that moves has two patches, one at each end:
+        the pair ``(prefix_a, prefix_b)``, whose midpoint the cameras locate and whose heading
+        from a to b is its yaw (:mod:`pbdkit.sim.tracking`); the other objects have one.
+    cameras : CameraRig, optional
+        Where the two cameras stand for this task; None (default): the paper's rig
+        (:data:`pbdkit.sim.world.CAMERA_POSITIONS`, looking across the table from in front
+        of the robot).
     n_liquid : int
         Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
     move : ObjectMove, optional
@@ -403,7 +491,8 @@ class TaskSpec:
     add_objects: AddObjects
     via_points: ViaPoints
     judge: Judge
-    patches: Mapping[str, str] = field(default_factory=_GraspedPatch)
+    patches: Mapping[str, str | tuple[str, str]] = field(default_factory=_GraspedPatch)
+    cameras: CameraRig | None = None
     n_liquid: int = 0
     move: ObjectMove | None = None
     grasped: str = "glass"
@@ -430,6 +519,15 @@ class TaskSpec:
                 f"patches of task {self.name!r} name object(s) {unknown} without a range; "
                 f"expected some of {list(ranges)}"
             )
+        patches: dict[str, str | tuple[str, str]] = {}
+        for obj, prefix in self.patches.items():
+            r = ranges[obj]
+            patches[obj] = _check_patch(self.name, obj, prefix, r.posed, not r.fixed)
+        if self.cameras is not None and not isinstance(self.cameras, CameraRig):
+            raise ValueError(
+                f"cameras of task {self.name!r} must be a CameraRig or None (the paper's rig), "
+                f"got {self.cameras!r}"
+            )
         if self.n_liquid < 0:
             raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
         if self.move is not None and (
@@ -443,7 +541,7 @@ class TaskSpec:
             if not callable(getattr(self, what)):
                 raise ValueError(f"{what} of task {self.name!r} must be callable")
         object.__setattr__(self, "ranges", ranges)
-        object.__setattr__(self, "patches", dict(self.patches))
+        object.__setattr__(self, "patches", patches)
 
     def __repr__(self) -> str:
         return f"TaskSpec(name={self.name!r}, objects={list(self.ranges)})"
@@ -457,6 +555,17 @@ class TaskSpec:
     def fixed_objects(self) -> tuple[str, ...]:
         """Objects that never move, in range order; known without vision."""
         return tuple(name for name, r in self.ranges.items() if r.fixed)
+
+    def patch_ends(self, name: str) -> tuple[str, str] | None:
+        """The two patches' prefixes (end a, end b) of a posed object ``name``, or None for an
+        object with one patch (ValueError for one without a patch)."""
+        if name not in self.patches:
+            raise ValueError(
+                f"objects: no colored patch is known for {name!r} in the {self.name!r} task; "
+                f"expected one of {sorted(self.patches)}"
+            )
+        prefix = self.patches[name]
+        return None if isinstance(prefix, str) else prefix
 
     @property
     def posed_objects(self) -> tuple[str, ...]:

@@ -5,7 +5,7 @@
 test checks it), and adds, in the robot's base frame (table top at z = 0):
 
 - a table, two 320x240 cameras ``cam_left`` and ``cam_right`` (baseline 0.30 m) across it and a
-  light;
+  light; a task may place the cameras elsewhere (:attr:`pbdkit.sim.tasks.TaskSpec.cameras`);
 - a parallel two-finger gripper on the ``gripper`` link (coupled fingers on slide joints, position
   actuators with a force limit: grasps are physical, by contact and friction);
 - position and velocity servos on the 5 arm joints (a PD loop with velocity feed-forward) and
@@ -392,12 +392,14 @@ def _add_actuators(spec: Any) -> None:
         act.forcerange = [-FINGER_FORCE, FINGER_FORCE]
 
 
-def _add_cameras_and_lights(world: Any) -> None:
-    target = np.array(CAMERA_TARGET)
+def _add_cameras_and_lights(world: Any, rig: T.CameraRig | None) -> None:
+    # The task's rig, or the paper's (TaskSpec.cameras None).
+    target = np.array(CAMERA_TARGET if rig is None else rig.target)
+    fovy = CAMERA_FOVY if rig is None else rig.fovy
     for name in CAMERAS:
-        pos = np.array(CAMERA_POSITIONS[name])
+        pos = np.array(CAMERA_POSITIONS[name] if rig is None else rig.position(name))
         world.add_camera(
-            name=name, pos=pos.tolist(), xyaxes=_look_at_xyaxes(pos, target), fovy=CAMERA_FOVY
+            name=name, pos=pos.tolist(), xyaxes=_look_at_xyaxes(pos, target), fovy=fovy
         )
     world.add_light(
         name="sun",
@@ -473,7 +475,7 @@ def build_scene(
 
     world = mj.worldbody
     _add_table(world)
-    _add_cameras_and_lights(world)
+    _add_cameras_and_lights(world, spec.cameras)
     spec.add_objects(world, objs, rng)
 
     model = mj.compile()

@@ -14,6 +14,9 @@ Pipeline and names
   :func:`calibrate_intrinsics`: intrinsics from several views of a planar target.
 - :func:`triangulate`: two views -> world points (OpenCV DLT + Gauss-Newton refinement).
 - :class:`StereoTracker`: two frames -> ``{name: Track}``, a status and a position or None.
+- :class:`PoseModel`, :class:`PoseTrack`: an object that turns, located by two patches (its
+  ends): its pose, position and yaw about the vertical (:mod:`pbdkit.vision.pose`;
+  :meth:`StereoTracker.track_objects`).
 - :class:`TrackFilter`: a stream of tracks while a skill runs -> the positions to trust (holds
   the last good one when the arm hides a patch or carries the object; refuses jumps).
 - :mod:`pbdkit.vision.synthetic`: images of colored discs at known 3-D positions (for tests).
@@ -47,7 +50,15 @@ from .color import (
     threshold_from_probability,
 )
 from .filter import TrackEvent, TrackFilter
-from .stereo import StereoTracker, Track, TrackStatus, reprojection_error, triangulate
+from .pose import PoseModel, PoseTrack
+from .stereo import (
+    ObjectTrack,
+    StereoTracker,
+    Track,
+    TrackStatus,
+    reprojection_error,
+    triangulate,
+)
 
 __all__ = [
     "DEFAULT_MIN_CHROMA",
@@ -55,7 +66,10 @@ __all__ = [
     "Blob",
     "BlobStatus",
     "ColorModel",
+    "ObjectTrack",
     "PinholeCamera",
+    "PoseModel",
+    "PoseTrack",
     "StereoTracker",
     "Track",
     "TrackEvent",

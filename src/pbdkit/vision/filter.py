@@ -18,12 +18,21 @@ estimate and refuses a frame's position when:
 - ``"held"``: the caller says the object is in the gripper (its position is then the arm's,
   not the world's: a controller fed the carried glass's position would chase its own hand).
 
+An object that turns is tracked by its two end patches (:class:`pbdkit.vision.PoseTrack`): its
+estimate is its pose (4, 4), refused as a whole when either end is (not located, or its blob
+shrunk: ``"occluded"``, each end's area compared with its own first one, below
+``end_area_ratio``), when its point jumps as above, or when its yaw turned faster than
+``max_turn_rate`` allows (``"jump"`` too). A turn changes a flat mark's blob a little (the slot
+task's marks, turned -60..60 degrees in place: 0.91-1.08 of their area at 0 degrees, so up to
+0.84 of the first area over the whole range), hence a lower default ratio for the ends, 0.8.
+
 Refused frames keep the last good estimate; every change of an object's status is logged as a
 :class:`TrackEvent`, and frames are counted per reason (:meth:`TrackFilter.summary`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -33,7 +42,8 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array, check_positive_float
-from .stereo import Track
+from .pose import PoseTrack
+from .stereo import ObjectTrack
 
 __all__ = ["TrackEvent", "TrackFilter"]
 
@@ -82,11 +92,18 @@ class TrackFilter:
     cameras : (array-like (3,), array-like (3,)), optional
         World positions of the centres of cameras a and b (:attr:`PinholeCamera.center`):
         areas are then compared after scaling by the squared distance to the camera.
+    end_area_ratio : float
+        As ``min_area_ratio``, for each end of a posed object; default 0.8 (module docstring).
+    max_turn_rate : float
+        Fastest plausible turn of a posed object about the vertical (rad/s); default 3.
+    yaw_tolerance : float
+        Radians added to the plausible turn (tracker noise); default 0.05 (2.9 degrees).
 
     Attributes
     ----------
-    estimates : dict str -> ndarray, shape (3,)
-        The last good position of each object seen at least once.
+    estimates : dict str -> ndarray, shape (3,) or (4, 4)
+        The last good position of each object seen at least once (its pose for an object
+        tracked by a :class:`pbdkit.vision.PoseTrack`).
     status : dict str -> str
         Each object's status at the last update ("unseen" before its first good frame).
     events : list of TrackEvent
@@ -101,6 +118,9 @@ class TrackFilter:
         tolerance: float = 0.005,
         min_area_ratio: float = 0.9,
         cameras: Sequence[npt.ArrayLike] | None = None,
+        end_area_ratio: float = 0.8,
+        max_turn_rate: float = 3.0,
+        yaw_tolerance: float = 0.05,
     ) -> None:
         self.names = tuple(str(k) for k in names)
         if not self.names or len(set(self.names)) != len(self.names):
@@ -108,6 +128,11 @@ class TrackFilter:
         self.max_speed = check_positive_float(max_speed, "max_speed")
         self.tolerance = check_positive_float(tolerance, "tolerance")
         self.min_area_ratio = check_positive_float(min_area_ratio, "min_area_ratio")
+        self.end_area_ratio = check_positive_float(end_area_ratio, "end_area_ratio")
+        if self.end_area_ratio >= 1.0:
+            raise ValueError(f"end_area_ratio must be < 1, got {end_area_ratio}")
+        self.max_turn_rate = check_positive_float(max_turn_rate, "max_turn_rate")
+        self.yaw_tolerance = check_positive_float(yaw_tolerance, "yaw_tolerance")
         if self.min_area_ratio >= 1.0:
             raise ValueError(f"min_area_ratio must be < 1, got {min_area_ratio}")
         if cameras is None:
@@ -121,11 +146,11 @@ class TrackFilter:
         self.status: dict[str, str] = dict.fromkeys(self.names, "unseen")
         self.events: list[TrackEvent] = []
         self._time: dict[str, float] = {}
-        self._area: dict[str, tuple[float, float]] = {}
+        self._area: dict[str, tuple[float, ...]] = {}
         self._counts: dict[str, dict[str, int]] = {k: {} for k in self.names}
 
     def update(
-        self, t: float, tracks: Mapping[str, Track], *, held: Collection[str] = ()
+        self, t: float, tracks: Mapping[str, ObjectTrack], *, held: Collection[str] = ()
     ) -> dict[str, Float]:
         """Take one frame's tracks; return the positions accepted from it.
 
@@ -133,17 +158,18 @@ class TrackFilter:
         ----------
         t : float
             The frame's time (s), not decreasing.
-        tracks : dict str -> Track
-            From :meth:`pbdkit.vision.StereoTracker.track`; objects left out count as unseen
-            ("missing").
+        tracks : dict str -> Track or PoseTrack
+            From :meth:`pbdkit.vision.StereoTracker.track` or
+            :meth:`~pbdkit.vision.StereoTracker.track_objects`; objects left out count as
+            unseen ("missing").
         held : collection of str
             Objects now in the gripper: their frames are refused ("held").
 
         Returns
         -------
-        accepted : dict str -> ndarray, shape (3,)
-            New estimates of the objects whose position this frame gave and the checks passed
-            (a subset of :attr:`estimates`; empty when nothing changed).
+        accepted : dict str -> ndarray, shape (3,) or (4, 4)
+            New estimates of the objects whose position (pose) this frame gave and the checks
+            passed (a subset of :attr:`estimates`; empty when nothing changed).
         """
         accepted: dict[str, Float] = {}
         for name in self.names:
@@ -160,35 +186,61 @@ class TrackFilter:
         return accepted
 
     def _judge(
-        self, t: float, name: str, track: Track | None, held: Collection[str]
+        self, t: float, name: str, track: ObjectTrack | None, held: Collection[str]
     ) -> tuple[str, str, Float | None]:
         if name in held:
             return "held", "in the gripper", None
         if track is None:
             return "missing", "no track for this object", None
+        posed = isinstance(track, PoseTrack)
         if not track.ok or track.position is None:
-            return str(track.status), f"blob areas {track.area_a}, {track.area_b} px", None
+            detail = (
+                track.describe()
+                if isinstance(track, PoseTrack)
+                else f"blob areas {track.area_a}, {track.area_b} px"
+            )
+            return str(track.status), detail, None
         pos = np.asarray(track.position, dtype=np.float64)
         ref = self._area.get(name)
-        areas = (float(track.area_a), float(track.area_b))
-        if self.cameras is not None:
-            areas = (
-                areas[0] * float(np.sum((pos - self.cameras[0]) ** 2)),
-                areas[1] * float(np.sum((pos - self.cameras[1]) ** 2)),
-            )
+        areas = self._areas(track, pos)
         if ref is None:
             self._area[name] = areas
         else:
             ratio = min(a / max(r, 1e-12) for a, r in zip(areas, ref, strict=True))
-            if ratio < self.min_area_ratio:
+            if ratio < (self.end_area_ratio if posed else self.min_area_ratio):
                 return "occluded", f"blob area {100 * ratio:.0f} % of its first", None
         last = self.estimates.get(name)
         if last is not None:
-            dist = float(np.linalg.norm(pos - last))
-            allowed = self.max_speed * max(0.0, t - self._time[name]) + self.tolerance
+            dt = max(0.0, t - self._time[name])
+            dist = float(np.linalg.norm(pos - last[:3, 3] if posed else pos - last))
+            allowed = self.max_speed * dt + self.tolerance
             if dist > allowed:
-                return "jump", f"{1e3 * dist:.1f} mm in {t - self._time[name]:.3f} s", None
+                return "jump", f"{1e3 * dist:.1f} mm in {dt:.3f} s", None
+            if isinstance(track, PoseTrack) and track.pose is not None:
+                turn = _yaw_between(track.pose, last)
+                if turn > self.max_turn_rate * dt + self.yaw_tolerance:
+                    return "jump", f"turned {math.degrees(turn):.1f} deg in {dt:.3f} s", None
+        if isinstance(track, PoseTrack) and track.pose is not None:
+            return "ok", "", np.array(track.pose, dtype=np.float64)
         return "ok", "", pos
+
+    def _areas(self, track: ObjectTrack, pos: Float) -> tuple[float, ...]:
+        """The blob areas to compare with the first ones: per camera, and per end of a posed
+        object; scaled by the squared distance to the camera when the centres are known."""
+        if isinstance(track, PoseTrack):
+            parts = [(e, e.position if e.position is not None else pos) for e in track.ends]
+        else:
+            parts = [(track, pos)]
+        out: list[float] = []
+        for tr, p in parts:
+            areas = (float(tr.area_a), float(tr.area_b))
+            if self.cameras is not None:
+                areas = (
+                    areas[0] * float(np.sum((p - self.cameras[0]) ** 2)),
+                    areas[1] * float(np.sum((p - self.cameras[1]) ** 2)),
+                )
+            out.extend(areas)
+        return tuple(out)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready: per object, frames per status, and the status changes (events)."""
@@ -196,3 +248,10 @@ class TrackFilter:
             "frames": {k: dict(v) for k, v in self._counts.items()},
             "events": [e.as_dict() for e in self.events],
         }
+
+
+def _yaw_between(a: Float, b: Float) -> float:
+    """Absolute yaw difference (rad, in [0, pi]) between two poses (4, 4)."""
+    ya = math.atan2(float(a[1, 0]), float(a[0, 0]))
+    yb = math.atan2(float(b[1, 0]), float(b[0, 0]))
+    return abs(math.remainder(ya - yb, 2.0 * math.pi))

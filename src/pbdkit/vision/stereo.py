@@ -15,8 +15,16 @@ from .._validation import check_array, check_int, check_positive_float
 from .blobs import Blob, _find_blob
 from .camera import PinholeCamera
 from .color import CBCR_FROM_RGB, CBCR_OFFSET, DEFAULT_THRESHOLD, ColorModel, check_image
+from .pose import PoseModel, PoseTrack
 
-__all__ = ["StereoTracker", "Track", "TrackStatus", "reprojection_error", "triangulate"]
+__all__ = [
+    "ObjectTrack",
+    "StereoTracker",
+    "Track",
+    "TrackStatus",
+    "reprojection_error",
+    "triangulate",
+]
 
 Float = NDArray[np.float64]
 
@@ -199,6 +207,10 @@ class Track:
         return self.blob_b.area
 
 
+#: What :meth:`StereoTracker.track_objects` gives for an object: a :class:`Track` (a patch's
+#: position), or a :class:`pbdkit.vision.pose.PoseTrack` (a posed object's pose from two patches).
+ObjectTrack = Track | PoseTrack
+
 # refusal statuses in priority order: (camera a only, camera b only, both)
 _REFUSALS: dict[str, tuple[TrackStatus, TrackStatus, TrackStatus]] = {
     "not_visible": ("not_visible_a", "not_visible_b", "not_visible_ab"),
@@ -250,6 +262,11 @@ class StereoTracker:
         half (measured on the MuJoCo scene: 12 mm below the axis point, the same within 1 mm over
         5 placements); a thick disc shows its rim. Measure it once with the object at a known
         place: ``offsets[name] = true_position - track.position``.
+    poses : mapping of str to PoseModel, optional
+        Objects placed as poses, each located by two of the models' patches (its ``ends``):
+        :meth:`track_objects` gives their poses (:mod:`pbdkit.vision.pose`) in place of those
+        patches' tracks. A patch is the end of one object at most; an object's name is not a
+        model's.
     """
 
     def __init__(
@@ -264,6 +281,7 @@ class StereoTracker:
         max_reprojection_error: float = 3.0,
         refine: bool = True,
         offsets: Mapping[str, npt.ArrayLike] | None = None,
+        poses: Mapping[str, PoseModel] | None = None,
     ) -> None:
         for name, cam in (("cam_a", cam_a), ("cam_b", cam_b)):
             if not isinstance(cam, PinholeCamera):
@@ -295,6 +313,12 @@ class StereoTracker:
             name: check_array(given.get(name, np.zeros(3)), f"offsets[{name!r}]", shape=(3,))
             for name in self.models
         }
+        self.poses = _check_poses(poses, self.models)
+        # What track_objects gives, in the models' order: a posed object at its first end.
+        end_of = {e: obj for obj, m in self.poses.items() for e in m.ends}
+        self.objects: tuple[str, ...] = tuple(
+            dict.fromkeys(end_of.get(name, name) for name in self.models)
+        )
         # Whitening of each model, so that d^2 = z1^2 + z2^2 with z affine in (Cb, Cr):
         # Lambda = L L^T (Cholesky, L lower), z = L^T (c - mu).
         self._whiten = []
@@ -306,8 +330,9 @@ class StereoTracker:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain-data form of the whole vision calibration (cameras, color models, settings)."""
-        return {
+        """Plain-data form of the whole vision calibration (cameras, color models, settings;
+        ``"poses"`` only when some object is posed)."""
+        out = {
             "cam_a": self.cam_a.to_dict(),
             "cam_b": self.cam_b.to_dict(),
             "models": {name: m.to_dict() for name, m in self.models.items()},
@@ -318,6 +343,9 @@ class StereoTracker:
             "refine": self.refine,
             "offsets": {name: o.tolist() for name, o in self.offsets.items()},
         }
+        if self.poses:
+            out["poses"] = {name: m.to_dict() for name, m in self.poses.items()}
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> StereoTracker:
@@ -344,10 +372,20 @@ class StereoTracker:
             )
             if k in data
         }
+        if "poses" in data:
+            poses = data["poses"]
+            if not isinstance(poses, dict):
+                raise ValueError(
+                    f"data['poses'] must be a dict name -> pose model dict, got {poses!r}"
+                )
+            pose_models = {str(k): PoseModel.from_dict(v) for k, v in poses.items()}
+        else:
+            pose_models = None
         return cls(
             PinholeCamera.from_dict(data["cam_a"]),
             PinholeCamera.from_dict(data["cam_b"]),
             {str(k): ColorModel.from_dict(v) for k, v in models.items()},
+            poses=pose_models,
             **options,
         )
 
@@ -462,6 +500,63 @@ class StereoTracker:
             else:
                 tracks[name] = Track(name, "ok", pos + self.offsets[name], err, a, b)
         return tracks
+
+    def track_objects(self, image_a: object, image_b: object) -> dict[str, ObjectTrack]:
+        """Every object's result in one stereo frame: a posed object's pose from its two
+        ends, every other patch's position.
+
+        Parameters
+        ----------
+        image_a, image_b : ndarray of uint8, shape (height, width, 3)
+            As :meth:`track`.
+
+        Returns
+        -------
+        tracks : dict of str to Track or PoseTrack
+            One per name of :attr:`objects`, in that order: a
+            :class:`~pbdkit.vision.pose.PoseTrack` for an object of ``poses``
+            (:meth:`PoseModel.track <pbdkit.vision.pose.PoseModel.track>`), the patch's
+            :class:`Track` for the others. Without ``poses``, :meth:`track`'s result.
+        """
+        tracks = self.track(image_a, image_b)
+        if not self.poses:
+            return dict(tracks)
+        out: dict[str, ObjectTrack] = {}
+        for name in self.objects:
+            model = self.poses.get(name)
+            if model is None:
+                out[name] = tracks[name]
+            else:
+                out[name] = model.track(name, tracks[model.ends[0]], tracks[model.ends[1]])
+        return out
+
+
+def _check_poses(
+    poses: Mapping[str, PoseModel] | None, models: Mapping[str, ColorModel]
+) -> dict[str, PoseModel]:
+    out: dict[str, PoseModel] = {}
+    used: dict[str, str] = {}
+    for name, model in dict(poses or {}).items():
+        if not isinstance(model, PoseModel):
+            raise ValueError(f"poses[{name!r}] must be a PoseModel, got {type(model).__name__}")
+        if name in models:
+            raise ValueError(
+                f"poses: the object {name!r} has the name of a color model; name a posed object "
+                f"otherwise than its patches {list(models)}"
+            )
+        for end in model.ends:
+            if end not in models:
+                raise ValueError(
+                    f"poses[{name!r}]: its end {end!r} is not a color model; expected some of "
+                    f"{list(models)}"
+                )
+            if end in used:
+                raise ValueError(
+                    f"poses[{name!r}]: the patch {end!r} is already an end of {used[end]!r}"
+                )
+            used[end] = name
+        out[str(name)] = model
+    return out
 
 
 def _cbcr_planes(img: NDArray[np.uint8]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:

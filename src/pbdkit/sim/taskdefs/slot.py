@@ -50,9 +50,10 @@ from ..parts import (
     add_block,
     add_tray,
     footprint_margin,
+    mark_prefix,
 )
 from ..scene import Simulation
-from ..tasks import Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint, yaw_of
+from ..tasks import CameraRig, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint, yaw_of
 from ..teacher import UP, Person
 
 __all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
@@ -77,6 +78,20 @@ RANGES: dict[str, PlacementRange] = {
         (0.12, -0.15, TRAY_RIM_HEIGHT), (0.16, -0.09, TRAY_RIM_HEIGHT), YAW_RANGE
     ),
 }
+
+#: The cameras: each object's two marks (end a, end b) give its pose (:mod:`pbdkit.sim.tracking`).
+PATCHES = {name: (mark_prefix(name, "a"), mark_prefix(name, "b")) for name in ("block", "tray")}
+
+#: The stereo pair for this task: the paper's rig (0.30 m baseline, in front of the robot) moved
+#: closer, lower and narrower. From the paper's place (1.05 m out, 0.52 m up, 42 degrees) a
+#: mark covered 12-36 pixels; from here (0.85 m out, 0.50 m up, looking at the table between
+#: the two objects, 24 degrees) 57-170 (medians: block 68-74, tray 142-170), and a mark's
+#: blob stays 19 pixels or more inside the image border. The cameras look under the raised
+#: hand of the start posture (x 0.28-0.34 m, 0.27-0.32 m up), which hid the tray's marks from
+#: a higher rig (0.62 m out and up); here it hides none (40 placements and start postures).
+CAMERAS = CameraRig(
+    left=(0.85, 0.15, 0.50), right=(0.85, -0.15, 0.50), target=(0.15, 0.0, 0.0), fovy=24.0
+)
 
 DESCRIPTION = (
     "Put the block into the slot: grasp the block lying on the table from above and lower it "
@@ -173,7 +188,8 @@ SPEC = TaskSpec(
     add_objects=add_objects,
     via_points=via_points,
     judge=judge,
-    patches={},
+    patches=PATCHES,
+    cameras=CAMERAS,
     grasped="block",
 )
 
