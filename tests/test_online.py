@@ -231,7 +231,8 @@ def test_a_perturbation_is_one_registry_entry(coaster: E.TaskSkill) -> None:
         assert P.get_perturbation("tap") is tap and "tap" in P.PERTURBATIONS
         # The command line's choices and help come from the registry.
         r = CliRunner().invoke(app, ["evaluate", "--perturb", "shake"])
-        assert r.exit_code == 2 and "must be one of none, move, push, tap" in r.output
+        said = " ".join(r.output.replace("│", " ").split())  # the error box's lines wrap
+        assert r.exit_code == 2 and "must be one of none, move, push, rotate, tap" in said
         r = CliRunner().invoke(app, ["evaluate", "--help"])
         words = " ".join(r.output.replace("│", " ").split())  # the help's lines wrap
         assert "or tap (a 1 N tap on the gripper at the grasp)." in words

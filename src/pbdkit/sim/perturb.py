@@ -1,4 +1,5 @@
-"""Disturbances of a run (``pbdkit evaluate --perturb NAME``): objects that move, a pushed arm.
+"""Disturbances of a run (``pbdkit evaluate --perturb NAME``): objects that move or turn, a pushed
+arm.
 
 A :class:`Disturbance` acts on the simulation before every physics step of a run, at the run's
 time t (seconds from the start of the trajectory, the first command). Both ways of running a
@@ -19,6 +20,17 @@ time of the first step where the skill's generalized gripper command closes.
   4 cm on the table before the grasp, over 1 s ending 1.5 s before ``t_grasp`` (the hand is
   then still on its way, behind and above the glass). The direction is drawn at random among
   those whose end point stays inside the object's placement range (the demonstrated range).
+- ``"rotate"``: the task's :class:`pbdkit.sim.tasks.ObjectTurn`. Slot task: the tray turns by
+  20-30 degrees about the vertical through its centre (its reference point, which stays where it
+  is), at constant speed over 1 s from ``t_grasp + 1 s`` while the block is carried: the fingers
+  take about 0.5 s to close on the block (measured: first contact of both 0.4-0.5 s after
+  ``t_grasp``), so the turn starts once it is held, as the hand lifts it, and ends well before
+  the hand lowers it into the pocket (``"before_grasp"``: as ``"move"``'s, ending 1.5 s before
+  ``t_grasp``). The size
+  is drawn uniformly in the task's range, the direction at random among those that keep the yaw
+  inside the object's yaw range (the demonstrated range). An offline trajectory, planned for the
+  tray's first yaw, puts the block in at that yaw; the online controller is told the turned pose
+  and follows it.
 - ``"push"``: a horizontal force of 40 N on the gripper for 0.3 s, starting halfway to the
   grasp (``t_grasp / 2``), across the arm (perpendicular to the vertical plane through the
   base axis and the grasped object, :attr:`pbdkit.sim.tasks.TaskSpec.grasped`), with a random
@@ -39,7 +51,7 @@ from numpy.typing import NDArray
 
 from ._registry import Registry
 from .scene import Simulation
-from .tasks import TaskSpec
+from .tasks import TaskSpec, yaw_of
 
 __all__ = [
     "PERTURBATIONS",
@@ -49,6 +61,7 @@ __all__ = [
     "Perturbation",
     "PushArm",
     "SlideObject",
+    "TurnObject",
     "check_perturb",
     "get_perturbation",
     "grasp_time",
@@ -65,6 +78,8 @@ PUSH_FORCE = 40.0  # N
 PUSH_DURATION = 0.3  # s
 PUSH_BODY = "gripper"
 SLIDE_DURATION = 1.0  # s
+#: ``"rotate"`` while carried: the turn starts this long after ``t_grasp`` (s; module docstring).
+TURN_DELAY = 1.0
 
 
 class Disturbance:
@@ -141,6 +156,63 @@ class SlideObject(Disturbance):
 
     def __post_init__(self) -> None:
         self.displacement = np.asarray(self.displacement, dtype=np.float64)
+
+
+@dataclass
+class TurnObject(Disturbance):
+    """An object turns about the vertical through its reference point by ``angle`` at constant
+    speed during ``[start, start + duration)``; its reference point stays where it is.
+
+    Attributes
+    ----------
+    obj : str
+        The object (a mocap object: :meth:`Simulation.place_object` with ``yaw``).
+    angle : float
+        The turn (rad, counter-clockwise seen from above).
+    start, duration : float
+        Seconds of run time.
+    """
+
+    obj: str
+    angle: float
+    start: float
+    duration: float = SLIDE_DURATION
+    grasp_s: float | None = None
+    name: str = field(default="rotate", init=False)
+    _origin: tuple[Float, float] | None = field(default=None, init=False, repr=False)
+    _done: bool = field(default=False, init=False, repr=False)
+
+    def apply(self, sim: Simulation, t: float) -> None:
+        if t < self.start or self._done:
+            return
+        if self._origin is None:
+            pose = sim.object_poses()[self.obj]
+            self._origin = (pose[:3, 3].copy(), yaw_of(pose))
+        point, yaw0 = self._origin
+        if t >= self.start + self.duration + 1e-12:
+            sim.place_object(self.obj, point, yaw=yaw0 + self.angle)  # the end, once
+            self._done = True
+            return
+        frac = (t - self.start) / self.duration
+        sim.place_object(self.obj, point, yaw=yaw0 + frac * self.angle)
+
+    def as_dict(self) -> dict[str, Any]:
+        yaws = None if self._origin is None else (self._origin[1], self._origin[1] + self.angle)
+        return {
+            "name": self.name,
+            "object": self.obj,
+            "angle_deg": math.degrees(self.angle),
+            "start_s": float(self.start),
+            "duration_s": float(self.duration),
+            "initial_yaw_deg": None if yaws is None else math.degrees(yaws[0]),
+            "final_yaw_deg": None if yaws is None else math.degrees(yaws[1]),
+            "grasp_s": self.grasp_s,
+        }
+
+    def __post_init__(self) -> None:
+        self.angle = float(self.angle)
+        if not math.isfinite(self.angle):
+            raise ValueError(f"angle must be finite (rad), got {self.angle!r}")
 
 
 @dataclass
@@ -222,8 +294,9 @@ class DisturbanceSetup:
     ----------
     task : TaskSpec
         The task (its ``move``, ranges and ``grasped`` object).
-    objects : dict str -> ndarray, shape (3,)
-        The trial's true object positions at the start, every object of the task.
+    objects : dict str -> ndarray, shape (3,) or (4, 4)
+        The trial's true object placements at the start, every object of the task (poses for
+        the objects placed as poses, :attr:`pbdkit.sim.tasks.PlacementRange.yaw`).
     times : ndarray, shape (T,)
         The skill's time grid (s), :meth:`pbdkit.Skill.times`.
     gripper : ndarray, shape (T,), or None
@@ -385,6 +458,48 @@ def _slide(setup: DisturbanceSetup) -> Disturbance:
     return SlideObject(move.obj, d, start, grasp_s=t_grasp)
 
 
+def _has_rotate(spec: TaskSpec) -> None:
+    if spec.rotate is None:
+        raise ValueError(f"task {spec.name!r} has no 'rotate' disturbance (TaskSpec.rotate)")
+
+
+def _turn_angle(
+    spec: TaskSpec, obj: str, yaw: float, size: float, rng: np.random.Generator
+) -> float:
+    """A turn of ``size`` (rad) whose end keeps the yaw of ``obj`` (now ``yaw``) inside its
+    yaw range: either direction when both do, at random."""
+    r = spec.ranges[obj].yaw
+    assert r is not None  # TaskSpec checks it
+    signs = [s for s in (1.0, -1.0) if r[0] - 1e-9 <= yaw + s * size <= r[1] + 1e-9]
+    if not signs:
+        raise ValueError(
+            f"no turn of {math.degrees(size):g} degrees keeps {obj!r} inside its yaw range from "
+            f"{math.degrees(yaw):g} degrees"
+        )
+    sign = signs[0] if len(signs) == 1 else (1.0 if rng.uniform() < 0.5 else -1.0)
+    return sign * size
+
+
+def _turn(setup: DisturbanceSetup) -> Disturbance:
+    """The task's :class:`~pbdkit.sim.tasks.ObjectTurn` (module docstring)."""
+    t_grasp = setup.grasp_time()
+    spec = setup.task
+    turn = spec.rotate
+    assert turn is not None  # _has_rotate
+    size = math.radians(float(setup.rng.uniform(*turn.degrees)))
+    placed = np.asarray(setup.objects[turn.obj], dtype=np.float64)
+    if placed.shape != (4, 4):
+        raise ValueError(
+            f"{turn.obj!r} must be placed as a pose (4, 4) to turn, got {placed.shape}"
+        )
+    angle = _turn_angle(spec, turn.obj, yaw_of(placed), size, setup.rng)
+    if turn.when == "while_carried":
+        start = t_grasp + TURN_DELAY
+    else:
+        start = max(0.0, t_grasp - 1.5 - SLIDE_DURATION)
+    return TurnObject(turn.obj, angle, start, grasp_s=t_grasp)
+
+
 def _push(setup: DisturbanceSetup) -> Disturbance:
     """A shove across the vertical plane through the base axis and the grasped object (the
     hand passes near it at the push's time), halfway to the grasp (module docstring)."""
@@ -409,4 +524,13 @@ register_perturbation(
 )
 register_perturbation(
     Perturbation("push", f"a {PUSH_DURATION:g} s shove on the arm halfway to the grasp", _push)
+)
+register_perturbation(
+    Perturbation(
+        "rotate",
+        "an object turns about its centre, the task's TaskSpec.rotate: slot task: the tray "
+        "20-30 degrees while the block is carried",
+        _turn,
+        check=_has_rotate,
+    )
 )

@@ -126,6 +126,7 @@ __all__ = [
     "GRASP_OFFSET",
     "CameraRig",
     "ObjectMove",
+    "ObjectTurn",
     "Outcome",
     "PlacementRange",
     "RunStats",
@@ -441,6 +442,46 @@ class ObjectMove:
             raise ValueError(f"distance must be > 0 (m), got {self.distance!r}")
 
 
+@dataclass(frozen=True)
+class ObjectTurn:
+    """A task's ``rotate`` disturbance (``pbdkit evaluate --perturb rotate``): an object turns
+    about the vertical through its reference point (its centre), staying in its yaw range.
+
+    Attributes
+    ----------
+    obj : str
+        The object that turns: one placed as a pose (its range has a yaw,
+        :attr:`PlacementRange.yaw`), built as a MuJoCo mocap body (the slot task's tray).
+    degrees : tuple of float
+        (min, max): the size of the turn is drawn uniformly in it (degrees, 0 < min <= max);
+        the direction is one that keeps the object's yaw inside its range (see
+        :func:`pbdkit.sim.perturb.make_disturbance`).
+    when : str
+        ``"before_grasp"``: the turn ends before the hand reaches the grasped object;
+        ``"while_carried"``: it happens while the grasped object is held (timed as
+        :class:`ObjectMove`).
+    """
+
+    obj: str
+    degrees: tuple[float, float]
+    when: str = "while_carried"
+
+    def __post_init__(self) -> None:
+        if self.when not in ("before_grasp", "while_carried"):
+            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+        try:
+            lo, hi = (float(v) for v in self.degrees)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"degrees must be (min, max) in degrees, got {self.degrees!r}"
+            ) from None
+        if not (math.isfinite(hi) and 0.0 < lo <= hi):
+            raise ValueError(
+                f"degrees must be (min, max) with 0 < min <= max, got {self.degrees!r}"
+            )
+        object.__setattr__(self, "degrees", (lo, hi))
+
+
 @dataclass(frozen=True, eq=False)
 class TaskSpec:
     """Everything that makes a task (see the module docstring for how to write one).
@@ -479,6 +520,10 @@ class TaskSpec:
         Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
     move : ObjectMove, optional
         The task's ``move`` disturbance (``--perturb move``); None: the task has none.
+    rotate : ObjectTurn, optional
+        The task's ``rotate`` disturbance (``--perturb rotate``): an object placed as a pose
+        turns; None (default): the task has none. Its largest turn must fit in half the
+        object's yaw range (so that one direction always keeps the yaw inside it).
     grasped : str
         The object the gripper holds, a glass built with ``add_glass(..., name=grasped)``: the
         simulation's grasp, tilt and release checks, the record of a run, the online loop's
@@ -496,6 +541,7 @@ class TaskSpec:
     n_liquid: int = 0
     move: ObjectMove | None = None
     grasped: str = "glass"
+    rotate: ObjectTurn | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -537,6 +583,8 @@ class TaskSpec:
                 f"move of task {self.name!r} must be an ObjectMove of one of its objects "
                 f"{list(ranges)}, got {self.move!r}"
             )
+        if self.rotate is not None:
+            _check_turn(self.name, self.rotate, ranges)
         for what in ("add_objects", "via_points", "judge"):
             if not callable(getattr(self, what)):
                 raise ValueError(f"{what} of task {self.name!r} must be callable")
@@ -637,6 +685,29 @@ class TaskSpec:
     def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
         """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
         return self.check_placement(objects)
+
+
+def _check_turn(task: str, turn: object, ranges: Mapping[str, PlacementRange]) -> None:
+    """Refuse a ``rotate`` that is not an :class:`ObjectTurn` of an object placed as a pose,
+    or a turn larger than half its yaw range."""
+    if not isinstance(turn, ObjectTurn) or turn.obj not in ranges:
+        raise ValueError(
+            f"rotate of task {task!r} must be an ObjectTurn of one of its objects "
+            f"{list(ranges)}, got {turn!r}"
+        )
+    yaw = ranges[turn.obj].yaw
+    if yaw is None:
+        raise ValueError(
+            f"rotate of task {task!r} turns {turn.obj!r}, which is placed as a position: it "
+            "needs a yaw range (PlacementRange.yaw)"
+        )
+    half = 0.5 * math.degrees(yaw[1] - yaw[0])
+    if turn.degrees[1] > half + 1e-9:
+        raise ValueError(
+            f"rotate of task {task!r}: a turn of up to {turn.degrees[1]:g} degrees does not fit "
+            f"in {turn.obj!r}'s yaw range from everywhere in it (at most half its width, "
+            f"{half:g} degrees)"
+        )
 
 
 _REGISTRY: Registry[TaskSpec] = Registry(

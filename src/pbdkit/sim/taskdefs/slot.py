@@ -53,7 +53,16 @@ from ..parts import (
     mark_prefix,
 )
 from ..scene import Simulation
-from ..tasks import CameraRig, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint, yaw_of
+from ..tasks import (
+    CameraRig,
+    ObjectTurn,
+    Outcome,
+    PlacementRange,
+    RunStats,
+    TaskSpec,
+    ViaPoint,
+    yaw_of,
+)
 from ..teacher import UP, Person
 
 __all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
@@ -191,6 +200,9 @@ SPEC = TaskSpec(
     patches=PATCHES,
     cameras=CAMERAS,
     grasped="block",
+    # --perturb rotate: the tray turns about its centre while the block is carried, its yaw
+    # staying inside YAW_RANGE (pbdkit.sim.perturb).
+    rotate=ObjectTurn("tray", (20.0, 30.0), "while_carried"),
 )
 
 
