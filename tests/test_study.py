@@ -44,6 +44,24 @@ def test_grid_spans_twice_the_range_with_the_others_nominal() -> None:
         S.grid_placements(get_task("basin"), "basin", 3)
 
 
+def test_a_posed_objects_grid_spans_x_and_twice_its_yaw_range() -> None:
+    """The slot's tray is mapped over x and yaw (y at the range's centre), the yaw from -120 to
+    120 degrees for a -60..60 range; the block stays at its nominal pose."""
+    from pbdkit.sim.tasks import yaw_of
+
+    spec = get_task("slot")
+    xs, yaws, places = S.grid_placements(spec, "tray", 5)
+    r = spec.ranges["tray"]
+    np.testing.assert_allclose(np.degrees([yaws[0], yaws[-1]]), [-120.0, 120.0])
+    assert len(places) == 25
+    tray = places[7]["tray"]  # row-major: x index 2, yaw index 1
+    assert tray.shape == (4, 4)
+    np.testing.assert_allclose(tray[:3, 3], [xs[2], r.center[1], r.center[2]])
+    assert yaw_of(tray) == pytest.approx(yaws[1])
+    for p in places:
+        np.testing.assert_array_equal(p["block"], spec.ranges["block"].nominal())
+
+
 def test_observation_noise_has_the_asked_mean_error_on_moving_objects_only() -> None:
     spec = get_task("basin")
     truth = spec.nominal_objects()
