@@ -240,8 +240,14 @@ class PlacementRange:
         return 0.5 * (self.low + self.high)
 
     def contains(self, position: Float, tol: float = 1e-9) -> bool:
-        """True if ``position`` (3,) lies in the box (up to ``tol``)."""
+        """True if ``position`` (3,) lies in the box (up to ``tol``); for a pose (4, 4), its
+        position in the box and its yaw in the yaw range."""
         p = np.asarray(position, dtype=np.float64)
+        if p.shape == (4, 4):
+            yaw = math.atan2(float(p[1, 0]), float(p[0, 0]))
+            if self.yaw is None or not self.yaw[0] - tol <= yaw <= self.yaw[1] + tol:
+                return False
+            p = p[:3, 3]
         return bool(np.all(p >= self.low - tol) and np.all(p <= self.high + tol))
 
 
