@@ -36,16 +36,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array
-
-if TYPE_CHECKING:  # stereo.py imports this module
-    from .stereo import Track, TrackStatus
+from .track import Track, TrackStatus
 
 __all__ = ["PoseModel", "PoseTrack", "ends_heading", "yaw_matrix"]
 
