@@ -139,15 +139,7 @@ def tracking_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | Non
         None when nothing was observed.
     """
 
-    def stats(v: NDArray[np.float64]) -> dict[str, Any]:
-        return {"mean": float(v.mean()), "std": float(v.std()), "max": float(v.max()), "n": len(v)}
-
-    pooled = np.array([e for row in errors for e in row.values()], dtype=np.float64)
-    if pooled.size == 0:
-        return None
-    names = list(dict.fromkeys(k for row in errors for k in row))
-    per = {k: stats(np.array([row[k] for row in errors if k in row])) for k in names}
-    return {**stats(pooled), "per_object": per}
+    return _summary(errors, "std")
 
 
 def yaw_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:
@@ -166,8 +158,15 @@ def yaw_summary(errors: Sequence[dict[str, float]]) -> dict[str, Any] | None:
         None when no posed object was observed.
     """
 
+    return _summary(errors, "sd")
+
+
+def _summary(errors: Sequence[dict[str, float]], sd_key: str) -> dict[str, Any] | None:
+    """Pooled and per-object mean, standard deviation (population, under ``sd_key``), max and
+    count of per-placement errors; None when there are none."""
+
     def stats(v: NDArray[np.float64]) -> dict[str, Any]:
-        return {"mean": float(v.mean()), "sd": float(v.std()), "max": float(v.max()), "n": len(v)}
+        return {"mean": float(v.mean()), sd_key: float(v.std()), "max": float(v.max()), "n": len(v)}
 
     pooled = np.array([e for row in errors for e in row.values()], dtype=np.float64)
     if pooled.size == 0:
