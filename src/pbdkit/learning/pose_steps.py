@@ -50,10 +50,10 @@ from .steps import (
     MAX_HALVINGS,
     ControllerStep,
     RunSetup,
+    _bound_step,
     _free_step2,
     _limited_mask,
     _spd_inverse,
-    _step_scale,
     _task_stack,
 )
 
@@ -161,13 +161,7 @@ class PoseFusedStep(ControllerStep):
         _, step, info = dposv(lam, -grad)
         if info != 0:
             raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
-        step2 = float(step.dot(step))
-        limited = False
-        if step2 > self.free2:
-            scale = _step_scale(step, step2, self.step_limit, self.max_step)
-            if scale < 1.0:
-                step = step * scale
-                limited = True
+        step, limited = _bound_step(step, self.free2, self.step_limit, self.max_step)
         new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
         x_new, rot_new, jac_new = self.kin(new)
         if self.line_search:
@@ -285,13 +279,7 @@ class PoseTaskStep(ControllerStep):
         jp = damped_pinv(wg)
         d_hat = self.c.joint_mean[j] - theta
         step = jp.dot(wdx) + self.alpha * (self.eye - jp.dot(wg)).dot(d_hat)
-        step2 = float(step.dot(step))
-        limited = False
-        if step2 > self.free2:
-            scale = _step_scale(step, step2, self.step_limit, self.max_step)
-            if scale < 1.0:
-                step = step * scale
-                limited = True
+        step, limited = _bound_step(step, self.free2, self.step_limit, self.max_step)
         new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
         x_new, rot_new, jac_new = self.kin(new)
         return new, x_new, jac_new, rot_new, limited

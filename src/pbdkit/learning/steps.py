@@ -71,6 +71,19 @@ def _free_step2(max_step: float, step_limit: Float | None) -> float:
     return free * free * (1.0 - 1e-9)
 
 
+def _bound_step(
+    step: Float, free2: float, step_limit: Float | None, max_step: float
+) -> tuple[Float, bool]:
+    """``step`` scaled down by :func:`_step_scale` when it is longer than ``free2`` allows
+    (squared, :func:`_free_step2`), and whether it was."""
+    step2 = float(step.dot(step))
+    if step2 > free2:
+        scale = _step_scale(step, step2, step_limit, max_step)
+        if scale < 1.0:
+            return step * scale, True
+    return step, False
+
+
 def _step_scale(step: Float, step2: float, step_limit: Float | None, max_step: float) -> float:
     """Factor in (0, 1] that brings ``step`` within ``step_limit`` and then ``max_step``.
 
@@ -165,14 +178,9 @@ class JointStep(ControllerStep):
 
     def __call__(self, j: int, theta: Float) -> tuple[Float, bool]:
         """theta_j from theta_{j-1} = ``theta``, and whether a bound scaled the step down."""
-        step = self.target[j] - theta
-        step2 = step @ step
-        limited = False
-        if step2 > self.free2:
-            scale = _step_scale(step, step2, self.step_limit, self.max_step)
-            if scale < 1.0:
-                step = step * scale
-                limited = True
+        step, limited = _bound_step(
+            self.target[j] - theta, self.free2, self.step_limit, self.max_step
+        )
         return theta + step, limited  # stays in the box: between theta and target[j]
 
 
@@ -468,13 +476,7 @@ class TaskStep(ControllerStep):
         d_hat = self.c.joint_mean[j] - theta
         # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
         step = jp @ (self.target[j] - x) + self.alpha * ((self.eye - jp @ jac) @ d_hat)
-        step2 = step @ step
-        limited = False
-        if step2 > self.free2:
-            scale = _step_scale(step, step2, self.step_limit, self.max_step)
-            if scale < 1.0:
-                step *= scale
-                limited = True
+        step, limited = _bound_step(step, self.free2, self.step_limit, self.max_step)
         new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
         x_new, jac_new = self.fk_jac(new)
         return new, x_new, jac_new, limited
