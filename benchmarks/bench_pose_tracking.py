@@ -17,13 +17,13 @@ Run: .venv/bin/python benchmarks/bench_pose_tracking.py [--placements N] [--repe
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
-import mujoco
 import numpy as np
 from _common import fmt_time, print_table
 from numpy.typing import NDArray
@@ -32,58 +32,16 @@ from threadpoolctl import threadpool_limits
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, get_task
 from pbdkit.sim._gl import BACKEND
-from pbdkit.sim.parts import TRAY_MARK_A_RGBA, TRAY_MARK_B_RGBA, add_block
-from pbdkit.sim.tasks import PlacementRange, TaskSpec, yaw_of, yaw_pose
+from pbdkit.sim.tasks import TaskSpec, yaw_of, yaw_pose
 from pbdkit.sim.teacher import random_start_posture
 from pbdkit.sim.tracking import SimTracker
 from pbdkit.vision import PoseTrack
 
+# The plate of (b), shared with the tests.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from plate_task import PLATE_SIDE, plate_task
+
 Float = NDArray[np.float64]
-
-#: The plate of (b): its marks' centres lie this far to the side of its point (m).
-PLATE_SIDE = 0.03
-
-
-def plate_task() -> TaskSpec:
-    """The slot task with its tray replaced by a flat plate (a static body, posed) whose two
-    marks (the tray's colors, 16 x 30 mm, 84 mm apart) lie :data:`PLATE_SIDE` to the side of
-    its point (the body's origin): a bias of the object, which turns with it."""
-    slot = get_task("slot")
-
-    def add_objects(world: Any, objects: Any, rng: np.random.Generator) -> None:
-        add_block(world, objects["block"])
-        p = objects["tray"]
-        yaw = yaw_of(p)
-        body = world.add_body(
-            name="tray", pos=p[:3, 3].tolist(), quat=[math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)]
-        )
-        body.add_geom(  # the plate: gray, 2 mm thick, its top face at the point's height
-            name="tray_plate",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.055, 0.05, 0.001],
-            pos=[0.0, PLATE_SIDE / 2, -0.001],
-            rgba=[0.42, 0.42, 0.45, 1.0],
-        )
-        for end, x, rgba in (("a", -0.042, TRAY_MARK_A_RGBA), ("b", 0.042, TRAY_MARK_B_RGBA)):
-            body.add_geom(
-                name=f"tray_mark_{end}",
-                type=mujoco.mjtGeom.mjGEOM_BOX,
-                size=[0.008, 0.015, 0.0002],
-                pos=[x, PLATE_SIDE, 0.0002],
-                rgba=list(rgba),
-                contype=0,
-                conaffinity=0,
-            )
-
-    z = 0.002
-    r = slot.ranges["tray"]
-    ranges = {
-        "block": slot.ranges["block"],
-        "tray": PlacementRange.box(
-            (r.low[0], r.low[1], z), (r.high[0], r.high[1], z), (-math.pi / 3, math.pi / 3)
-        ),
-    }
-    return dataclasses.replace(slot, name="plate", ranges=ranges, add_objects=add_objects)
 
 
 def slot_errors(

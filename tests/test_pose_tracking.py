@@ -18,14 +18,14 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
-import mujoco
+from plate_task import PLATE_SIDE, plate_task
 
 from pbdkit.apps.cli import app
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, task_skill
 from pbdkit.sim.online import VisionObserver
-from pbdkit.sim.parts import BLOCK_RGBA, TRAY_MARK_A_RGBA, TRAY_MARK_B_RGBA, add_block
-from pbdkit.sim.tasks import CameraRig, PlacementRange, TaskSpec, yaw_of, yaw_pose
+from pbdkit.sim.parts import BLOCK_RGBA
+from pbdkit.sim.tasks import CameraRig, TaskSpec, yaw_of, yaw_pose
 from pbdkit.sim.teacher import random_start_posture
 from pbdkit.sim.tracking import (
     ObjectNotSeenError,
@@ -42,8 +42,6 @@ from pbdkit.vision import PoseTrack, Track
 # leave margin for other renderers.
 MAX_POSITION_MM = 2.5
 MAX_YAW_DEG = 2.0
-#: The plate's point lies this far to the side of its marks' line (m).
-PLATE_SIDE = 0.03
 
 
 def _arm(seed: int) -> np.ndarray:
@@ -121,50 +119,8 @@ def test_slot_poses_match_the_truth(slot_tracker: SimTracker) -> None:
     assert np.mean(yaw_err) < 1.0
 
 
-def _plate_task() -> TaskSpec:
-    """The slot with its tray replaced by a flat plate (static, posed) whose marks lie
-    :data:`PLATE_SIDE` to the side of its point: a bias of the object, which turns with it
-    (``benchmarks/bench_pose_tracking.py`` builds the same)."""
-    slot = get_task("slot")
-
-    def add_objects(world: Any, objects: Any, rng: np.random.Generator) -> None:
-        add_block(world, objects["block"])
-        p = objects["tray"]
-        yaw = yaw_of(p)
-        body = world.add_body(
-            name="tray", pos=p[:3, 3].tolist(), quat=[math.cos(yaw / 2), 0, 0, math.sin(yaw / 2)]
-        )
-        body.add_geom(
-            name="tray_plate",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.055, 0.05, 0.001],
-            pos=[0.0, PLATE_SIDE / 2, -0.001],
-            rgba=[0.42, 0.42, 0.45, 1.0],
-        )
-        for end, x, rgba in (("a", -0.042, TRAY_MARK_A_RGBA), ("b", 0.042, TRAY_MARK_B_RGBA)):
-            body.add_geom(
-                name=f"tray_mark_{end}",
-                type=mujoco.mjtGeom.mjGEOM_BOX,
-                size=[0.008, 0.015, 0.0002],
-                pos=[x, PLATE_SIDE, 0.0002],
-                rgba=list(rgba),
-                contype=0,
-                conaffinity=0,
-            )
-
-    r = slot.ranges["tray"]
-    z = 0.002
-    ranges = {
-        "block": slot.ranges["block"],
-        "tray": PlacementRange.box(
-            (r.low[0], r.low[1], z), (r.high[0], r.high[1], z), (-math.pi / 3, math.pi / 3)
-        ),
-    }
-    return dataclasses.replace(slot, name="plate", ranges=ranges, add_objects=add_objects)
-
-
 def test_object_frame_offset_beats_a_world_offset_on_turned_placements() -> None:
-    plate = _plate_task()
+    plate = plate_task()
     # Both calibrated at the nominal placement only (yaw 0), where they agree.
     local = _calibrate(plate, pose_views=1)
     world = _calibrate(plate, pose_views=1, offset_frame="world")
