@@ -59,20 +59,20 @@ calibrated at yaw 0 and turned by up to 60 degrees, a world offset errs by up to
 object-frame offset stays within the tracker's noise. The slot's own marks are flat and
 symmetric about the objects' points, so their bias is small either way: over 100 placements
 (``benchmarks/bench_pose_tracking.py``, the arm at a start posture), position error mean +- sd
-(largest 1.5 mm with the default calibration) and yaw error (largest 1.6 degrees):
+(largest 2.4 mm with the default calibration) and yaw error (largest 1.7 degrees):
 
 ========================  =====================  =====================
 calibration               block                  tray
 ========================  =====================  =====================
-raw (midpoint, heading)   0.53 +- 0.28 mm        0.50 +- 0.24 mm
-world frame, 1 view       0.54 +- 0.38 mm        0.76 +- 0.42 mm
-object frame, 1 view      0.57 +- 0.34 mm        0.72 +- 0.36 mm
-world frame, 5 views      0.39 +- 0.31 mm        0.45 +- 0.27 mm
-object frame, 5 views     0.39 +- 0.31 mm        0.42 +- 0.27 mm
-yaw (any calibration)     0.42-0.46 +- 0.4 deg   0.20-0.23 +- 0.2 deg
+raw (midpoint, heading)   0.54 +- 0.33 mm        0.52 +- 0.33 mm
+world frame, 1 view       0.42 +- 0.37 mm        0.76 +- 0.45 mm
+object frame, 1 view      0.42 +- 0.37 mm        0.69 +- 0.43 mm
+world frame, 5 views      0.41 +- 0.37 mm        0.45 +- 0.35 mm
+object frame, 5 views     0.43 +- 0.36 mm        0.41 +- 0.38 mm
+yaw (any calibration)     0.40-0.48 +- 0.37 deg  0.22-0.23 +- 0.24 deg
 ========================  =====================  =====================
 
-(the tray's lateral error, sd 0.13 mm in the object frame against 0.19 mm in the world's, is
+(the tray's lateral error, sd 0.13 mm in the object frame against 0.21 mm in the world's, is
 the part of its bias that turns with it). The slot task has its own camera rig
 (:data:`pbdkit.sim.taskdefs.slot.CAMERAS`), closer to the objects than the paper's, where a mark
 covers 57-170 pixels instead of 12-36.
