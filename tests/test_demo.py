@@ -234,6 +234,24 @@ def test_demo_basin_paper_configuration(basin_learner: FastBasin, tmp_path: Path
 
 
 @pytest.mark.slow
+def test_demo_slot_with_the_cameras_reports_the_yaw(
+    fast_demos: Callable[..., list], tmp_path: Path
+) -> None:
+    """`pbdkit demo --task slot` with the cameras: the objects' yaw error beside the position
+    error in metrics.json and the report, and each posed object's calibration in its frame."""
+    run_robot_demo("slot", tmp_path, seed=0, learn=FastBasin(fast_demos("slot", 5, 1)))
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    tracking = m["tracking"]
+    assert set(tracking["error_deg"]) == {"block", "tray"}
+    assert 0.0 <= tracking["tracking_error_deg"]["mean"] < 2.5  # bench_pose_tracking's bound
+    assert tracking["offsets_mm"] == {}  # both objects are posed: their offsets are in frame
+    assert set(tracking["pose_offsets"]) == {"block", "tray"}
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert re.search(r"and \d+\.\d+ deg \+- \d+\.\d+ deg over 2 objects in yaw", html)
+    assert "in its own frame, yaw" in html and "yaw error (deg)" in html
+
+
+@pytest.mark.slow
 def test_demo_online_shows_the_online_run(basin_learner: FastBasin, tmp_path: Path) -> None:
     # As `pbdkit demo --online --ground-truth` (whose --perturb is move by default).
     run_robot_demo(

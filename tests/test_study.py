@@ -150,6 +150,33 @@ def test_a_tiny_study_writes_its_report(fast_learning: FastLearning, tmp_path: P
         assert title in html
 
 
+@pytest.mark.slow
+def test_a_tiny_study_of_the_slot_maps_position_and_yaw(
+    fast_demos: Callable[..., list], tmp_path: Path
+) -> None:
+    """The slot's objects are poses: each map is over x and the yaw, and its report says so
+    (the study ran end to end on the posed task)."""
+    size = S.StudySize(
+        grid=2,
+        demos=(3,),
+        curve_trials=1,
+        noise_mm=(0.0,),
+        noise_trials=1,
+        map_controllers=("fused",),
+    )
+    result = S.run_study("slot", tmp_path, size=size, learn=FastLearning(fast_demos("slot", 5, 1)))
+    assert set(result["maps"]) == {"block", "tray"}
+    for name, m in result["maps"].items():
+        assert set(m) >= {"x", "yaw"} and "y" not in m
+        r = get_task("slot").ranges[name]
+        assert r.yaw is not None
+        assert min(m["yaw"]) < r.yaw[0] and max(m["yaw"]) > r.yaw[1]  # twice the range
+        assert np.array(m["success"]["fused"]).shape == (2, 2)
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert "the block placed and turned" in html and "x and yaw (2 x 2" in html
+    assert (tmp_path / "map_tray.png").read_bytes().startswith(PNG_MAGIC)
+
+
 def test_study_command_line_errors(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["study", "--out", str(tmp_path), "--workers", "0"])
     assert r.exit_code != 0 and "must be >= 1" in r.output

@@ -37,8 +37,8 @@ from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
 from .._validation import check_int, check_positive_float
+from ..learning.naming import controller_names
 from ..sim import tasks as T
-from ..sim.naming import controller_names
 from ..sim.task_skill import learn_task
 from ..sim.tasks import TaskSpec
 from ..sim.trials import run_trials
@@ -516,13 +516,20 @@ def _write_report(spec: TaskSpec, out: Path, result: dict[str, Any]) -> None:
             [k, _percent(m["inside_range"][k]), _percent(m["overall"][k])]
             for k in result["controllers"]
         ]
+        posed = "yaw" in m
+        grid = (
+            f"x and yaw ({len(m['x'])} x {len(m['yaw'])}; y at the range's centre)"
+            if posed
+            else f"x and y ({len(m['x'])} x {len(m['y'])})"
+        )
         sections.append(
             Section(
-                f"Where the skill works: the {obj} over the table",
+                f"Where the skill works: the {obj} "
+                + ("placed and turned" if posed else "over the table"),
                 paragraphs=[
-                    f"The {obj} on a {len(m['x'])} x {len(m['y'])} grid spanning twice its "
-                    "demonstrated range on each side (box), the other objects at their nominal "
-                    "place; every controller at every point, told the true positions."
+                    f"The {obj} on a grid over {grid} spanning twice its demonstrated range on "
+                    "each side (box), the other objects at their nominal place; every "
+                    "controller at every point, told the true positions."
                 ],
                 tables={"Success rate": (["controller", "inside the range", "whole grid"], rows)},
                 figures=[Figure((out / f"map_{obj}.png").read_bytes(), f"Map of the {obj}.")],

@@ -24,7 +24,7 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
 - The experiment (:mod:`pbdkit.sim.experiment` gathers its names), one module per concern:
-  controller names (:mod:`~pbdkit.sim.naming`), a task's skill
+  controller names (:mod:`~pbdkit.learning.naming`), a task's skill
   (:mod:`~pbdkit.sim.task_skill`), one controller's run (:mod:`~pbdkit.sim.runs`), what is
   measured (:mod:`~pbdkit.sim.metrics`), what the skill is told (:mod:`~pbdkit.sim.sensing`),
   trials (:mod:`~pbdkit.sim.trials`) on Dask workers (:mod:`~pbdkit.sim.parallel`, a pure
@@ -55,6 +55,7 @@ from .perturb import (
     Perturbation,
     PushArm,
     SlideObject,
+    TurnObject,
     get_perturbation,
     perturbation_names,
     register_perturbation,
@@ -63,6 +64,7 @@ from .perturb import (
 from .scene import CAMERAS, SceneInfo, Simulation, build_scene
 from .tasks import (
     ObjectMove,
+    ObjectTurn,
     Outcome,
     PlacementRange,
     RunStats,
@@ -88,6 +90,7 @@ __all__ = [
     "DisturbanceSetup",
     "ExecutionResult",
     "ObjectMove",
+    "ObjectTurn",
     "OnlineRun",
     "Outcome",
     "Perturbation",
@@ -98,6 +101,7 @@ __all__ = [
     "Simulation",
     "SlideObject",
     "TaskSpec",
+    "TurnObject",
     "ViaPoint",
     "build_scene",
     "evaluate_outcome",

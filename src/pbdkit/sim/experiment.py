@@ -2,7 +2,7 @@
 
 Teach, learn, reproduce for new placements, execute, judge; each concern has its module:
 
-- :mod:`pbdkit.sim.naming`: the controllers by name (``"fused"``, ``"joint"``,
+- :mod:`pbdkit.learning.naming`: the controllers by name (``"fused"``, ``"joint"``,
   ``"task:OBJECT"``);
 - :mod:`pbdkit.sim.task_skill`: a task's skill (:class:`TaskSkill`, :func:`learn_task`, which
   objects get a constraint);
@@ -18,6 +18,7 @@ This module re-exports their public names, where they have always been importabl
 
 from __future__ import annotations
 
+from ..learning.naming import controller_names, controller_use
 from .evaluation import ControllerStats, Evaluation, evaluate, summarize
 from .metrics import (
     following_error,
@@ -26,7 +27,6 @@ from .metrics import (
     tracking_errors,
     tracking_summary,
 )
-from .naming import controller_names, controller_use
 from .runs import ControllerRun, OnlineControllerRun, run_controller, run_online
 from .sensing import calibrate_tracker, observation_noise, observe
 from .task_skill import TaskSkill, constrained_objects, learn_task, start_posture

@@ -23,10 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..learning.demonstration import Demonstration
+from ..learning.naming import FUSED_POSITION, controller_names, controller_use
 from ..learning.skill import Skill
 from ..prob.gmm import MAX_COMPONENTS
 from ..robots import katana
-from .naming import FUSED_POSITION, controller_names, controller_use
 from .tasks import TaskSpec, get_task
 from .teacher import teach
 
@@ -90,7 +90,8 @@ class TaskSkill:
 
     @property
     def controllers(self) -> list[str]:
-        """The controllers of this skill, by name (:func:`pbdkit.sim.naming.controller_names`)."""
+        """The controllers of this skill, by name
+        (:func:`pbdkit.learning.naming.controller_names`)."""
         return controller_names(self.skill.object_names, oriented=self.position_skill is not None)
 
     def skill_for(self, controller: str) -> tuple[Skill, list[str] | None]:

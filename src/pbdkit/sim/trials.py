@@ -267,7 +267,7 @@ def run_trials(
     placements : sequence of dict str -> ndarray, shape (3,)
         True positions of every object of the task.
     controllers : sequence of str
-        Names from :func:`pbdkit.sim.naming.controller_names`.
+        Names from :func:`pbdkit.learning.naming.controller_names`.
     tracker : SimTracker, optional
         With a tracker the skill is told the positions the cameras measure; without, the true
         ones.
