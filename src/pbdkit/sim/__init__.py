@@ -20,7 +20,7 @@ This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extr
   :class:`pbdkit.vision.TrackFilter`) or the truth.
 - :mod:`pbdkit.sim.perturb`: disturbances for both ways of running, a registry like the tasks'
   (:func:`register_perturbation`, :func:`perturbation_names`; built in: ``move``, an object
-  slides; ``push``, a shove on the arm).
+  slides; ``push``, a shove on the arm; ``rotate``, an object placed as a pose turns).
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
 - :func:`save_video`: recorded frames to MP4.
 - The experiment (:mod:`pbdkit.sim.experiment` gathers its names), one module per concern:
