@@ -10,8 +10,10 @@ OUT ?= demo-output
 
 .PHONY: demo test check docs lint bench clean system-deps
 
-# Debian packages for headless rendering (EGL, with OSMesa as fallback); skipped when not root.
-SYSTEM_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
+# Debian packages for headless rendering (EGL, with OSMesa as fallback), and the chromium the
+# browser test of `pbdkit view` drives (playwright's own browser download is not used); skipped
+# when not root.
+SYSTEM_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 chromium
 system-deps:
 	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	  missing=$$(for p in $(SYSTEM_PKGS); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
@@ -23,7 +25,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(BIN)/python system-deps
-	$(BIN)/python -m pip install --quiet -e ".[sim,test,docs]"
+	$(BIN)/python -m pip install --quiet -e ".[sim,view,test,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)

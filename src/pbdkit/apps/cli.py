@@ -408,7 +408,12 @@ def demo(
         console.print(t2)
     _print_components(spec, metrics["n_components"])
     tracking = metrics["tracking"]
-    _print_tracking(metrics["vision"], tracking["tracking_error_mm"] if tracking else None)
+    deg = tracking.get("tracking_error_deg") if tracking else None
+    _print_tracking(
+        metrics["vision"],
+        tracking["tracking_error_mm"] if tracking else None,
+        None if deg is None else {"mean": deg["mean"], "sd": deg["std"]},
+    )
     secs = metrics["seconds"]
     console.print(
         f"teach {secs['teach']:.1f} s, learn {secs['learn']:.2f} s, reproduce "
@@ -984,6 +989,97 @@ def study(
     )
     console.print(f"fused success by tracking noise: {noise}")
     console.print(f"open {out / 'report.html'} ({result['seconds']:.0f} s)")
+
+
+@app.command()
+@_reports_errors
+def view(
+    task: Annotated[
+        str | None,
+        typer.Option(help=f"{_TASK_HELP}: teach and learn it as `pbdkit demo` does."),
+    ] = None,
+    skill_path: Annotated[
+        Path | None, typer.Option("--skill", help="A skill file (.npz) instead of a task.")
+    ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            help="With --skill: the URDF to draw the arm from (meshes are looked up beside "
+            "it), or katana; default: the URDF stored in the skill file.",
+        ),
+    ] = None,
+    obj: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--object",
+            help="With --skill: where an object starts, NAME=x,y,z or NAME=x,y,z,qw,qx,qy,qz "
+            "(default: where the demonstrations had it on average, "
+            "pbdkit.apps.view_plan.typical_placements).",
+        ),
+    ] = None,
+    port: Annotated[int, typer.Option(help="Port on 127.0.0.1.")] = 8080,
+    no_browser: Annotated[
+        bool, typer.Option("--no-browser", help="Do not open a browser; print the URL.")
+    ] = False,
+    seed: Annotated[int, typer.Option(help="With --task: seed of the demonstrations.")] = 0,
+) -> None:
+    """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
+    (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
+    it in physics, or online while you drag (needs the view extra: pip install pbdkit[view])."""
+    from .view import check_port
+
+    if (task is None) == (skill_path is None):
+        _fail("give --task or --skill (one of them)")
+    if task is not None and (robot is not None or obj):
+        _fail("--robot and --object apply to --skill; a task has its own arm and objects")
+    _check_seed(seed)
+    check_port(port)
+    try:
+        import viser  # noqa: F401
+        import yourdfpy  # noqa: F401
+    except ImportError as exc:
+        _fail(f"pbdkit view needs the view extra (pip install 'pbdkit[view]'): {exc}")
+    from .view import ViewApp, serve
+
+    if skill_path is not None:
+        from .. import robots
+        from ..learning.skill import Skill
+        from .view_plan import typical_placements
+
+        if not skill_path.is_file():
+            raise FileNotFoundError(2, "No such file", str(skill_path))
+        skill = Skill.load(skill_path)
+        urdf: Path | None = None
+        if robot is not None and robot in robots.available():
+            urdf = robots.katana_urdf_path() if robot == "katana" else None
+        elif robot is not None:
+            urdf = Path(robot)
+            if not urdf.is_file():
+                raise FileNotFoundError(2, "No such file", str(urdf))
+        objects = typical_placements(skill)
+        given = _parse_objects(obj or [])
+        unknown = [k for k in given if k not in skill.object_names]
+        if unknown:
+            _fail(f"--object: {unknown} are not objects of the skill ({skill.object_names})")
+        objects.update(given)
+        title = f"skill {skill_path.name}"
+
+        def factory(server: Any) -> ViewApp:
+            return ViewApp(skill, objects, server, urdf=urdf, title=title)
+
+    else:
+        assert task is not None
+        spec = _robot_task(task)
+        from ..sim.task_skill import learn_task
+
+        with console.status(f"teaching and learning the {spec.name} task ..."):
+            ts = learn_task(spec, n_demos=5, seed=seed)
+        placement = spec.nominal_objects()
+
+        def factory(server: Any) -> ViewApp:
+            return ViewApp(ts.skill, placement, server, task_skill=ts, title=f"task {spec.name}")
+
+    serve(factory, port=port, open_browser=not no_browser, say=console.print)
 
 
 def _print_components(spec: TaskSpec, n_components: dict[str, int]) -> None:

@@ -1,0 +1,34 @@
+"""Headless Chromium for the tests, the view's benchmark and its screenshots: Debian's chromium
+(``make system-deps``), driven by playwright with software WebGL (playwright's own browser
+download does not work here)."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+from typing import Any
+
+from pbdkit.apps.view import HOST
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--enable-unsafe-swiftshader",
+    "--use-angle=swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+
+
+def launch(playwright: Any) -> Any:
+    """Chromium from ``sync_playwright()``'s object, headless, software WebGL."""
+    return playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+
+
+def free_port() -> int:
+    """A port free on 127.0.0.1 now."""
+    with socket.socket() as s:
+        s.bind((HOST, 0))
+        return int(s.getsockname()[1])
