@@ -406,3 +406,35 @@ def test_drag_previews_while_held_and_plans_in_full_at_the_release(coaster_view:
     finally:
         app.move_object("coaster", start)
         app.wait_idle(30)
+
+
+@pytest.mark.slow
+def test_online_run_follows_an_object_dragged_while_the_arm_moves(coaster_view: Any) -> None:
+    """The "online" button: the controller runs in MuJoCo at the wall clock's pace; the coaster
+    dragged 3 cm while the arm moves is moved in the physics and the controller is told (its
+    commands' object positions end at the new place); the page shows the outcome."""
+    _, box, _ = coaster_view
+    app = box["app"]
+    assert app.wait_idle(30)
+    start = np.array(app.objects["coaster"])
+    moved = start + np.array([0.0, 0.03, 0.0])
+    try:
+        thread = app.start_run(online=True)
+        time.sleep(1.0)  # the arm is on its way to the glass
+        assert thread.is_alive()
+        with pytest.raises(ValueError, match="a run is going on"):
+            app.start_run(online=False)
+        app.move_object("coaster", moved)
+        thread.join(timeout=120)
+        assert not thread.is_alive()
+        run = app.last_run
+        told = run.online.objects["coaster"]
+        np.testing.assert_allclose(told[0], start, atol=1e-9)
+        np.testing.assert_allclose(told[-1], moved, atol=1e-6)  # the truth, at 15 Hz
+        world = run.execution.objects["coaster"]
+        np.testing.assert_allclose(world[-1], moved, atol=1e-6)  # moved in the physics
+        verdict = "success" if run.success else "failure"
+        assert f"fused online: **{verdict}**" in app.result_text
+    finally:
+        app.move_object("coaster", start)
+        app.wait_idle(30)
