@@ -25,6 +25,7 @@ from browser import CHROMIUM, free_port, launch
 from pbdkit.apps.view import HOST, check_port
 from pbdkit.apps.view_plan import (
     LatestWins,
+    carry_transform,
     coarse_skill,
     ellipsoid_pose,
     make_plan,
@@ -203,6 +204,30 @@ def test_coarse_skill_has_the_full_skills_constraints_at_the_same_moments(
     assert np.linalg.norm(end_full - end_coarse) < 0.002
     with pytest.raises(ValueError, match="n_steps"):
         coarse_skill(full, 202)
+
+
+def test_the_plan_carries_the_glass_onto_the_coaster(small_task_skill: Callable[..., Any]) -> None:
+    """The page draws the grasped glass moving with the hand from the grasp to the release:
+    untouched before, rigid with the hand while held, let go on the coaster (within 15 mm of
+    it across the table), and left there after."""
+    ts = small_task_skill("coaster", 3, 1)
+    objects = ts.task.nominal_objects()
+    plan = make_plan(ts.skill, objects, "fused", None)
+    closed = np.flatnonzero(plan.result.gripper)
+    grasp, last = int(closed[0]), int(closed[-1])
+    robot = ts.skill.robot
+    assert carry_transform(robot, plan, grasp - 1) is None
+    np.testing.assert_allclose(carry_transform(robot, plan, grasp), np.eye(4), atol=1e-12)
+    glass = np.append(objects["glass"], 1.0)
+    reach = np.linalg.norm(robot.fk(plan.result.joints[grasp]) - objects["glass"])
+    for k in (grasp + 5, (grasp + last) // 2, last):
+        carried = carry_transform(robot, plan, k) @ glass
+        hand = robot.fk(plan.result.joints[k])
+        assert np.linalg.norm(hand - carried[:3]) == pytest.approx(reach, abs=1e-9)
+    let_go = (carry_transform(robot, plan, last) @ glass)[:3]
+    assert np.linalg.norm(let_go[:2] - objects["coaster"][:2]) < 0.015
+    after = carry_transform(robot, plan, len(plan.times) - 1)
+    np.testing.assert_allclose(after @ glass, carry_transform(robot, plan, last) @ glass)
 
 
 # ----------------------------------------------------------------------------- the command

@@ -55,6 +55,7 @@ from .view_plan import (
     OBJECT_RGBS,
     LatestWins,
     Plan,
+    carry_transform,
     coarse_skill,
     constraint_colors,
     ellipsoid_pose,
@@ -613,7 +614,8 @@ class ViewApp:
             if self._running():
                 pass  # the physics draws the arm
             elif self._draw_world is not None:
-                self._draw_world.show_plan(q, plan.objects | self._fixed_objects())
+                carry = carry_transform(self.skill.robot, plan, step)
+                self._draw_world.show_plan(q, plan.objects | self._fixed_objects(), carry)
             elif self._urdf_arm is not None:
                 self._urdf_arm.show(q)
             robot: Any = self.skill.robot

@@ -6,6 +6,7 @@
 - :func:`step_gaussians` and :func:`ellipsoid_pose`: the constraints' Gaussians of the hand at a
   step, as ellipsoids;
 - :func:`typical_placements`: where a skill file's objects start (a skill keeps no placements);
+- :func:`carry_transform`: how the plan moves the object it grasps;
 - :class:`LatestWins`: one planning thread that serves the newest request only;
 - :func:`constraint_colors`: Fig. 6's colors.
 """
@@ -40,6 +41,7 @@ __all__ = [
     "OBJECT_RGBS",
     "LatestWins",
     "Plan",
+    "carry_transform",
     "coarse_skill",
     "constraint_colors",
     "ellipsoid_pose",
@@ -341,3 +343,27 @@ def typical_placements(skill: Skill) -> dict[str, Float]:
         else:
             out[name] = np.asarray(robot.fk(q), dtype=np.float64) - mean[:3]
     return out
+
+
+def carry_transform(robot: Any, plan: Plan, step: int) -> Float | None:
+    """How the plan moves the object it grasps at reproduction step ``step``: a 4x4 transform
+    to apply to the object's pose where it lies, or None before the grasp (or if the gripper
+    never closes).
+
+    From the step the gripper closes (the grasp) the object keeps its pose relative to the hand
+    there: the transform is H_k H_g^-1 with H the hand's pose (:meth:`pbdkit.Robot.fk_pose`),
+    g the grasp and k the step; from the step it opens again (the release) it stays where it
+    was let go (k = the last closed step). A drawing of the plan, not physics: the object does
+    not slip or fall.
+    """
+    closed = np.asarray(plan.result.gripper, dtype=bool)
+    shut = np.flatnonzero(closed)
+    if shut.size == 0 or step < shut[0]:
+        return None
+    grasp = int(shut[0])
+    opened = np.flatnonzero(~closed[grasp:])
+    release = grasp + int(opened[0]) - 1 if opened.size else len(closed) - 1
+    k = min(step, release)
+    hand_g = robot.fk_pose(plan.result.joints[grasp])
+    hand_k = robot.fk_pose(plan.result.joints[k])
+    return np.asarray(hand_k @ np.linalg.inv(hand_g), dtype=np.float64)

@@ -130,6 +130,7 @@ class SimDrawing:
         #: Bodies of the liquid (basin task): drawn in a run, hidden in a plan (they stay where
         #: the scene was built while the glass is dragged).
         self.liquid = {b for b in meshes if m.body(b).name.startswith("liquid")}
+        self._grasped = int(m.body(spec.grasped).id)
         for b, parts in meshes.items():
             name = m.body(b).name or f"body{b}"
             whole = cast("trimesh.Trimesh", trimesh.util.concatenate(parts))
@@ -144,12 +145,25 @@ class SimDrawing:
             yaw = yaw_of(v) if v.shape == (4, 4) else None
             self.sim.place_object(name, position_of(v), yaw=yaw)
 
-    def show_plan(self, q: Float, objects: Mapping[str, Any]) -> None:
+    def show_plan(self, q: Float, objects: Mapping[str, Any], carry: Float | None = None) -> None:
         """The arm at joint angles ``q`` and the objects at ``objects``, by kinematics (no
-        physics step; the fingers as the scene was built)."""
+        physics step; the fingers as the scene was built); ``carry``: a 4x4 transform that
+        moves the grasped object from where it lies
+        (:func:`pbdkit.apps.view_plan.carry_transform`)."""
         self._place(objects)
         self.sim.set_joints(q)
-        self._send(self.sim.data.xpos, self.sim.data.xquat, liquid=False)
+        xpos, xquat = self.sim.data.xpos, self.sim.data.xquat
+        if carry is not None:
+            xpos, xquat = np.array(xpos), np.array(xquat)
+            b = self._grasped
+            body = np.eye(4)
+            rot = np.zeros(9)
+            mujoco.mju_quat2Mat(rot, xquat[b])
+            body[:3, :3], body[:3, 3] = rot.reshape(3, 3), xpos[b]
+            moved = carry @ body
+            xpos[b] = moved[:3, 3]
+            mujoco.mju_mat2Quat(xquat[b], moved[:3, :3].reshape(-1))
+        self._send(xpos, xquat, liquid=False)
 
     def show_frame(self, frame: Frame) -> None:
         """A recorded instant of a run."""
