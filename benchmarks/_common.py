@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
 
 
 def median_time(fn: Callable[[], object], *, repeat: int, warmup: int = 1) -> float:
@@ -36,3 +39,23 @@ def print_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
     print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
     for r in rows:
         print("| " + " | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) + " |")
+
+
+def tracker_cycle(
+    tracker: Any, sim: Any, track: Callable[[Any, Any], object], *, repeat: int, warmup: int = 5
+) -> tuple[float, float, float]:
+    """Median seconds of a camera cycle of a simulated tracker (``pbdkit.sim.tracking``) and of
+    its two parts, timed inside the same cycles (medians comparable under a varying load): the
+    whole cycle, rendering both images, and ``track(img_a, img_b)`` on them."""
+    for _ in range(warmup):
+        tracker.locate(sim)
+    parts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        img_a, img_b = tracker.images(sim)
+        t1 = time.perf_counter()
+        track(img_a, img_b)
+        t2 = time.perf_counter()
+        parts.append((t2 - t0, t1 - t0, t2 - t1))
+    cycle, renders, tracking = (float(v) for v in np.median(np.array(parts), axis=0))
+    return cycle, renders, tracking

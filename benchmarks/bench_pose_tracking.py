@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import fmt_time, print_table
+from _common import fmt_time, print_table, tracker_cycle
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
@@ -169,17 +169,9 @@ def main() -> None:
         sim = Simulation.from_task(slot, slot.sample_objects(rng))
         sim.set_joints(random_start_posture(robot, rng))
         try:
-            for _ in range(5):
-                tracker.locate(sim)
-            parts = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                img_a, img_b = tracker.images(sim)
-                t1 = time.perf_counter()
-                tracker.tracker.track_objects(img_a, img_b)
-                t2 = time.perf_counter()
-                parts.append((t2 - t0, t1 - t0, t2 - t1))
-            cycle, renders, track_s = (float(v) for v in np.median(np.array(parts), axis=0))
+            cycle, renders, track_s = tracker_cycle(
+                tracker, sim, tracker.tracker.track_objects, repeat=args.repeat
+            )
         finally:
             sim.close()
     print()

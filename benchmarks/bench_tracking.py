@@ -24,7 +24,7 @@ import os
 import time
 
 import numpy as np
-from _common import fmt_time, print_table
+from _common import fmt_time, print_table, tracker_cycle
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
@@ -188,18 +188,9 @@ def main() -> None:
     sim.set_joints(random_start_posture(katana(), rng))
     try:
         with threadpool_limits(1):
-            # Parts timed inside the same cycles: medians comparable under a varying load.
-            for _ in range(5):
-                tracker.locate(sim)
-            parts = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                img_a, img_b = tracker.images(sim)
-                t1 = time.perf_counter()
-                tracker.tracker.track(img_a, img_b)
-                t2 = time.perf_counter()
-                parts.append((t2 - t0, t1 - t0, t2 - t1))
-            cycle, renders, track = (float(v) for v in np.median(np.array(parts), axis=0))
+            cycle, renders, track = tracker_cycle(
+                tracker, sim, tracker.tracker.track, repeat=args.repeat
+            )
     finally:
         sim.close()
     load = os.getloadavg()[0]

@@ -135,7 +135,7 @@ def test_gaussians_at_a_step_are_the_constraints_in_the_world(skill: Skill) -> N
     c = plan.constraints
     lead = int(np.count_nonzero(plan.result.lead_in))
     k = c.n_steps // 2
-    g = step_gaussians(skill, plan, k + lead)
+    g = step_gaussians(plan, k + lead)
     world = c.world_task("glass", objects["glass"])
     np.testing.assert_allclose(g["glass"][0], world.position[k], atol=1e-12)
     np.testing.assert_allclose(g["glass"][1], np.linalg.inv(world.precision[k]), rtol=1e-8)

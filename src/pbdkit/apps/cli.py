@@ -1033,7 +1033,7 @@ def view(
     if task is not None and (robot is not None or obj):
         _fail("--robot and --object apply to --skill; a task has its own arm and objects")
     _check_seed(seed)
-    check_port(port)
+    check_port(port)  # before the teaching and learning; serve checks again as it binds
     try:
         import viser  # noqa: F401
         import yourdfpy  # noqa: F401

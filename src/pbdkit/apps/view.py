@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from ..learning.constraints import JOINT
 from ..learning.naming import controller_names, controller_use
 from ..learning.placement import position_of
-from ..prob.rotations import matrix_from_quaternion
+from ..prob.rotations import exp_map, matrix_from_quaternion, pose_matrix
 from .view_plan import (
     COLOR_NAMES,
     JOINT_RGB,
@@ -131,13 +131,9 @@ def _yaw_deg(value: Float) -> float:
     return math.degrees(math.atan2(float(value[1, 0]), float(value[0, 0])))
 
 
-def _with_yaw(value: Float, position: Float, yaw_deg: float) -> Float:
-    """A pose at ``position`` turned about the vertical to ``yaw_deg`` (its tilt dropped)."""
-    a = math.radians(yaw_deg)
-    pose = np.eye(4)
-    pose[:2, :2] = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    pose[:3, 3] = position
-    return pose
+def _yaw_pose(position: Float, yaw_deg: float) -> Float:
+    """A pose at ``position`` turned about the vertical by ``yaw_deg``."""
+    return pose_matrix(position, exp_map([0.0, 0.0, math.radians(yaw_deg)]))
 
 
 class ViewApp:
@@ -205,6 +201,10 @@ class ViewApp:
         self.plans = 0
         self._run_thread: threading.Thread | None = None
         self._live: Any = None  # the online run's Sampler while it runs
+        #: The last run in physics (:class:`pbdkit.sim.runs.ControllerRun` or
+        #: :class:`~pbdkit.sim.runs.OnlineControllerRun`) and its line in the panel.
+        self.last_run: Any = None
+        self.result_text = ""
         self._stop = threading.Event()
         self._updating_fields = False
         self._playing = threading.Event()
@@ -370,7 +370,7 @@ class ViewApp:
             return np.asarray(position, dtype=np.float64)
         rot = matrix_from_quaternion(wxyz)
         if self.ts is not None:
-            return _with_yaw(old, position, math.degrees(math.atan2(rot[1, 0], rot[0, 0])))
+            return _yaw_pose(position, math.degrees(math.atan2(rot[1, 0], rot[0, 0])))
         pose = np.eye(4)
         pose[:3, :3] = rot
         pose[:3, 3] = position
@@ -385,7 +385,7 @@ class ViewApp:
             p = np.array(pos.value, dtype=np.float64)
             old = self.objects[name]
             if old.shape == (4, 4):
-                value = _with_yaw(old, p, float(yaw.value)) if self.ts is not None else old.copy()
+                value = _yaw_pose(p, float(yaw.value)) if self.ts is not None else old.copy()
                 if self.ts is None:
                     value[:3, 3] = p
             else:
@@ -540,14 +540,14 @@ class ViewApp:
             self.plans += 1
             n = len(plan.times)
             step = self._first_step(plan) if old is None else round(frac * (n - 1))
-            self._draw_plan(plan, skill)
+            self._draw_plan(plan)
             self._updating_fields = True
             try:
                 self.ui_step.max = n - 1
                 self.ui_step.value = step
             finally:
                 self._updating_fields = False
-            self._show_step(step, skill)
+            self._show_step(step)
         self.server.flush()
         if preview:
             with self._lock:
@@ -562,10 +562,9 @@ class ViewApp:
         c = plan.constraints
         name = self.skill.object_names[0]
         k = int(np.argmin(np.trace(c.task_cov[name][:, :3, :3], axis1=1, axis2=2)))
-        lead = 0 if plan.result.lead_in is None else int(np.count_nonzero(plan.result.lead_in))
-        return min(k + lead, len(plan.times) - 1)
+        return min(k + plan.lead, len(plan.times) - 1)
 
-    def _draw_plan(self, plan: Plan, skill: Skill) -> None:
+    def _draw_plan(self, plan: Plan) -> None:
         pts = plan.result.positions
         n = len(pts) - 1
         idx = np.unique(np.linspace(0, n, min(n, PATH_SEGMENTS) + 1).round().astype(int))
@@ -602,13 +601,12 @@ class ViewApp:
         with self._lock:
             self._show_step(int(self.ui_step.value))
 
-    def _show_step(self, step: int, skill: Skill | None = None) -> None:
+    def _show_step(self, step: int) -> None:
         plan = self.plan
         if plan is None:
             return
         step = int(np.clip(step, 0, len(plan.times) - 1))
         self.step = step
-        skill = skill or plan.skill
         q = plan.result.joints[step]
         with self.server.atomic():
             if self._running():
@@ -625,7 +623,7 @@ class ViewApp:
                 self.hand.wxyz = quat_wxyz(hand[:3, :3])
             driving = plan.driving[step]
             self.hand_dot.color = self.colors[driving]
-            for name, (mean, cov) in step_gaussians(skill, plan, step).items():
+            for name, (mean, cov) in step_gaussians(plan, step).items():
                 node = self.gauss[name]
                 axes, wxyz = ellipsoid_pose(cov)
                 node.position = np.asarray(mean)

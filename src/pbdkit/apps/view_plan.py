@@ -192,6 +192,12 @@ class Plan:
     preview: bool = False
 
     @property
+    def lead(self) -> int:
+        """Steps of the reproduction's lead-in from its start posture (the skill's steps follow)."""
+        lead_in = self.result.lead_in
+        return 0 if lead_in is None else int(np.count_nonzero(lead_in))
+
+    @property
     def end(self) -> Float:
         """The hand's planned position at the last step (m)."""
         return np.array(self.result.positions[-1], dtype=np.float64)
@@ -270,7 +276,7 @@ def coarse_skill(skill: Skill, n_steps: int) -> Skill:
     )
 
 
-def step_gaussians(skill: Skill, plan: Plan, step: int) -> dict[str, tuple[Float, Float]]:
+def step_gaussians(plan: Plan, step: int) -> dict[str, tuple[Float, Float]]:
     """The constraints' Gaussians of the hand position at reproduction step ``step``, in the
     robot's base frame: name -> (mean (3,), covariance (3, 3)).
 
@@ -281,12 +287,10 @@ def step_gaussians(skill: Skill, plan: Plan, step: int) -> dict[str, tuple[Float
     the skill's first).
     """
     c = plan.constraints
-    res = plan.result
-    lead = 0 if res.lead_in is None else int(np.count_nonzero(res.lead_in))
-    k = int(np.clip(step - lead, 0, c.n_steps - 1))
+    k = int(np.clip(step - plan.lead, 0, c.n_steps - 1))
     out: dict[str, tuple[Float, Float]] = {}
     q = c.joint_mean[k]
-    x, jac = skill.robot.fk_jacobian(q)
+    x, jac = plan.skill.robot.fk_jacobian(q)
     out[JOINT] = (np.asarray(x, dtype=np.float64), jac @ c.joint_cov[k] @ jac.T)
     for name in c.object_names:
         placement = plan.objects[name]

@@ -90,10 +90,9 @@ def geom_mesh(model: mujoco.MjModel, g: int) -> trimesh.Trimesh | None:
 
 @dataclass(frozen=True)
 class Frame:
-    """One recorded instant of a run: time (s), the arm's joint angles, every body's pose."""
+    """One recorded instant of a run: time (s) and every body's pose."""
 
     t: float
-    joints: Float
     xpos: Float
     xquat: Float
 
@@ -233,7 +232,7 @@ class Sampler(Disturbance):
         if t + 1e-9 < self._next:
             return
         self._next += 1.0 / FRAME_RATE
-        frame = Frame(t, sim.joints(), np.array(sim.data.xpos), np.array(sim.data.xquat))
+        frame = Frame(t, np.array(sim.data.xpos), np.array(sim.data.xquat))
         self.frames.append(frame)
         if self.show is not None:
             self.show(frame)
