@@ -44,7 +44,7 @@ def print_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
 def tracker_cycle(
     tracker: Any, sim: Any, track: Callable[[Any, Any], object], *, repeat: int, warmup: int = 5
 ) -> tuple[float, float, float]:
-    """Median seconds of a camera cycle of a simulated tracker (``pbdkit.sim.tracking``) and of
+    """Median seconds of a camera cycle of a simulated tracker (``pbdkit.sim._tracking``) and of
     its two parts, timed inside the same cycles (medians comparable under a varying load): the
     whole cycle, rendering both images, and ``track(img_a, img_b)`` on them."""
     for _ in range(warmup):

@@ -6,9 +6,9 @@ it (80 reproductions). For every reproduction, played over ``skill.times(res)``:
 
 - peak velocity, acceleration and jerk over the Katana's limits (1.19 rad/s, 6 rad/s^2,
   60 rad/s^3): divided differences at the trajectory's own samples, padded with rest at both
-  ends (``pbdkit.motion.limits.motion_peaks``);
+  ends (``pbdkit.motion.motion_peaks``);
 - reversals: a joint reversing between two consecutive steps each faster than 25 % of its
-  velocity limit (``pbdkit.motion.limits.count_reversals``);
+  velocity limit (``pbdkit.motion._limits.count_reversals``);
 - the hand's distance to o + x_hat at each object's tightest step (mm);
 - the cost of ``Skill.reproduce`` per step (BLAS on one thread, median of 5 calls).
 
@@ -43,11 +43,11 @@ from _common import print_table
 from threadpoolctl import threadpool_limits
 
 from pbdkit import Skill
-from pbdkit.learning.demonstration import save_demonstrations
-from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.data._demonstration import save_demonstrations
+from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import katana
-from pbdkit.sim import experiment as E
-from pbdkit.sim.teacher import teach
+from pbdkit.sim._task_skill import constrained_objects
+from pbdkit.sim._teacher import teach
 
 ROOT = Path(__file__).resolve().parent.parent
 TASKS = ("coaster", "basin")
@@ -60,7 +60,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 warnings.simplefilter("ignore")
 from pbdkit import Skill
-from pbdkit.learning.demonstration import load_demonstrations
+from pbdkit.data._demonstration import load_demonstrations
 from pbdkit.robots import katana
 job = json.loads(sys.argv[1])
 out = {}
@@ -143,7 +143,7 @@ def main() -> None:
                 demos = teach(task, 5, seed=seed)
                 path = tmp / f"{task}{seed}.npz"
                 save_demonstrations(demos, path)
-                objects = E.constrained_objects(task)
+                objects = constrained_objects(task)
                 skill = Skill.learn(demos, robot, task_objects=objects)
                 pls = placements(skill, demos)
                 name = f"{task} {seed}"

@@ -30,7 +30,9 @@ from pathlib import Path
 
 from _common import print_table
 
-from pbdkit.sim import experiment as E
+from pbdkit.sim._evaluation import evaluate
+from pbdkit.sim._task_skill import TaskSkill, learn_task
+from pbdkit.skill._naming import controller_names
 
 TARGET = 0.6
 RUNS = (("serial", None), ("1 worker", 1), ("2 workers", 2))
@@ -53,9 +55,9 @@ def _command(task: str, trials: int, workers: int | None, out: Path) -> tuple[fl
     return wall, _comparable(json.loads(out.read_text()))
 
 
-def _in_process(ts: E.TaskSkill, task: str, trials: int, workers: int | None) -> tuple[float, str]:
+def _in_process(ts: TaskSkill, task: str, trials: int, workers: int | None) -> tuple[float, str]:
     start = time.perf_counter()
-    ev = E.evaluate(task, trials, 0, task_skill=ts, workers=workers)
+    ev = evaluate(task, trials, 0, task_skill=ts, workers=workers)
     return time.perf_counter() - start, _comparable(ev.as_dict())
 
 
@@ -85,8 +87,8 @@ def main() -> None:
     ap.add_argument("--task", default="coaster")
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
-    ts = E.learn_task(args.task, seed=0)
-    runs = args.trials * len(E.controller_names(ts.skill.object_names))
+    ts = learn_task(args.task, seed=0)
+    runs = args.trials * len(controller_names(ts.skill.object_names))
     print(f"{args.task}: {args.trials} trials x {runs // args.trials} controllers, cameras\n")
     with tempfile.TemporaryDirectory() as tmp:
         walls: dict[str, list[float]] = {label: [] for label, _ in RUNS}

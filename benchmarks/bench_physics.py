@@ -1,7 +1,7 @@
 """Physics playback speed: how much faster than real time a run plays, and where its time goes.
 
 For the fused reproduction of each task's skill (teach seed 0) at a few new placements, the
-wall time of one offline playback (:func:`pbdkit.sim.execute.execute`: 0.3 s settling, the
+wall time of one offline playback (:func:`pbdkit.sim.execute`: 0.3 s settling, the
 trajectory over the demonstrations' duration, 1 s of settling; no camera), against:
 
 - the playback loop as it was before it was tuned (servo targets written by index arrays at
@@ -9,7 +9,7 @@ trajectory over the demonstrations' duration, 1 s of settling; no camera), again
   and measured in the same run: the "current one" the issue compares with;
 - the same number of bare ``mj_step`` calls with the arm following the same targets set once
   per segment (no Python per physics step beyond the call): the floor MuJoCo itself sets;
-- the online loop (:func:`pbdkit.sim.online.execute_online`, truth at 15 Hz), which also runs
+- the online loop (:func:`pbdkit.sim.execute_online`, truth at 15 Hz), which also runs
   one controller step per skill step.
 
 Real-time factor = simulated seconds / wall seconds, medians over placements x repeats. The
@@ -28,10 +28,10 @@ import numpy as np
 from _common import print_table
 from threadpoolctl import threadpool_limits
 
-from pbdkit.sim import experiment as E
-from pbdkit.sim.execute import Recorder, execute, start_at
-from pbdkit.sim.online import TruthObserver, execute_online
-from pbdkit.sim.scene import TIMESTEP, Simulation
+from pbdkit.sim._execute import Recorder, execute, start_at
+from pbdkit.sim._online import TruthObserver, execute_online
+from pbdkit.sim._scene import TIMESTEP, Simulation
+from pbdkit.sim._task_skill import learn_task
 
 TARGET = 20.0  # design.md: >= 20x real time per core (coaster task)
 
@@ -86,7 +86,7 @@ def main() -> None:
     rows = []
     with threadpool_limits(limits=1, user_api="blas"):
         for task in ("coaster", "basin"):
-            ts = E.learn_task(task, seed=0)
+            ts = learn_task(task, seed=0)
             rng = np.random.default_rng([0, 1])
             runs: dict[str, list[float]] = {"now": [], "before": [], "bare": [], "online": []}
             ok = {"now": 0, "before": 0}

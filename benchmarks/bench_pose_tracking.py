@@ -1,6 +1,6 @@
 """Pose tracking in the simulated world: position (mm) and yaw (degrees) of turned objects.
 
-(a) The slot task's block and tray (two marks each, ``pbdkit.sim.parts``) over random placements
+(a) The slot task's block and tray (two marks each, ``pbdkit.sim._parts``) over random placements
     (``sample_objects``: positions and yaws -60..60 degrees), the arm at a start posture of the
     teacher drawn per placement, as in ``pbdkit evaluate``; trackers calibrated at the nominal
     placement (``SimTracker.from_simulation``): raw (the marks' midpoint and heading), the
@@ -32,9 +32,9 @@ from threadpoolctl import threadpool_limits
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, get_task
 from pbdkit.sim._gl import BACKEND
-from pbdkit.sim.tasks import TaskSpec, yaw_of, yaw_pose
-from pbdkit.sim.teacher import random_start_posture
-from pbdkit.sim.tracking import SimTracker
+from pbdkit.sim._tasks import TaskSpec, yaw_of, yaw_pose
+from pbdkit.sim._teacher import random_start_posture
+from pbdkit.sim._tracking import SimTracker
 from pbdkit.vision import PoseTrack
 
 # The plate of (b), shared with the tests.

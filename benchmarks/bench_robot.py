@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from pbdkit import robots
-from pbdkit.robots.kinematics import damped_pinv
+from pbdkit.robots._kinematics import damped_pinv
 
 PI = math.pi
 

@@ -1,6 +1,6 @@
 """Benchmark: how K is chosen, measured on the simulated teacher's tasks and on LASA.
 
-The evidence behind ``n_components="auto"`` (pbdkit.prob.gmm, "Choosing K"). For both tasks and
+The evidence behind ``n_components="auto"`` (pbdkit.prob._gmm, "Choosing K"). For both tasks and
 teach seeds 0-9 (5 demonstrations each, the paper's configuration: the basin task has no
 basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
 
@@ -13,7 +13,7 @@ basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
   largest over the joints; task spaces in mm, the norm of the 3-D step), and its ratio to the
   demonstrations' own largest one-step change (rescaled to the same grid; for a task space the
   hand position f(theta) minus the object's): a ratio well above 1 is a jump of the
-  generalized trajectory (pbdkit.prob.gmm, "Time floor");
+  generalized trajectory (pbdkit.prob._gmm, "Time floor");
 - the fused reproduction's peak joint speed over the URDF limit, played over ``skill.times()``,
   from q0 = None and from every demonstration's first posture (worst);
 - learning time.
@@ -52,10 +52,9 @@ from _common import print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from pbdkit.learning.datasets import lasa_names, load_lasa
-from pbdkit.learning.demonstration import Demonstration
-from pbdkit.learning.skill import JOINT, Skill
-from pbdkit.prob.gmm import (
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.datasets import lasa, lasa_names
+from pbdkit.prob._gmm import (
     CV_TOLERANCE,
     GMM,
     LOCAL_SPREAD_FLOOR,
@@ -66,8 +65,9 @@ from pbdkit.prob.gmm import (
     sequences_from_time,
 )
 from pbdkit.robots import katana
-from pbdkit.sim.experiment import constrained_objects
-from pbdkit.sim.teacher import teach
+from pbdkit.sim._task_skill import constrained_objects
+from pbdkit.sim._teacher import teach
+from pbdkit.skill._skill import JOINT, Skill
 
 Float = NDArray[np.float64]
 ROLL = 4  # the Katana's wrist roll
@@ -192,7 +192,7 @@ METHODS = ["auto", "auto-pooled", "bic20", "bic-plain", "bic-acf", "loo-lik"]
 
 def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
     """The rows each GMM of ``skill`` was fitted on (100 steps per demonstration)."""
-    from pbdkit.learning.skill import space_data
+    from pbdkit.skill._skill import space_data
 
     steps = np.unique(np.round(np.linspace(0, skill.n_steps - 1, 100)).astype(int))
     data = space_data(demos, skill.robot, skill.object_names, skill.n_steps, steps)
@@ -202,7 +202,7 @@ def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
 def lasa_row(method: str) -> tuple[str, str]:
     rows, ks = [], []
     for name in lasa_names(single_mode=True):
-        demos = load_lasa(name)
+        demos = lasa(name)
         t = np.linspace(0.0, 1.0, 1000)
         x = np.vstack([np.column_stack([t[::10], d.pos[::10]]) for d in demos])
         gmm = choose(method, x, np.full(3, 1e-6), MAX_COMPONENTS, None)
@@ -392,7 +392,7 @@ def run(args: argparse.Namespace) -> None:
 
 def _floor_of(skill: Skill, name: str) -> Float:
     """Skill.learn's default per-dimension floor of a space."""
-    from pbdkit.learning.skill import TIME_FLOOR, VARIABILITY_FLOOR
+    from pbdkit.skill._skill import TIME_FLOOR, VARIABILITY_FLOOR
 
     if name == JOINT:
         n = skill.n_joints

@@ -8,7 +8,7 @@ the 3 constraints fused (default settings: the Katana's velocity limits and max_
 steps; the comparison with the naive loop turns both off).
 
 The reproduction is within the Katana's velocity, acceleration and jerk limits (the default):
-Table II with Newton's term, a lead-in and the timing (``pbdkit.learning.probabilistic_ik``,
+Table II with Newton's term, a lead-in and the timing (``pbdkit.reproduction._probabilistic_ik``,
 "Motion limits").
 
 Peers:
@@ -17,7 +17,7 @@ Peers:
 - reproduction: a naive loop as the paper's Matlab would run it: at every step GMR of every space
   for that step (``GMM.regress_one``), Table II with explicit inverses (J+ from np.linalg.pinv,
   eq. (1) with the pseudo-inverse of the rank-deficient J+ Sigma J+^T and np.linalg.inv), with
-  the same line search written out (pbdkit.learning.probabilistic_ik, "Stability");
+  the same line search written out (_probabilistic_ik, "Stability");
 - the paper: "the whole computation (using Matlab) took less than one minute".
 
 BLAS is limited to one thread (threadpoolctl): these matrices are tiny. Times are medians.
@@ -36,11 +36,11 @@ from _common import fmt_time, median_time, print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from pbdkit.learning.demonstration import Demonstration
-from pbdkit.learning.skill import Skill
-from pbdkit.prob.gmm import GMM
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.prob._gmm import GMM
 from pbdkit.robots import katana
-from pbdkit.robots.model import Robot
+from pbdkit.robots._robot import Robot
+from pbdkit.skill._skill import Skill
 
 Float = NDArray[np.float64]
 
@@ -131,7 +131,7 @@ def naive_reproduce(skill: Skill, objects: dict[str, Float], alpha: float = 0.5)
             robot.lower,
             robot.upper,
         )
-        # The same line search as pbdkit's (pbdkit.learning.probabilistic_ik, "Stability"), written
+        # The same line search as pbdkit's (_probabilistic_ik, "Stability"), written
         # out: halve a step while it raises the fused energy of step j.
         terms = [(np.linalg.inv(sigma_theta), theta_hat, None)]
         for k in names:

@@ -31,8 +31,8 @@ from threadpoolctl import threadpool_limits
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation, nominal_objects, sample_objects
 from pbdkit.sim._gl import BACKEND
-from pbdkit.sim.teacher import random_start_posture
-from pbdkit.sim.tracking import SimTracker, tracked_objects
+from pbdkit.sim._teacher import random_start_posture
+from pbdkit.sim._tracking import SimTracker, tracked_objects
 from pbdkit.vision import PinholeCamera, StereoTracker
 
 PAPER_MEAN, PAPER_STD = 5.9, 2.8  # mm, paper Sec. III

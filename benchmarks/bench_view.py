@@ -11,7 +11,7 @@ handler makes, to placements drawn in its demonstrated range (seed 0):
   until its scene has been sent (``server.flush``) before the next; latency = arrival to sent;
 - a drag at 20 Hz (viser's client sends drag updates about that often) with the handle held:
   moves 50 ms apart along a line across the range, each planned as a preview on a grid of
-  ``PREVIEW_STEPS`` steps (:func:`pbdkit.apps.view_plan.coarse_skill`); a move that arrives while
+  ``PREVIEW_STEPS`` steps (:func:`pbdkit.apps._view_plan.coarse_skill`); a move that arrives while
   another is planned replaces the one waiting (latest wins), and the latency of each planned
   move is counted; then the release and its full plan.
 
@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 from _common import print_table
 
-from pbdkit.apps.view import HOST, ViewApp, served
-from pbdkit.sim.task_skill import learn_task
+from pbdkit.apps._view import HOST, ViewApp, served
+from pbdkit.sim._task_skill import learn_task
 
 # Headless Chromium as the tests launch it.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))

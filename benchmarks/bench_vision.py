@@ -24,14 +24,8 @@ from _common import fmt_time, median_time, print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from pbdkit.vision import (
-    ColorModel,
-    PinholeCamera,
-    StereoTracker,
-    calibrate_camera,
-    triangulate,
-)
-from pbdkit.vision.synthetic import random_discs, render_discs
+from pbdkit.vision import ColorModel, PinholeCamera, StereoTracker, calibrate_camera, triangulate
+from pbdkit.vision._synthetic import random_discs, render_discs
 
 COLORS = {"red": (190, 50, 50), "green": (50, 160, 60), "blue": (50, 70, 190)}
 TARGET = np.array([0.0, 0.7, 0.03])

@@ -3,7 +3,7 @@
 The arm zoo (``tests/arm_zoo.py``: UR5, Panda, Kinova JACO2 6-DOF, xArm7, SO-100, vendored
 from example-robot-data): for each arm, each placement square it reaches (15 cm: boxes 5-20
 cm apart; 40 cm: 20-56 cm apart) and teach seeds 0-4, five reach-grasp-return demonstrations
-(``pbdkit.learning.datasets.reach_grasp_return``: they agree only at the grasp) and five new box
+(``pbdkit.datasets.reach_grasp_return``: they agree only at the grasp) and five new box
 placements inside their hull. The measure: the fused hand's distance to the box at the first
 gripper close.
 
@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from arm_zoo import ARMS, grasp_errors
 
 from pbdkit import Skill
-from pbdkit.prob.gmm import CV_TOLERANCE, GMM
+from pbdkit.prob._gmm import CV_TOLERANCE, GMM
 
 METHODS = ("auto", "auto-pooled", "bic")
 

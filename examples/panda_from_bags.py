@@ -49,7 +49,7 @@ controller (remap the topic to /<controller>/joint_trajectory), and the gripper 
 Online, the skill runs in the arm's 1 kHz loop (libfranka, franka_ros2): every millisecond,
 read the joints, send the next setpoint. A Panda checks every setpoint against the last ones and
 stops on one that needs more velocity, acceleration or jerk than its limits; a
-pbdkit.motion.limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for
+pbdkit.motion._limits.StreamMonitor checks the stream the same way. ``SimulatedPanda`` stands in for
 the arm (the joints follow the setpoints, the encoders read them with a little noise).
 
 The output folder gets the demonstration bags, the trajectory bag, both skills (skill.npz, the
@@ -74,15 +74,9 @@ from pathlib import Path
 import numpy as np
 
 import pbdkit
-from pbdkit.learning.bags import write_demonstration_bag
-from pbdkit.motion.limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
-from pbdkit.prob.rotations import (
-    exp_map,
-    log_map,
-    mean_rotation,
-    pose_matrix,
-    quaternion_from_matrix,
-)
+from pbdkit._rotations import exp_map, log_map, mean_rotation, pose_matrix, quaternion_from_matrix
+from pbdkit.data._bags import write_demonstration_bag
+from pbdkit.motion._limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
 
 RATE = 100.0  # Hz, the joint state rate of the driver
 LOOP_HZ = 1000.0  # the Panda's control loop: one setpoint per millisecond

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pbdkit import Robot, Skill
-from pbdkit.learning.datasets import ReachGraspReturn, reach_grasp_return
+from pbdkit.datasets import ReachGraspReturn, reach_grasp_return
 
 ARMS_DIR = Path(__file__).parent / "data" / "arms"
 NARROW, WIDE = 0.15, 0.40  # side of the square of placements (m): 5-20 cm and 20-56 cm apart

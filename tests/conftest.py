@@ -22,14 +22,14 @@ import numpy as np
 import pytest
 from synthetic_teacher import N_STEPS, synthetic_demos
 
-from pbdkit.learning.demonstration import Demonstration
-from pbdkit.learning.skill import Skill
-from pbdkit.motion.limits import MotionLimits
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.motion._limits import MotionLimits
 from pbdkit.robots import katana
-from pbdkit.robots.model import Robot
+from pbdkit.robots._robot import Robot
+from pbdkit.skill._skill import Skill
 
 if TYPE_CHECKING:  # the simulator is optional: imported where a simulated task is built
-    from pbdkit.sim.task_skill import TaskSkill
+    from pbdkit.sim._task_skill import TaskSkill
 
 # The teacher of the small simulated skills demonstrates twice as fast as the default one.
 FAST = 2.0
@@ -63,7 +63,7 @@ def limits(robot: Robot) -> MotionLimits:
 # ----------------------------------------------------------------------------- simulated tasks
 @functools.cache
 def _taught(task: str, n_demos: int, seed: int) -> tuple[Demonstration, ...]:
-    from pbdkit.sim.teacher import teach
+    from pbdkit.sim._teacher import teach
 
     return tuple(teach(task, n_demos, seed=seed, speed=FAST))
 
@@ -77,7 +77,7 @@ def _small_task_skill(
     max_components: int | None,
     objects: tuple[str, ...] | None,
 ) -> TaskSkill:
-    from pbdkit.sim.task_skill import TaskSkill, constrained_objects
+    from pbdkit.sim._task_skill import TaskSkill, constrained_objects
 
     demos = list(_taught(task, n_demos, seed))
     # Skill.learn's own default when no maximum is asked for.
@@ -107,7 +107,7 @@ def small_task_skill() -> Callable[..., TaskSkill]:
     objects=None)``: a skill learned from ``fast_demos(task, n_demos, seed)`` on the Katana.
 
     ``objects=None`` constrains the task's constrained objects
-    (:func:`pbdkit.sim.task_skill.constrained_objects`); ``max_components=None`` keeps
+    (:func:`pbdkit.sim._task_skill.constrained_objects`); ``max_components=None`` keeps
     :meth:`Skill.learn`'s default. Built once per arguments and shared: read it, don't change it.
     """
     pytest.importorskip("mujoco")

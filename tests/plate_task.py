@@ -12,8 +12,8 @@ import mujoco
 import numpy as np
 
 from pbdkit.sim import get_task
-from pbdkit.sim.parts import TRAY_MARK_A_RGBA, TRAY_MARK_B_RGBA, add_block
-from pbdkit.sim.tasks import PlacementRange, TaskSpec, yaw_of
+from pbdkit.sim._parts import TRAY_MARK_A_RGBA, TRAY_MARK_B_RGBA, add_block
+from pbdkit.sim._tasks import PlacementRange, TaskSpec, yaw_of
 
 #: The plate's marks' centres lie this far to the side of its point (m).
 PLATE_SIDE = 0.03

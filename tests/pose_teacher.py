@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 import pbdkit
-from pbdkit.prob.rotations import exp_map, log3
+from pbdkit._rotations import exp_map, log3
 
 START = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])  # Panda "ready"
 DOWN = np.diag([1.0, -1.0, -1.0])  # the hand's z axis pointing down

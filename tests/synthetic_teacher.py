@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from pbdkit.learning.demonstration import Demonstration
-from pbdkit.robots.model import Robot
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.robots._robot import Robot
 
 Float = NDArray[np.float64]
 

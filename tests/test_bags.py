@@ -27,9 +27,9 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner, Result
 
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
-from pbdkit.apps.cli import app
-from pbdkit.learning.bags import write_demonstration_bag
-from pbdkit.learning.placement import is_pose, position_of, rotation_of
+from pbdkit.apps._cli import app
+from pbdkit.data._bags import write_demonstration_bag
+from pbdkit.data._placement import is_pose, position_of, rotation_of
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # ROS time of the first joint state in the hand-written bags (ns)

@@ -15,11 +15,11 @@ import pytest
 import typer
 from typer.testing import CliRunner, Result
 
-from pbdkit.apps.cli import app
-from pbdkit.learning.demonstration import Demonstration, save_demonstrations
-from pbdkit.learning.skill import Skill
-from pbdkit.prob.gmm import CV_TOLERANCE
+from pbdkit.apps._cli import app
+from pbdkit.data._demonstration import Demonstration, save_demonstrations
+from pbdkit.prob._gmm import CV_TOLERANCE
 from pbdkit.robots import katana
+from pbdkit.skill._skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -127,7 +127,7 @@ def no_simulation(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the command started working before checking its output paths")
 
     sim = [f"pbdkit.sim{m}" for m in ("", ".experiment", ".teacher", ".tracking")]
-    names = ["pbdkit.apps.demo", *sim]
+    names = ["pbdkit.apps._demo", *sim]
     for name in names:
         fake = types.ModuleType(name)
         fake.__getattr__ = lambda attr: refuse  # type: ignore[method-assign]
@@ -325,7 +325,7 @@ def test_a_negative_seed_names_the_option(
 def test_one_object_parser_for_learn_and_reproduce() -> None:
     """`reproduce` takes positions, `learn` also a topic or tf:FRAME; one parser, one set of
     messages (there were two)."""
-    from pbdkit.apps.cli import _parse_objects
+    from pbdkit.apps._cli import _parse_objects
 
     positions = _parse_objects(["glass=0.3,0,0.1", "coaster=-1e-1,2,inf"])
     assert list(positions) == ["glass", "coaster"]
@@ -357,8 +357,8 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
     x,y,z,w), given on as the 7-vector the library reads; other counts name both forms."""
     from scipy.spatial.transform import Rotation
 
-    from pbdkit.apps.cli import _parse_objects
-    from pbdkit.learning.placement import check_placements, position_of, rotation_of
+    from pbdkit.apps._cli import _parse_objects
+    from pbdkit.data._placement import check_placements, position_of, rotation_of
 
     rng = np.random.default_rng(23)
     rot = Rotation.from_quat(rng.normal(size=4))  # uniform on SO(3)
@@ -402,7 +402,7 @@ def _mug_demos(path: Path) -> np.ndarray:
     returns a new pose of the mug, as the --object parser gives it (x, y, z, qw, qx, qy, qz)."""
     import pose_teacher
 
-    from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit._rotations import quaternion_from_matrix
     from pbdkit.robots import panda
 
     save_demonstrations(pose_teacher.demonstrations(panda()), path)
@@ -452,7 +452,7 @@ def test_learn_orientation_option_says_which_objects_are_oriented(tmp_path: Path
 
 
 def test_reproduce_a_posed_object_prints_degrees_and_writes_orientations(tmp_path: Path) -> None:
-    from pbdkit.apps.report import closest_approach
+    from pbdkit.apps._report import closest_approach
 
     seven = _mug_demos(tmp_path / "demos.npz")
     _, skill_path = _learn_mug(tmp_path)

@@ -10,12 +10,12 @@ import pytest
 from synthetic_teacher import N_STEPS, REACH_STEP, synthetic_demos, unseen_glass
 
 from pbdkit import Controller, Skill
-from pbdkit.learning.controller import REPLAN_DISTANCE, Command
-from pbdkit.learning.demonstration import Demonstration
-from pbdkit.learning.probabilistic_ik import RunOptions
-from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
-from pbdkit.motion.otg import follow
-from pbdkit.robots.model import Robot
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.motion._limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
+from pbdkit.motion._otg import follow
+from pbdkit.reproduction._controller import REPLAN_DISTANCE, Command
+from pbdkit.reproduction._probabilistic_ik import RunOptions
+from pbdkit.robots._robot import Robot
 
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
 
@@ -104,7 +104,7 @@ def test_fed_its_own_commands_it_plays_the_reproduction(
     ctrl = skill.controller({"glass": glass})
     assert ctrl.limits is not None
     joints, cmds = _run(ctrl, q0.copy())
-    # The commands are the reproduction's motion (pbdkit.motion.otg.follow) sampled every dt.
+    # The commands are the reproduction's motion (pbdkit.motion._otg.follow) sampled every dt.
     motion = follow(
         offline.times,
         offline.joints,

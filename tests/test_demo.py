@@ -14,13 +14,13 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
-from pbdkit.apps.cli import app
-from pbdkit.apps.demo import run_lasa_demo, run_robot_demo
-from pbdkit.learning.skill import Skill
-from pbdkit.prob.gmm import MAX_COMPONENTS
+from pbdkit.apps._cli import app
+from pbdkit.apps._demo import run_lasa_demo, run_robot_demo
+from pbdkit.prob._gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
-from pbdkit.sim import evaluation
-from pbdkit.sim import experiment as E
+from pbdkit.sim import _evaluation as evaluation
+from pbdkit.sim._task_skill import TaskSkill, constrained_objects
+from pbdkit.skill._skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -122,13 +122,13 @@ class FastBasin:
         self.demos = demos
         self.got: dict[str, object] = {}
 
-    def __call__(self, task: str, **kwargs: object) -> E.TaskSkill:
+    def __call__(self, task: str, **kwargs: object) -> TaskSkill:
         self.got.update(kwargs)
-        objects = E.constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
+        objects = constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
         skill = Skill.learn(
             self.demos, katana(), n_steps=100, max_components=3, task_objects=objects
         )
-        return E.TaskSkill(task, self.demos, skill, 0.0, 0.0)
+        return TaskSkill(task, self.demos, skill, 0.0, 0.0)
 
 
 @pytest.fixture
@@ -321,7 +321,7 @@ def test_cli_bad_input_is_reported_clearly(tmp_path: Path) -> None:
     assert r.exit_code != 0
 
 
-def _never(*args: object, **kwargs: object) -> E.TaskSkill:
+def _never(*args: object, **kwargs: object) -> TaskSkill:
     raise AssertionError("the demo taught or learned before checking its arguments")
 
 

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.learning.demonstration: validation, time rescaling, .npz and CSV I/O."""
+"""Tests of pbdkit.data._demonstration: validation, time rescaling, .npz and CSV I/O."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pbdkit.learning.demonstration import (
+from pbdkit.data._demonstration import (
     Demonstration,
     check_demonstrations,
     demonstration_from_csv,

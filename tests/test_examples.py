@@ -22,10 +22,10 @@ from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
 from pbdkit import Skill, demonstration_from_csv, read_bag
-from pbdkit.learning.probabilistic_ik import ReproductionResult
-from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.reproduction._probabilistic_ik import ReproductionResult
 from pbdkit.robots import panda
-from pbdkit.robots.model import Robot
+from pbdkit.robots._robot import Robot
 
 # Every test reads the runs of both example scripts (a fresh interpreter each; the Panda's takes
 # about 8 s, 41 reproductions of a 1000-step skill among them).

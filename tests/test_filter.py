@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from pbdkit.vision import TrackFilter
-from pbdkit.vision.blobs import Blob
-from pbdkit.vision.stereo import Track
+from pbdkit.vision._blobs import Blob
+from pbdkit.vision._stereo import Track
 
 RATE = 15.0
 

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.prob.frames: the frame mappings against explicit inverses, FrameModel's
+"""Tests of pbdkit.prob._frames: the frame mappings against explicit inverses, FrameModel's
 prediction against its definition (GMR per frame, product of the world Gaussians), its
 equivariance under similarity transforms, leave-one-demonstration-out accuracy on reaching data
 with rotated targets against the same model given translation-only frames, files and bad input.
@@ -17,7 +17,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from pbdkit.prob.frames import (
+from pbdkit.prob._frames import (
     FrameModel,
     covariance_to_world,
     precision_to_world,
@@ -25,7 +25,7 @@ from pbdkit.prob.frames import (
     to_local,
     to_world,
 )
-from pbdkit.prob.gmm import GMM
+from pbdkit.prob._gmm import GMM
 
 Float = NDArray[np.float64]
 Frames = list[tuple[Float, Float]]
@@ -396,7 +396,7 @@ def _with(frames: list[Frames], i: int, p: int, a: object = None, b: object = No
         ),
         (
             lambda tr, fr: (tr, _with(fr, 3, 1, a=[[1.0, 2.0], [2.0, 4.0]])),
-            r"frames\[3\]\[1\] A must be invertible .*\(condition number 2.5\de\+16",
+            r"frames\[3\]\[1\] A must be invertible .*\(condition number \d\.\de\+1[5-9]",
         ),
         (
             lambda tr, fr: (tr, _with(fr, 3, 1, a=[[1.0, 0.0], [0.0, 1e-14]])),

@@ -19,8 +19,8 @@ from sklearn.utils import estimator_checks
 from sklearn.utils.validation import check_is_fitted
 
 from pbdkit import GMM
-from pbdkit.learning.datasets import lasa_names, load_lasa
-from pbdkit.prob.gmm import (
+from pbdkit.datasets import lasa, lasa_names
+from pbdkit.prob._gmm import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
     MAX_COMPONENTS,
@@ -315,7 +315,7 @@ def test_bic_on_lasa_picks_fewer_components_than_plain_bic() -> None:
     # (every sample independent) keeps decreasing to (or near) the cap; the
     # effective-sample-size BIC stops far earlier.
     for name, k_range in [("Angle", (2, 5)), ("Snake", (3, 8))]:
-        demos = load_lasa(name)
+        demos = lasa(name)
         t = np.linspace(0.0, 1.0, 1000)[::4]
         x = np.vstack([np.column_stack([t, d.pos[::4]]) for d in demos])
         chosen = GMM("bic", max_components=10).fit(x)
@@ -571,7 +571,7 @@ def test_auto_on_lasa_tracks_the_demonstrations_without_reaching_the_cap() -> No
     names = lasa_names(single_mode=True)
     rows, ks = [], []
     for name in names:
-        demos = load_lasa(name)
+        demos = lasa(name)
         t = np.linspace(0.0, 1.0, 1000)
         x = np.vstack([np.column_stack([t[::10], d.pos[::10]]) for d in demos])
         gmm = GMM("auto", max_components=30).fit(x)
@@ -715,7 +715,7 @@ def test_basin_task_gmr_means_do_not_jump() -> None:
     # mean jumped by 40-60 mm in one step on seeds 0, 4 and 5 (6.9-10.1x the demonstrations'
     # own largest step); seed 0 (60 mm) only, as the teaching takes 2-3 s.
     pytest.importorskip("mujoco")
-    from pbdkit.sim.experiment import learn_task
+    from pbdkit.sim._task_skill import learn_task
 
     for seed in (0,):
         ts = learn_task("basin", seed=seed)
@@ -783,7 +783,7 @@ def test_scale_aware_floor_is_scikit_learns_from_unit_variance_up() -> None:
 def _lasa_rows(time_scale: float, space_scale: float) -> tuple[np.ndarray, np.ndarray]:
     """LASA's G as Skill.learn samples it (100 of 1000 steps per demonstration), time in
     [0, time_scale], positions times space_scale; and the 1000 query times."""
-    demos = load_lasa("GShape")
+    demos = lasa("GShape")
     t = np.linspace(0.0, time_scale, 1000)
     x = np.vstack([np.column_stack([t[::10], space_scale * d.pos[::10]]) for d in demos])
     return x, t

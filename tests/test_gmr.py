@@ -7,8 +7,8 @@ import pytest
 from gmr import GMM as ReferenceGMM
 
 from pbdkit import GMM
-from pbdkit.learning.datasets import lasa_names, load_lasa
-from pbdkit.prob.gmr import gmr_batch, gmr_step
+from pbdkit.datasets import lasa, lasa_names
+from pbdkit.prob._gmr import gmr_batch, gmr_step
 
 
 def _random_gmm(rng: np.random.Generator, k: int, d: int) -> tuple[np.ndarray, ...]:
@@ -202,7 +202,7 @@ def test_regress_bad_input() -> None:
 
 
 def _lasa_rmse(name: str, k: int) -> tuple[float, float]:
-    demos = load_lasa(name)
+    demos = lasa(name)
     t = np.linspace(0.0, 1.0, demos[0].pos.shape[0])
     x = np.vstack([np.column_stack([t, d.pos]) for d in demos])
     positions = np.stack([d.pos for d in demos])

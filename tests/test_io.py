@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from pbdkit._io import NpyHeader, atomic_write_bytes, open_npz, save_npz_atomic
-from pbdkit.learning.demonstration import Demonstration
+from pbdkit.data._demonstration import Demonstration
 
 
 def _load_all(path: Path, *, keys: Any = None, **options: Any) -> dict[str, np.ndarray]:
@@ -260,8 +260,8 @@ def test_npz_header_length_is_checked_before_the_header_is_read(
 
 
 def _small_skill(tmp_path: Path) -> Path:
-    from pbdkit.learning.skill import Skill
     from pbdkit.robots import katana
+    from pbdkit.skill._skill import Skill
 
     rng = np.random.default_rng(3)
     arm = katana()
@@ -282,7 +282,7 @@ def _small_skill(tmp_path: Path) -> Path:
 def test_skill_load_refuses_unknown_keys_and_bombs_before_loading(
     tmp_path: Path, no_array_read: list[str]
 ) -> None:
-    from pbdkit.learning.skill import MAX_FILE_BYTES, Skill
+    from pbdkit.skill._skill import MAX_FILE_BYTES, Skill
 
     with np.load(_small_skill(tmp_path)) as data:
         arrays = {k: data[k] for k in data.files}
@@ -311,7 +311,7 @@ def test_skill_load_refuses_unknown_keys_and_bombs_before_loading(
 @pytest.mark.slow
 def test_a_2_gb_bomb_is_refused_in_bounded_time_and_memory(tmp_path: Path) -> None:
     """The issue's case: a demonstrations file of a few MB with an extra 2 GB array."""
-    from pbdkit.learning.demonstration import load_demonstrations, save_demonstrations
+    from pbdkit.data._demonstration import load_demonstrations, save_demonstrations
 
     rng = np.random.default_rng(4)
     demos = [Demonstration(np.arange(50.0), rng.normal(size=(50, 3))) for _ in range(2)]

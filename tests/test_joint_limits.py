@@ -14,10 +14,10 @@ from numpy.typing import NDArray
 from typer.testing import CliRunner
 
 from pbdkit import robots
-from pbdkit.apps.cli import app
-from pbdkit.learning.demonstration import Demonstration, save_demonstrations
-from pbdkit.learning.skill import Skill
-from pbdkit.robots.model import Robot, urdf_from_dh
+from pbdkit.apps._cli import app
+from pbdkit.data._demonstration import Demonstration, save_demonstrations
+from pbdkit.robots._robot import Robot, urdf_from_dh
+from pbdkit.skill._skill import Skill
 
 INF = np.inf
 LIMITS = ("velocity_limit", "acceleration_limit", "jerk_limit")

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.motion.limits: MotionLimits (validation, robots' limits), divided differences and
+"""Tests of pbdkit.motion: MotionLimits (validation, robots' limits), divided differences and
 motion peaks against independent formulas, reversals, the jerk-limited braking speed against a
 simulated stop, retiming a path into the limits, and the online StreamMonitor."""
 
@@ -13,7 +13,7 @@ import pytest
 from numpy.typing import NDArray
 
 from pbdkit import robots
-from pbdkit.motion.limits import (
+from pbdkit.motion._limits import (
     LIMIT_SAFETY,
     MotionLimits,
     MotionPeaks,

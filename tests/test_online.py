@@ -12,37 +12,41 @@ pytest.importorskip("mujoco")
 
 from typer.testing import CliRunner
 
-from pbdkit.apps.cli import app
-from pbdkit.motion.limits import MotionLimits, motion_peaks
-from pbdkit.sim import experiment as E
-from pbdkit.sim import perturb as P
-from pbdkit.sim.online import OnlineRun, TruthObserver, execute_online
-from pbdkit.sim.perturb import Disturbance, DisturbanceSetup, PushArm, SlideObject, grasp_time
-from pbdkit.sim.scene import TIMESTEP, Simulation
-from pbdkit.sim.task_skill import step_seconds
-from pbdkit.sim.tasks import TaskSpec
+from pbdkit.apps._cli import app
+from pbdkit.motion._limits import MotionLimits, motion_peaks
+from pbdkit.sim import _perturb as P
+from pbdkit.sim._evaluation import evaluate
+from pbdkit.sim._metrics import peak_speed_ratio
+from pbdkit.sim._online import OnlineRun, TruthObserver, execute_online
+from pbdkit.sim._perturb import Disturbance, DisturbanceSetup, PushArm, SlideObject, grasp_time
+from pbdkit.sim._runs import run_controller, run_online
+from pbdkit.sim._scene import TIMESTEP, Simulation
+from pbdkit.sim._sensing import calibrate_tracker, observe
+from pbdkit.sim._task_skill import TaskSkill, start_posture, step_seconds
+from pbdkit.sim._tasks import TaskSpec
+from pbdkit.sim._trials import trial_disturbance
 
 
 @pytest.fixture(scope="module")
-def coaster(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+def coaster(small_task_skill: Callable[..., TaskSkill]) -> TaskSkill:
     # Small: 3 fast demonstrations, a coarse time grid (test_parallel.py's too).
     return small_task_skill("coaster", 3, seed=1, n_steps=150)
 
 
 @pytest.fixture(scope="module")
-def placement(coaster: E.TaskSkill) -> dict[str, np.ndarray]:
+def placement(coaster: TaskSkill) -> dict[str, np.ndarray]:
     return coaster.task.sample_objects(np.random.default_rng(0))
 
 
-def _disturbance(ts: E.TaskSkill, name: str, truth: dict[str, np.ndarray]) -> Disturbance:
-    return E.trial_disturbance(ts, name, truth, seed=0)
+def _disturbance(ts: TaskSkill, name: str, truth: dict[str, np.ndarray]) -> Disturbance:
+    return trial_disturbance(ts, name, truth, seed=0)
 
 
 def test_online_run_equals_the_offline_one_and_keeps_the_limits(
-    coaster: E.TaskSkill, placement: dict[str, np.ndarray]
+    coaster: TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
     ts = coaster
-    offline = E.run_controller(ts, placement, "fused")
+    offline = run_controller(ts, placement, "fused")
     ctrl = ts.skill.controller({k: placement[k] for k in ts.skill.object_names})
     sim = Simulation.from_task(ts.task, placement)
     run = execute_online(sim, ctrl, observer=TruthObserver(ts.skill.object_names))
@@ -63,7 +67,7 @@ def test_online_run_equals_the_offline_one_and_keeps_the_limits(
     q = np.vstack([sim_start(run), run.commands])
     assert motion_peaks(ctrl.dt * np.arange(len(q)), q, limits).worst <= 1.0 + 1e-9
     assert run.execution.servo_peaks.worst <= 1.0
-    assert E.peak_speed_ratio(run.execution, limits.velocity) < 1.05
+    assert peak_speed_ratio(run.execution, limits.velocity) < 1.05
 
 
 def sim_start(run: OnlineRun) -> np.ndarray:
@@ -73,7 +77,7 @@ def sim_start(run: OnlineRun) -> np.ndarray:
 
 @pytest.mark.slow
 def test_a_sliding_coaster_is_followed_online_and_missed_offline(
-    coaster: E.TaskSkill, placement: dict[str, np.ndarray]
+    coaster: TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
     ts = coaster
     move = _disturbance(ts, "move", placement)
@@ -83,15 +87,15 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
         np.arange(ts.skill.n_steps) * step_seconds(ts), ts.skill.constraints().gripper
     )
     assert move.start == pytest.approx(t_grasp + 0.5)
-    online = E.run_online(ts, placement, "fused", disturbance=move)
+    online = run_online(ts, placement, "fused", disturbance=move)
     final = move.as_dict()["final_position"]
     np.testing.assert_allclose(online.execution.objects["coaster"][-1], final, atol=1e-12)
-    offline = E.run_controller(
+    offline = run_controller(
         ts, placement, "fused", disturbance=_disturbance(ts, "move", placement)
     )
     # An offline reproduction that knew the final place from the start, for reference.
     knew = {**placement, "coaster": np.array(final)}
-    reference = E.run_controller(ts, knew, "fused")
+    reference = run_controller(ts, knew, "fused")
     err = {
         k: r.execution.outcome.metrics["placement_error_mm"]
         for k, r in {"online": online, "offline": offline, "knew": reference}.items()
@@ -105,14 +109,14 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
 
 @pytest.mark.slow
 def test_a_pushed_arm_yields_and_is_steered_back_while_offline_snaps_back(
-    coaster: E.TaskSkill, placement: dict[str, np.ndarray]
+    coaster: TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
     ts = coaster
     push = _disturbance(ts, "push", placement)
     assert isinstance(push, PushArm)
     assert np.linalg.norm(push.force) == pytest.approx(40.0) and push.force[2] == 0.0
-    online = E.run_online(ts, placement, "fused", disturbance=push)
-    offline = E.run_controller(
+    online = run_online(ts, placement, "fused", disturbance=push)
+    offline = run_controller(
         ts, placement, "fused", disturbance=_disturbance(ts, "push", placement)
     )
     assert online.success
@@ -131,12 +135,12 @@ def test_a_pushed_arm_yields_and_is_steered_back_while_offline_snaps_back(
 
 @pytest.mark.slow
 def test_online_with_the_cameras_holds_the_grasped_glass_and_the_hidden_coaster(
-    coaster: E.TaskSkill, placement: dict[str, np.ndarray]
+    coaster: TaskSkill, placement: dict[str, np.ndarray]
 ) -> None:
     ts = coaster
-    tracker = E.calibrate_tracker(ts)
-    seen = E.observe(ts.task, placement, tracker, arm=E.start_posture(ts))
-    run = E.run_online(
+    tracker = calibrate_tracker(ts)
+    seen = observe(ts.task, placement, tracker, arm=start_posture(ts))
+    run = run_online(
         ts,
         seen,
         "fused",
@@ -161,9 +165,9 @@ def test_online_with_the_cameras_holds_the_grasped_glass_and_the_hidden_coaster(
 
 
 def test_evaluate_records_the_perturbation(
-    coaster: E.TaskSkill,
+    coaster: TaskSkill,
 ) -> None:
-    ev = E.evaluate(
+    ev = evaluate(
         "coaster",
         1,
         0,
@@ -184,7 +188,7 @@ def test_evaluate_records_the_perturbation(
     (row,) = data["runs"]["fused"]
     assert {"phase_held_steps", "peak_speed_ratio", "following_error_rad"} <= set(row)
     with pytest.raises(ValueError, match="perturb must be one of"):
-        E.evaluate("coaster", 1, 0, task_skill=coaster, perturb="shake")
+        evaluate("coaster", 1, 0, task_skill=coaster, perturb="shake")
 
 
 class Tap(Disturbance):
@@ -216,7 +220,7 @@ def _refuse_basin(task: TaskSpec) -> None:
         raise ValueError("tap: the basin task is not tapped")
 
 
-def test_a_perturbation_is_one_registry_entry(coaster: E.TaskSkill) -> None:
+def test_a_perturbation_is_one_registry_entry(coaster: TaskSkill) -> None:
     assert P.perturbation_names()[:3] == ("none", "move", "push")
     assert list(P.PERTURBATIONS) == list(P.perturbation_names())
     tap = P.Perturbation("tap", "a 1 N tap on the gripper at the grasp", _tap, check=_refuse_basin)
@@ -239,22 +243,22 @@ def test_a_perturbation_is_one_registry_entry(coaster: E.TaskSkill) -> None:
         assert "push (a 0.3 s shove on the arm halfway to the grasp)" in words
         assert "{perturbations}" not in words
         # The demo's report says what a user's perturbation did (a KeyError before).
-        from pbdkit.apps.demo import _perturbation_words
+        from pbdkit.apps._demo import _perturbation_words
 
         words_tap = _perturbation_words({"name": "tap", "force_n": [1.0, 0.0, 0.0]})
         assert words_tap == "tap: a 1 N tap on the gripper at the grasp"
         # A trial runs it, drawn from the trial's own stream, with what it needs to know.
-        ev = E.evaluate("coaster", 1, 0, task_skill=coaster, controllers=["fused"],
+        ev = evaluate("coaster", 1, 0, task_skill=coaster, controllers=["fused"],
                         ground_truth=True, perturb="tap")  # fmt: skip
         (p,) = ev.as_dict()["perturbations"]
         assert p["name"] == "tap" and ev.perturb == "tap"
         setup = seen[-1]
         assert setup.task is coaster.task and set(setup.objects) == {"glass", "coaster"}
         assert p["start_s"] == pytest.approx(setup.grasp_time())
-        again = E.trial_disturbance(coaster, "tap", ev.trials[0].truth, seed=0).as_dict()
+        again = trial_disturbance(coaster, "tap", ev.trials[0].truth, seed=0).as_dict()
         assert again == p
         with pytest.raises(ValueError, match="the basin task is not tapped"):
-            E.evaluate("basin", 1, 0, perturb="tap")
+            evaluate("basin", 1, 0, perturb="tap")
     finally:
         assert P.unregister_perturbation("tap") is tap
     assert "tap" not in P.perturbation_names()
@@ -281,7 +285,7 @@ def test_objects_slide_and_static_ones_refuse() -> None:
         sim.place_object("coaster", [0.3, np.nan, 0.0])
 
 
-def test_execute_online_refuses_a_used_controller(coaster: E.TaskSkill, placement: dict) -> None:
+def test_execute_online_refuses_a_used_controller(coaster: TaskSkill, placement: dict) -> None:
     ctrl = coaster.skill.controller({k: placement[k] for k in coaster.skill.object_names})
     ctrl.step(ctrl.target)
     with pytest.raises(ValueError, match="already run"):

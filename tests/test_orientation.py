@@ -12,15 +12,15 @@ from pose_teacher import demonstrations, grasp_pose, mug_pose
 from scipy.spatial.transform import Rotation
 
 import pbdkit
-from pbdkit.learning.probabilistic_ik import (
+from pbdkit._rotations import exp_map, left_jacobian_inverse, log3, log_map
+from pbdkit.reproduction._probabilistic_ik import (
     PoseFusedStep,
     PoseTaskStep,
     RunOptions,
     make_step,
     setup_run,
 )
-from pbdkit.learning.skill import mean_relative_rotation, space_data
-from pbdkit.prob.rotations import exp_map, left_jacobian_inverse, log3, log_map
+from pbdkit.skill._skill import mean_relative_rotation, space_data
 
 
 @pytest.fixture(scope="module")
@@ -349,7 +349,7 @@ def test_katana_weighs_an_orientation_it_cannot_fully_meet(robot):
         joints = q + np.linspace(0.0, 1.0, 30)[:, None] * rng.normal(0.0, 0.05, 5)
         demos.append(pbdkit.Demonstration(np.linspace(0, 3, 30), joints, {"block": obj}))
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pbdkit.learning.demonstration.LimitWarning)
+        warnings.simplefilter("ignore", pbdkit.data.LimitWarning)
         skill = pbdkit.Skill.learn(demos, robot, n_steps=50, n_components=2)
     assert skill.oriented == ["block"]
     res = skill.reproduce({"block": mug_pose(0.2, 0.31, 0.05)})

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.motion.otg (Ruckig): valid targets, time-optimal
+"""Tests of pbdkit.motion._otg (Ruckig): valid targets, time-optimal
 point-to-point moves, motions through timed samples (continuity, limits at any sampling rate,
 samples passed on time, rest at the end, a moving start), their setpoints every period, and the
 clamped cubic spline's derivatives."""
@@ -15,8 +15,8 @@ from scipy.interpolate import CubicSpline
 
 pytest.importorskip("ruckig")
 
-from pbdkit.motion.limits import MotionLimits, motion_peaks, retime, times_from_durations
-from pbdkit.motion.otg import (
+from pbdkit.motion._limits import MotionLimits, motion_peaks, retime, times_from_durations
+from pbdkit.motion._otg import (
     Motion,
     follow,
     follow_samples,

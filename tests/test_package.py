@@ -23,7 +23,7 @@ def _loaded_after(code: str) -> list[str]:
 @pytest.mark.slow
 def test_the_command_line_starts_without_the_numerical_libraries() -> None:
     # `pbdkit --help`, and `evaluate --workers` starting its worker server, come first.
-    assert _loaded_after("import pbdkit, pbdkit.apps.cli") == []
+    assert _loaded_after("import pbdkit, pbdkit.apps._cli") == []
     assert _loaded_after("import pbdkit\npbdkit.__all__") == []
     # A name that needs them loads them.
     assert {"sklearn", "scipy"} <= set(_loaded_after("import pbdkit\npbdkit.GMM"))
@@ -33,26 +33,14 @@ def test_the_command_line_starts_without_the_numerical_libraries() -> None:
 @pytest.mark.parametrize("name", pbdkit.__all__)
 def test_every_public_name_is_its_modules_object(name: str) -> None:
     value = getattr(pbdkit, name)
-    if name in ("gaussian", "robots"):
-        where = {"gaussian": "pbdkit.prob.gaussian", "robots": "pbdkit.robots"}[name]
+    modules = {"datasets": "pbdkit.datasets", "gaussian": "pbdkit.prob.gaussian"}
+    if name in (*modules, "robots"):
+        where = {**modules, "robots": "pbdkit.robots"}[name]
         assert value is importlib.import_module(where)
     else:
         assert getattr(importlib.import_module(value.__module__), name) is value
         assert value.__module__.startswith("pbdkit.")
     assert name in dir(pbdkit)
-
-
-@pytest.mark.parametrize(
-    ("old", "new"), [("pbdkit.gmm", "pbdkit.prob.gmm"), ("pbdkit.sim.study", "pbdkit.apps.study")]
-)
-def test_a_module_path_of_before_the_layers_imports_with_a_warning(old: str, new: str) -> None:
-    sys.modules.pop(old, None)
-    with pytest.warns(DeprecationWarning, match=f"{old} is now {new}"):
-        module = importlib.import_module(old)
-    assert module is importlib.import_module(new)
-    assert module.__spec__ is not None
-    assert module.__spec__.name == new  # its own relative imports still resolve quietly
-    sys.modules.pop(old, None)
 
 
 def test_star_import_and_an_unknown_name() -> None:

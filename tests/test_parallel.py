@@ -17,24 +17,26 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("distributed")
 
-from pbdkit.sim import experiment as E
-from pbdkit.sim.parallel import Session, connect, session
-from pbdkit.sim.tasks import get_task
+from pbdkit.sim._evaluation import Evaluation, evaluate
+from pbdkit.sim._parallel import Session, connect, session
+from pbdkit.sim._task_skill import TaskSkill
+from pbdkit.sim._tasks import get_task
+from pbdkit.sim._trials import run_trials
 
 
 @pytest.fixture(scope="module")
-def coaster(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+def coaster(small_task_skill: Callable[..., TaskSkill]) -> TaskSkill:
     return small_task_skill("coaster", 3, seed=1, n_steps=150)
 
 
-def _json(ev: E.Evaluation) -> str:
+def _json(ev: Evaluation) -> str:
     data = ev.as_dict()
     data.pop("learn_seconds")
     return json.dumps(data, sort_keys=True)
 
 
 @pytest.mark.slow
-def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
+def test_workers_give_the_serial_results(coaster: TaskSkill) -> None:
     # A disturbance drawn per trial, two controllers, the cameras: everything a trial depends
     # on travels to the workers, and the results come back in order.
     args: dict[str, Any] = {
@@ -42,9 +44,9 @@ def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
         "controllers": ["fused", "joint"],
         "perturb": "push",
     }
-    serial = E.evaluate("coaster", 3, 0, **args)
+    serial = evaluate("coaster", 3, 0, **args)
     ticks: list[tuple[int, int]] = []
-    parallel = E.evaluate(
+    parallel = evaluate(
         "coaster", 3, 0, workers=2, progress=lambda d, t: ticks.append((d, t)), **args
     )
     assert _json(parallel) == _json(serial)
@@ -53,11 +55,11 @@ def test_workers_give_the_serial_results(coaster: E.TaskSkill) -> None:
 
 
 @pytest.mark.slow
-def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
+def test_a_killed_workers_trials_are_run_again(coaster: TaskSkill) -> None:
     from distributed import LocalCluster
 
     args: dict[str, Any] = {"task_skill": coaster, "controllers": ["fused"], "ground_truth": True}
-    serial = E.evaluate("coaster", 4, 0, **args)
+    serial = evaluate("coaster", 4, 0, **args)
     cluster = LocalCluster(
         n_workers=2,
         threads_per_worker=1,
@@ -77,7 +79,7 @@ def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
             killed.append(pid)
 
     try:
-        parallel = E.evaluate(
+        parallel = evaluate(
             "coaster", 4, 0, scheduler=cluster.scheduler_address, progress=kill_one, **args
         )
     finally:
@@ -87,12 +89,12 @@ def test_a_killed_workers_trials_are_run_again(coaster: E.TaskSkill) -> None:
 
 
 @pytest.mark.slow
-def test_a_worker_with_two_threads_gives_the_serial_results(coaster: E.TaskSkill) -> None:
+def test_a_worker_with_two_threads_gives_the_serial_results(coaster: TaskSkill) -> None:
     # Two trials at once in one process: each thread works on its own copy of the skill.
     from distributed import LocalCluster
 
     args: dict[str, Any] = {"task_skill": coaster, "controllers": ["fused"], "ground_truth": True}
-    serial = E.evaluate("coaster", 4, 1, **args)
+    serial = evaluate("coaster", 4, 1, **args)
     cluster = LocalCluster(
         n_workers=1,
         threads_per_worker=2,
@@ -103,7 +105,7 @@ def test_a_worker_with_two_threads_gives_the_serial_results(coaster: E.TaskSkill
         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
     )
     try:
-        threaded = E.evaluate("coaster", 4, 1, scheduler=cluster.scheduler_address, **args)
+        threaded = evaluate("coaster", 4, 1, scheduler=cluster.scheduler_address, **args)
     finally:
         cluster.close()
     assert _json(threaded) == _json(serial)
@@ -156,7 +158,7 @@ def test_a_session_starts_quiet_workers_that_have_imported_the_simulation() -> N
 def test_a_session_refuses_bad_arguments_at_once_and_reports_a_failed_start(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from pbdkit.sim import parallel
+    from pbdkit.sim import _parallel as parallel
 
     with pytest.raises(ValueError, match="workers must be an integer >= 1"), session(workers=0):
         pass
@@ -178,23 +180,23 @@ def test_a_session_refuses_bad_arguments_at_once_and_reports_a_failed_start(
 
 
 @pytest.mark.slow
-def test_one_session_runs_the_same_evaluation_twice(coaster: E.TaskSkill) -> None:
+def test_one_session_runs_the_same_evaluation_twice(coaster: TaskSkill) -> None:
     # The same job scattered twice on one client (a study's maps of two objects): Dask
     # released the first one's data under the second's key ("lost dependencies").
     placements = [
         get_task("coaster").sample_objects(np.random.default_rng([3, i])) for i in range(2)
     ]
     args: dict[str, Any] = {"seed": 0}
-    serial = E.run_trials(coaster, placements, ["fused"], **args)
+    serial = run_trials(coaster, placements, ["fused"], **args)
     with session(workers=2) as run:
         for _ in range(3):
-            again = E.run_trials(coaster, placements, ["fused"], client=run, **args)
+            again = run_trials(coaster, placements, ["fused"], client=run, **args)
             assert [t.runs for t in again] == [t.runs for t in serial]
 
 
 _TWO_SESSIONS = """
 import sys
-from pbdkit.sim.parallel import session
+from pbdkit.sim._parallel import session
 assert "distributed" not in sys.modules
 for _ in range(2):
     with session(workers=1) as run:
@@ -365,8 +367,8 @@ def test_the_command_line_reports_a_port_that_is_not_a_scheduler_in_one_line(
 
     from typer.testing import CliRunner
 
-    from pbdkit.apps.cli import app
-    from pbdkit.sim import parallel
+    from pbdkit.apps._cli import app
+    from pbdkit.sim import _parallel as parallel
 
     monkeypatch.setattr(parallel, "SCHEDULER_TIMEOUT", 1.0)
     out = tmp_path / "ev.json"
@@ -396,7 +398,7 @@ def test_the_command_line_reports_a_port_that_is_not_a_scheduler_in_one_line(
 def test_local_workers_are_capped_at_the_cores_and_the_work(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from pbdkit import _forkserver
+    from pbdkit.sim import _forkserver
 
     monkeypatch.setattr(_forkserver, "cores", lambda: 4)
     assert _forkserver.local_workers(1000) == 4
@@ -411,8 +413,8 @@ def test_local_workers_are_capped_at_the_cores_and_the_work(
 def test_a_session_of_1000_workers_starts_one_per_core(
     monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    from pbdkit import _forkserver
-    from pbdkit.sim import parallel
+    from pbdkit.sim import _forkserver
+    from pbdkit.sim import _parallel as parallel
 
     # The cluster the session and connect would start is recorded, not started.
     started: list[int] = []
@@ -441,9 +443,9 @@ def test_the_command_line_caps_the_workers_with_a_notice(
 ) -> None:
     from typer.testing import CliRunner
 
-    from pbdkit import _forkserver
-    from pbdkit.apps.cli import app
-    from pbdkit.sim import evaluation
+    from pbdkit.apps._cli import app
+    from pbdkit.sim import _evaluation as evaluation
+    from pbdkit.sim import _forkserver
 
     asked: list[int | None] = []
 
@@ -474,7 +476,7 @@ def test_the_command_line_caps_the_workers_with_a_notice(
 def test_a_local_cluster_leaves_port_8787_to_others() -> None:
     # Without a dashboard, the scheduler still served HTTP on port 8787: with another cluster
     # on the machine Dask warned "Port 8787 is already in use" (an error under pytest).
-    from pbdkit.sim import parallel
+    from pbdkit.sim import _parallel as parallel
 
     client, cluster = parallel._local_cluster(0)
     try:

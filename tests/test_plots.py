@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from pbdkit.apps.plots import (
+from pbdkit.apps._plots import (
     figure_png,
     new_figure,
     plot_constraints,
@@ -20,10 +20,10 @@ from pbdkit.apps.plots import (
     plot_reproductions,
     space_data,
 )
-from pbdkit.learning.skill import Skill
-from pbdkit.motion.limits import MotionLimits, divided_differences
+from pbdkit.motion._limits import MotionLimits, divided_differences
 from pbdkit.robots import katana
-from pbdkit.sim.teacher import teach
+from pbdkit.sim._teacher import teach
+from pbdkit.skill._skill import Skill
 
 N_STEPS = 300
 
@@ -177,14 +177,14 @@ def test_figures_leave_the_users_matplotlib_backend_alone() -> None:
 
     code = (
         "import matplotlib; matplotlib.use('svg'); import numpy as np\n"
-        "from pbdkit.apps.plots import figure_png, plot_gmr_tube\n"
+        "from pbdkit.apps._plots import figure_png, plot_gmr_tube\n"
         "from matplotlib.figure import Figure\n"
         "fig = Figure(); ax = fig.subplots()\n"
         "t = np.linspace(0, 1, 5); plot_gmr_tube(ax, t, t, 0.1 + 0 * t)\n"
         "png = figure_png(fig)\n"
         "assert png[:4] == b'\\x89PNG', png[:4]\n"
         "from pbdkit import GMM\n"
-        "from pbdkit.apps.plots import plot_lasa_summary\n"
+        "from pbdkit.apps._plots import plot_lasa_summary\n"
         "x = np.column_stack([t, t, t])\n"
         "gmm = GMM.from_params([1.0], [[0.5, 0.5, 0.5]], [np.eye(3)])\n"
         "m, c = gmm.regress(t[:, None])\n"
@@ -212,7 +212,7 @@ def mug() -> dict[str, Any]:
     for a new pose of the mug (given as x, y, z, qw, qx, qy, qz)."""
     import pose_teacher
 
-    from pbdkit.prob.rotations import quaternion_from_matrix
+    from pbdkit._rotations import quaternion_from_matrix
     from pbdkit.robots import panda
 
     robot = panda()
@@ -293,7 +293,7 @@ def test_3d_figure_draws_the_frames_of_posed_objects_and_of_the_hand(
 ) -> None:
     from matplotlib.colors import to_rgb
 
-    from pbdkit.apps.plots import FRAME_COLORS, HAND_FRAME_GID, OBJECT_FRAME_GID
+    from pbdkit.apps._plots import FRAME_COLORS, HAND_FRAME_GID, OBJECT_FRAME_GID
 
     skill, demos, res = mug["posed"], mug["demos"], mug["posed_res"]
     fig = plot_demonstrations_3d(

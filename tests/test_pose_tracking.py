@@ -20,21 +20,23 @@ pytest.importorskip("mujoco")
 
 from plate_task import PLATE_SIDE, plate_task
 
-from pbdkit.apps.cli import app
+from pbdkit.apps._cli import app
 from pbdkit.robots import katana
-from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, task_skill
-from pbdkit.sim.online import VisionObserver
-from pbdkit.sim.parts import BLOCK_RGBA
-from pbdkit.sim.tasks import CameraRig, TaskSpec, yaw_of, yaw_pose
-from pbdkit.sim.teacher import random_start_posture
-from pbdkit.sim.tracking import (
+from pbdkit.sim import Simulation, get_task, nominal_objects
+from pbdkit.sim import _evaluation as evaluation
+from pbdkit.sim import _task_skill as task_skill
+from pbdkit.sim._online import VisionObserver
+from pbdkit.sim._parts import BLOCK_RGBA
+from pbdkit.sim._tasks import CameraRig, TaskSpec, yaw_of, yaw_pose
+from pbdkit.sim._teacher import random_start_posture
+from pbdkit.sim._tracking import (
     ObjectNotSeenError,
     SimTracker,
     label_patches,
     observed_objects,
     patch_models,
 )
-from pbdkit.sim.trials import Trial
+from pbdkit.sim._trials import Trial
 from pbdkit.vision import PoseTrack, Track
 
 # Measured by benchmarks/bench_pose_tracking.py over 100 slot placements (default calibration):
@@ -261,7 +263,7 @@ def test_coaster_tracking_is_unchanged() -> None:
 
 
 def test_observation_noise_moves_a_pose_and_keeps_its_yaw() -> None:
-    from pbdkit.sim.sensing import observation_noise
+    from pbdkit.sim._sensing import observation_noise
 
     spec = get_task("slot")
     truth = spec.sample_objects(np.random.default_rng(5))

@@ -1,4 +1,4 @@
-"""Poses from two patches (pbdkit.vision.pose): the model, the tracker's poses, the filter.
+"""Poses from two patches (pbdkit.vision._pose): the model, the tracker's poses, the filter.
 
 Synthetic scenes as in ``test_vision.py``: a stereo pair 0.4 m apart looking at a table-top
 region, colored discs lying flat at the two ends of an object.
@@ -15,10 +15,10 @@ from numpy.typing import NDArray
 from test_vision import COLORS, TARGET, calibrated_models, stereo_pair
 
 from pbdkit.vision import PoseModel, PoseTrack, StereoTracker, TrackFilter
-from pbdkit.vision.blobs import Blob
-from pbdkit.vision.pose import yaw_matrix
-from pbdkit.vision.stereo import Track
-from pbdkit.vision.synthetic import Disc, render_discs
+from pbdkit.vision._blobs import Blob
+from pbdkit.vision._pose import yaw_matrix
+from pbdkit.vision._stereo import Track
+from pbdkit.vision._synthetic import Disc, render_discs
 
 Float = NDArray[np.float64]
 

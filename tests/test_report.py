@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pbdkit.apps.report import Figure, Section, render_report, write_report
+from pbdkit.apps._report import Figure, Section, render_report, write_report
 
 PNG_1x1 = base64.b64decode(
     "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg=="
@@ -46,9 +46,9 @@ def test_booleans_render_as_yes_no() -> None:
 def test_orientation_section_shows_which_objects_are_oriented_and_the_angles() -> None:
     import pose_teacher
 
-    from pbdkit.apps.report import closest_approach, orientation_section
-    from pbdkit.learning.skill import Skill
+    from pbdkit.apps._report import closest_approach, orientation_section
     from pbdkit.robots import panda
+    from pbdkit.skill._skill import Skill
 
     robot = panda()
     demos = pose_teacher.demonstrations(robot)

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.learning.probabilistic_ik: the Table II loop, fusion in information form,
+"""Tests of pbdkit.reproduction._probabilistic_ik: the Table II loop, fusion in information form,
 controllers.
 
 A small spatial 4-joint arm with analytic kinematics (base yaw + three pitch joints) satisfies
@@ -14,8 +14,11 @@ import numpy.typing as npt
 import pytest
 from numpy.typing import NDArray
 
-from pbdkit.learning import constraints, pose_steps, probabilistic_ik, steps
-from pbdkit.learning.probabilistic_ik import (
+from pbdkit.reproduction import _constraints as constraints
+from pbdkit.reproduction import _pose_steps as pose_steps
+from pbdkit.reproduction import _probabilistic_ik as probabilistic_ik
+from pbdkit.reproduction import _steps as steps
+from pbdkit.reproduction._probabilistic_ik import (
     VELOCITY_SAFETY,
     Constraints,
     KinematicModel,
@@ -27,7 +30,7 @@ from pbdkit.learning.probabilistic_ik import (
     solve,
     step_limit_from_velocity,
 )
-from pbdkit.robots.kinematics import damped_pinv
+from pbdkit.robots._kinematics import damped_pinv
 
 Float = NDArray[np.float64]
 

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.robots.model, pbdkit.robots and pbdkit.robots.kinematics."""
+"""Tests of pbdkit.robots._robot, pbdkit.robots and pbdkit.robots._kinematics."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import yaml
 from numpy.typing import NDArray
 
 from pbdkit import robots
-from pbdkit.robots.kinematics import damped_pinv, damping_schedule, nullspace_projector
-from pbdkit.robots.model import Robot, _rpy_from_matrix, urdf_from_dh
+from pbdkit.robots._kinematics import damped_pinv, damping_schedule, nullspace_projector
+from pbdkit.robots._robot import Robot, _rpy_from_matrix, urdf_from_dh
 
 PI = math.pi
 

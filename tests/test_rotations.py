@@ -1,4 +1,4 @@
-"""Tests of pbdkit.prob.rotations against independent references.
+"""Tests of pbdkit._rotations against independent references.
 
 scipy's ``Rotation`` for the exponential map, its logarithm and quaternions (scipy orders a
 quaternion x, y, z, w; pbdkit w first), finite differences for the left Jacobian, the definition
@@ -15,7 +15,7 @@ from pytransform3d.transformations import exponential_coordinates_from_transform
 from pytransform3d.uncertainty import pose_fusion
 from scipy.spatial.transform import Rotation
 
-from pbdkit.prob.rotations import (
+from pbdkit._rotations import (
     as_pose,
     exp_map,
     fuse_poses,

@@ -17,41 +17,54 @@ pytest.importorskip("mujoco")
 import mujoco
 from typer.testing import CliRunner
 
-from pbdkit.apps.cli import app
-from pbdkit.learning.demonstration import load_demonstrations
-from pbdkit.learning.skill import Skill
-from pbdkit.motion.limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
-from pbdkit.motion.otg import follow
-from pbdkit.prob.gmm import MAX_COMPONENTS
+from pbdkit.apps._cli import app
+from pbdkit.data._demonstration import load_demonstrations
+from pbdkit.motion._limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
+from pbdkit.motion._otg import follow
+from pbdkit.prob._gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import (
     Outcome,
     PlacementRange,
-    RunStats,
     Simulation,
     TaskSpec,
     ViaPoint,
     build_scene,
     execute,
-    fixed_objects,
-    full_placement,
     get_task,
     register_task,
     sample_objects,
-    solve_ik,
     task_names,
     teach,
-    tool_pitch,
+)
+from pbdkit.sim import _tasks as T
+from pbdkit.sim._evaluation import Evaluation, evaluate, summarize
+from pbdkit.sim._execute import TIMESTEP, Recorder, servo_stream
+from pbdkit.sim._runs import ControllerRun, run_controller
+from pbdkit.sim._task_skill import TaskSkill, constrained_objects, learn_task
+from pbdkit.sim._taskdefs import basin as B
+from pbdkit.sim._taskdefs import coaster as C
+from pbdkit.sim._tasks import (
+    RunStats,
+    fixed_objects,
+    full_placement,
     tracked_objects,
     unregister_task,
 )
-from pbdkit.sim import experiment as E
-from pbdkit.sim import tasks as T
-from pbdkit.sim.execute import TIMESTEP, Recorder, servo_stream
-from pbdkit.sim.taskdefs import basin as B
-from pbdkit.sim.taskdefs import coaster as C
-from pbdkit.sim.teacher import APPROACH, UP, Person, between, grasp_via_points, radial
-from pbdkit.sim.world import CAMERA_POSITIONS, CAMERA_TARGET, add_glass
+from pbdkit.sim._teacher import (
+    APPROACH,
+    UP,
+    Person,
+    between,
+    grasp_via_points,
+    radial,
+    solve_ik,
+    tool_pitch,
+)
+from pbdkit.sim._trials import Trial
+from pbdkit.sim._world import CAMERA_POSITIONS, CAMERA_TARGET, add_glass
+from pbdkit.skill._naming import controller_names
+from pbdkit.skill._skill import Skill
 
 
 def _red_mask(image: np.ndarray) -> np.ndarray:
@@ -160,11 +173,11 @@ def test_tracked_and_fixed_objects_come_from_the_ranges() -> None:
 
 
 def test_constrained_objects_are_the_moving_ones_unless_asked() -> None:
-    assert E.constrained_objects("basin") == ["glass"]
-    assert E.constrained_objects("basin", constrain_fixed=True) == ["glass", "basin"]
+    assert constrained_objects("basin") == ["glass"]
+    assert constrained_objects("basin", constrain_fixed=True) == ["glass", "basin"]
     # Nothing is fixed in the coaster task: the option changes nothing there.
     for flag in (False, True):
-        assert E.constrained_objects("coaster", constrain_fixed=flag) == ["glass", "coaster"]
+        assert constrained_objects("coaster", constrain_fixed=flag) == ["glass", "coaster"]
 
 
 @pytest.mark.parametrize(
@@ -172,14 +185,14 @@ def test_constrained_objects_are_the_moving_ones_unless_asked() -> None:
     [(False, ["joint", "glass"]), (True, ["joint", "glass", "basin"])],
 )
 def test_basin_skill_constraints(constrain_fixed: bool, constraints: list[str]) -> None:
-    ts = E.learn_task(
+    ts = learn_task(
         "basin", n_demos=2, seed=21, n_steps=100, max_components=2, constrain_fixed=constrain_fixed
     )
     # The demonstrations record the basin either way (a user's recording would).
     assert all(set(d.objects) == {"glass", "basin"} for d in ts.demos)
     assert ts.skill.constraint_names == constraints
     assert ts.constrain_fixed is constrain_fixed
-    assert E.controller_names(ts.skill.object_names) == [
+    assert controller_names(ts.skill.object_names) == [
         "fused",
         "joint",
         *(f"task:{k}" for k in constraints[1:]),
@@ -187,20 +200,20 @@ def test_basin_skill_constraints(constrain_fixed: bool, constraints: list[str]) 
 
 
 @pytest.fixture(scope="module")
-def basin_skill(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+def basin_skill(small_task_skill: Callable[..., TaskSkill]) -> TaskSkill:
     # The paper's configuration, small: a fast teacher, 2 demonstrations, a coarse time grid.
     return small_task_skill("basin", 2, seed=22, n_steps=100, max_components=3)
 
 
 @pytest.mark.slow
 def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
-    basin_skill: E.TaskSkill,
+    basin_skill: TaskSkill,
 ) -> None:
     assert basin_skill.skill.object_names == ["glass"]
     rng = np.random.default_rng(23)
     glass = sample_objects("basin", rng)["glass"]
     # The robot knows the glass only; the basin comes from the task's fixed geometry.
-    run = E.run_controller(basin_skill, {"glass": glass}, "fused")
+    run = run_controller(basin_skill, {"glass": glass}, "fused")
     assert list(run.objects) == ["glass"]
     basin = get_task("basin").ranges["basin"].low
     np.testing.assert_allclose(run.execution.objects["basin"][-1], basin, atol=1e-12)
@@ -218,11 +231,11 @@ def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
     assert run.summary()["success"] is run.success
     # A moving object the robot does not know is an error, not a guess.
     with pytest.raises(ValueError, match=r"missing position\(s\) for \['glass'\]"):
-        E.run_controller(basin_skill, {"basin": basin}, "fused")
+        run_controller(basin_skill, {"basin": basin}, "fused")
     with pytest.raises(
         ValueError, match=r"controller must be one of \['fused', 'joint', 'task:glass'\]"
     ):
-        E.run_controller(basin_skill, {"glass": glass}, "task:basin")
+        run_controller(basin_skill, {"glass": glass}, "task:basin")
 
 
 def test_render_frames_and_red_patch_in_both_cameras() -> None:
@@ -386,7 +399,7 @@ def test_execute_records_frames() -> None:
 
 
 def test_save_video(tmp_path: Path) -> None:
-    from pbdkit.sim.video import save_video
+    from pbdkit.sim._video import save_video
 
     rng = np.random.default_rng(10)
     frames = rng.integers(0, 255, size=(6, 240, 320, 3), dtype=np.uint8)
@@ -420,7 +433,7 @@ def test_default_learning_captures_every_demonstrated_feature(task: str, seed: i
     # (basin 0 and 2: joint K = 3, wrist roll 0.53 rad off at the end) or under-fitted the
     # joints (coaster 1: RMSE 2.15 x the floor). benchmarks/bench_selection.py: seeds 0-9.
     demos = teach(task, 5, seed=seed)
-    skill = Skill.learn(demos, katana(), task_objects=E.constrained_objects(task))
+    skill = Skill.learn(demos, katana(), task_objects=constrained_objects(task))
     cap = MAX_COMPONENTS
     # No space collapses; the joints' K is interior. (A task space may reach the cap: where
     # the demonstrations agree, narrower components keep predicting a left-out demonstration a
@@ -530,17 +543,17 @@ def test_recorder_measures_the_servo_stream_as_a_stream_monitor_outside_a_push()
 
 @pytest.fixture(scope="module")
 def coaster_run(
-    small_task_skill: Callable[..., E.TaskSkill],
-) -> tuple[E.TaskSkill, E.ControllerRun]:
+    small_task_skill: Callable[..., TaskSkill],
+) -> tuple[TaskSkill, ControllerRun]:
     # A quick coaster skill (3 fast demonstrations, 300 steps), its fused run played offline.
     ts = small_task_skill("coaster", 3, seed=30, n_steps=300, max_components=5)
     placement = sample_objects("coaster", np.random.default_rng(31))
-    return ts, E.run_controller(ts, placement, "fused")
+    return ts, run_controller(ts, placement, "fused")
 
 
 @pytest.mark.slow
 def test_playback_servo_stream_is_within_the_limits(
-    coaster_run: tuple[E.TaskSkill, E.ControllerRun],
+    coaster_run: tuple[TaskSkill, ControllerRun],
 ) -> None:
     ts, run = coaster_run
     ex, res = run.execution, run.reproduction
@@ -583,13 +596,13 @@ def test_playback_servo_stream_is_within_the_limits(
 
 @pytest.mark.slow
 def test_playback_servos_follow_the_samples(
-    coaster_run: tuple[E.TaskSkill, E.ControllerRun],
+    coaster_run: tuple[TaskSkill, ControllerRun],
 ) -> None:
     ts, run = coaster_run
     ex, res = run.execution, run.reproduction
     t = ts.skill.times(res)
     grid = ex.servo_period * np.arange(ex.servo_targets.shape[0])
-    # The servo targets are the motion pbdkit.motion.otg.follow makes through the samples; it
+    # The servo targets are the motion pbdkit.motion._otg.follow makes through the samples; it
     # reaches each sample at its time, or later where the limits kept it behind.
     motion = follow(
         t,
@@ -633,7 +646,7 @@ def test_task_registry_resolves_names_once_and_refuses_bad_specs() -> None:
 
 
 # A task of one's own, in one place and nothing else touched: put the glass from the table on a
-# green mark on the table (the example of pbdkit.sim.tasks' docstring). The mark moves between
+# green mark on the table (the example of pbdkit.sim._tasks' docstring). The mark moves between
 # placements, so the cameras track it (its patch is the mark itself) and the skill gets a
 # task-space constraint for it.
 MARK_TOP = 0.001  # the mark is a 1 mm disk lying on the table; its point is its top's centre
@@ -741,13 +754,13 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     assert res.outcome.success, res.outcome.metrics
     assert res.outcome.metrics["placement_error_mm"] < 2.0
 
-    objects = E.constrained_objects("mark")
+    objects = constrained_objects("mark")
     assert objects == ["glass", "mark"]
     skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
-    ts = E.TaskSkill("mark", demos, skill, 0.0, 0.0)
+    ts = TaskSkill("mark", demos, skill, 0.0, 0.0)
     assert ts.task is mark_task and ts.constrain_fixed is False
     placement = sample_objects("mark", np.random.default_rng(24))
-    run = E.run_controller(ts, placement, "fused")
+    run = run_controller(ts, placement, "fused")
     assert set(run.execution.objects) == {"glass", "mark"}
     assert set(run.summary()) == {
         "success",
@@ -763,8 +776,8 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     # Measured: 11-20 mm with 3 fast demonstrations on a 200-step grid (fused, 3 placements).
     assert run.success
 
-    evaluation = E.evaluate("mark", trials=1, seed=0, task_skill=ts, ground_truth=True)
-    assert isinstance(evaluation, E.Evaluation) and len(evaluation.trials) == 1
+    evaluation = evaluate("mark", trials=1, seed=0, task_skill=ts, ground_truth=True)
+    assert isinstance(evaluation, Evaluation) and len(evaluation.trials) == 1
     assert set(evaluation.controllers) == {"fused", "joint", "task:glass", "task:mark"}
     result = evaluation.as_dict()
     assert result["task"] == "mark"
@@ -780,7 +793,7 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
         assert fused[f"peak_{k}"]["max"] > 0.0
     json.dumps(result)  # JSON-ready
     # Vision in the loop: the cameras learn the mark's green from the task's patches.
-    seen = E.evaluate("mark", trials=1, seed=0, task_skill=ts, controllers=["fused"]).as_dict()
+    seen = evaluate("mark", trials=1, seed=0, task_skill=ts, controllers=["fused"]).as_dict()
     assert seen["tracking_failures"] == 0
     assert set(seen["tracking_error_mm"]["per_object"]) == {"glass", "mark"}
     assert seen["tracking_error_mm"]["max"] < 4.0
@@ -839,22 +852,22 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
     try:
         demos = teach("cup", 3, seed=0, speed=2.0)
         assert all(set(d.objects) == {"cup", "coaster"} for d in demos)
-        objects = E.constrained_objects(CUP)
+        objects = constrained_objects(CUP)
         assert objects == ["cup", "coaster"]
         skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
-        ts = E.TaskSkill(CUP, demos, skill, 0.0, 0.0)
+        ts = TaskSkill(CUP, demos, skill, 0.0, 0.0)
         with Simulation.from_task(CUP) as sim:
             assert set(sim.object_positions()) == {"cup", "coaster"}
             sim.place_object("cup", sim.object_positions()["cup"] + [0.01, 0.0, 0.0])
-        cup = E.evaluate(CUP, 1, 0, task_skill=ts, controllers=["fused"], ground_truth=True)
+        cup = evaluate(CUP, 1, 0, task_skill=ts, controllers=["fused"], ground_truth=True)
         # The same task with the name the simulation used to assume: the same run, to the bit
         # (a name changes no physics).
         glass = [d.__class__(d.t, d.joints, {"glass": d.objects["cup"],
                  "coaster": d.objects["coaster"]}, d.gripper) for d in demos]  # fmt: skip
         skill = Skill.learn(glass, katana(), n_steps=200, max_components=5,
                             task_objects=["glass", "coaster"])  # fmt: skip
-        ts_glass = E.TaskSkill(C.SPEC, glass, skill, 0.0, 0.0)
-        same = E.evaluate(C.SPEC, 1, 0, task_skill=ts_glass, controllers=["fused"],
+        ts_glass = TaskSkill(C.SPEC, glass, skill, 0.0, 0.0)
+        same = evaluate(C.SPEC, 1, 0, task_skill=ts_glass, controllers=["fused"],
                           ground_truth=True)  # fmt: skip
         assert cup.trials[0].runs == same.trials[0].runs
         run = cup.trials[0].runs["fused"]
@@ -862,7 +875,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         # 200-step grid: placed 23 mm off centre, beyond the task's 15 mm).
         assert run["released"] == 1.0 and abs(run["height_error_mm"]) < 5.0
         assert run["tilt_deg"] < 10.0
-        online = E.evaluate(CUP, 1, 0, task_skill=ts, controllers=["fused"], online=True,
+        online = evaluate(CUP, 1, 0, task_skill=ts, controllers=["fused"], online=True,
                             perturb="push").as_dict()  # fmt: skip
         assert online["tracking_failures"] == 0
         assert set(online["tracking_error_mm"]["per_object"]) == {"cup", "coaster"}
@@ -910,10 +923,10 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
         },
     ]
     trials = [
-        E.Trial({"glass": np.zeros(3)}, None if i == 2 else {"glass": np.zeros(3)}, {}, None, r)
+        Trial({"glass": np.zeros(3)}, None if i == 2 else {"glass": np.zeros(3)}, {}, None, r)
         for i, r in enumerate(rows)
     ]
-    ev = E.summarize(ts, trials, seed=4, n_demos=5, vision=True)  # type: ignore[arg-type]
+    ev = summarize(ts, trials, seed=4, n_demos=5, vision=True)  # type: ignore[arg-type]
     assert ev.controllers["fused"].successes == 2
     assert ev.controllers["fused"].success_rate == pytest.approx(2 / 3)
     assert ev.controllers["fused"].metrics["err"] == {"mean": 2.0, "median": 2.0, "max": 3.0}
@@ -929,7 +942,7 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
 
 def test_the_teachers_start_posture_has_its_own_name() -> None:
     # `start_posture` meant both the teacher's random start and a skill's own (task_skill).
-    from pbdkit.sim.teacher import random_start_posture, start_posture
+    from pbdkit.sim._teacher import random_start_posture, start_posture
 
     robot = katana()
     new = random_start_posture(robot, np.random.default_rng(3))

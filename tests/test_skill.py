@@ -1,4 +1,4 @@
-"""Tests of pbdkit.learning.skill on the Katana: learning from synthetic demonstrations,
+"""Tests of pbdkit.skill._skill on the Katana: learning from synthetic demonstrations,
 reproduction for unseen object positions, influence of the constraints, save/load, bad input.
 
 The demonstrations come from the synthetic teacher of ``synthetic_teacher.py`` (the ``demos``
@@ -28,12 +28,12 @@ from synthetic_teacher import (
 )
 
 import pbdkit
-from pbdkit.learning.demonstration import Demonstration, LimitWarning, save_demonstrations
-from pbdkit.learning.probabilistic_ik import ReachWarning, ReproductionResult
-from pbdkit.learning.skill import VARIABILITY_FLOOR, Skill
-from pbdkit.motion.limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.prob.gmm import MAX_COMPONENTS
-from pbdkit.robots.model import Robot
+from pbdkit.data._demonstration import Demonstration, LimitWarning, save_demonstrations
+from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.prob._gmm import MAX_COMPONENTS
+from pbdkit.reproduction._probabilistic_ik import ReachWarning, ReproductionResult
+from pbdkit.robots._robot import Robot
+from pbdkit.skill._skill import VARIABILITY_FLOOR, Skill
 
 Float = NDArray[np.float64]
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
@@ -328,7 +328,7 @@ def test_limit_values_and_max_step(skill: Skill, demos: list[Demonstration]) -> 
     res = skill.reproduce(objs, velocity_limit=per_joint, acceleration_limit=2.0, jerk_limit=None)
     lim = MotionLimits.from_robot(robot, n, velocity=per_joint, acceleration=2.0, jerk=None)
     assert within_limits(skill, res, lim)
-    _, acc, _ = pbdkit.motion.limits.divided_differences(skill.times(res), res.joints)
+    _, acc, _ = pbdkit.motion._limits.divided_differences(skill.times(res), res.joints)
     assert 1.5 < np.abs(acc).max() <= 2.0 * (1 + 1e-9)
     # max_step still bounds the Euclidean length of a step of the path (after the lead-in).
     short = skill.reproduce(objs, max_step=0.01)
@@ -372,7 +372,7 @@ def test_velocity_limit_needs_a_known_duration(robot: Robot, skill: Skill) -> No
         reach=skill.reach,
         duration=skill.duration,
     )
-    # Without joint axes there is no Newton term (pbdkit.learning.probabilistic_ik, "Stability").
+    # Without joint axes there is no Newton term (_probabilistic_ik, "Stability").
     gauss_newton = skill.reproduce(objs, newton=False, **NO_LIMITS)
     np.testing.assert_array_equal(bare.reproduce(objs).joints, gauss_newton.joints)
 
@@ -489,7 +489,7 @@ def test_load_bounds_n_steps_and_checks_n_joints(
 def test_learn_bounds_n_steps_like_load(robot: Robot, demos: list[Demonstration]) -> None:
     with pytest.raises(ValueError, match=r"n_steps must be <= 1000000, got 1000001"):
         Skill.learn(demos, robot, n_steps=10**6 + 1)
-    from pbdkit.learning.skill import MAX_STEPS
+    from pbdkit.skill._skill import MAX_STEPS
 
     assert MAX_STEPS == 10**6
 

@@ -10,14 +10,14 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from pbdkit.prob.rotations import log3
+from pbdkit._rotations import log3
 from pbdkit.robots import katana
 from pbdkit.sim import Simulation
-from pbdkit.sim import parts as P
-from pbdkit.sim.runs import run_controller
-from pbdkit.sim.task_skill import TaskSkill, learn_task
-from pbdkit.sim.taskdefs import slot
-from pbdkit.sim.tasks import RunStats, get_task, yaw_of, yaw_pose
+from pbdkit.sim import _parts as P
+from pbdkit.sim._runs import run_controller
+from pbdkit.sim._task_skill import TaskSkill, learn_task
+from pbdkit.sim._taskdefs import slot
+from pbdkit.sim._tasks import RunStats, get_task, yaw_of, yaw_pose
 
 
 def _relative(hand: np.ndarray, obj: np.ndarray) -> np.ndarray:

@@ -14,13 +14,15 @@ pytest.importorskip("mujoco")
 
 from typer.testing import CliRunner
 
-from pbdkit.apps.cli import app
-from pbdkit.sim import experiment as E
-from pbdkit.sim import perturb as P
-from pbdkit.sim.scene import Simulation
-from pbdkit.sim.task_skill import step_seconds
-from pbdkit.sim.taskdefs import slot
-from pbdkit.sim.tasks import ObjectTurn, PlacementRange, TaskSpec, get_task, yaw_of, yaw_pose
+from pbdkit.apps._cli import app
+from pbdkit.sim import _perturb as P
+from pbdkit.sim._evaluation import evaluate
+from pbdkit.sim._runs import run_controller, run_online
+from pbdkit.sim._scene import Simulation
+from pbdkit.sim._task_skill import TaskSkill, step_seconds
+from pbdkit.sim._taskdefs import slot
+from pbdkit.sim._tasks import ObjectTurn, PlacementRange, TaskSpec, get_task, yaw_of, yaw_pose
+from pbdkit.sim._trials import trial_disturbance
 
 SLOT = get_task("slot")
 YAW_LOW, YAW_HIGH = (math.degrees(v) for v in slot.YAW_RANGE)
@@ -95,7 +97,7 @@ def test_rotate_refuses_a_task_without_a_turn_in_one_line(task: str) -> None:
     assert "\n" not in str(err.value)
     # Before any teaching: the evaluation and the command line refuse it at once.
     with pytest.raises(ValueError, match="has no 'rotate' disturbance"):
-        E.evaluate(task, 1, 0, perturb="rotate")
+        evaluate(task, 1, 0, perturb="rotate")
     r = CliRunner().invoke(
         app, ["evaluate", "--task", task, "--trials", "1", "--perturb", "rotate"]
     )
@@ -173,18 +175,18 @@ def test_the_tray_turns_about_its_centre_at_constant_speed() -> None:
 # ------------------------------------------------------------------------- online and offline
 @pytest.mark.slow
 def test_online_follows_the_turned_tray_where_the_offline_trajectory_misses_it(
-    small_task_skill: Callable[..., E.TaskSkill],
+    small_task_skill: Callable[..., TaskSkill],
 ) -> None:
     ts = small_task_skill("slot", 5, seed=1, n_steps=150)
     placement = ts.task.sample_objects(np.random.default_rng(0))
-    act = E.trial_disturbance(ts, "rotate", placement, seed=0)
+    act = trial_disturbance(ts, "rotate", placement, seed=0)
     assert isinstance(act, P.TurnObject)
     grid = np.arange(ts.skill.n_steps) * step_seconds(ts)
     t_grasp = P.grasp_time(grid, ts.skill.constraints().gripper)
     assert act.start == pytest.approx(t_grasp + P.TURN_DELAY)
-    online = E.run_online(ts, placement, "fused", disturbance=act)
-    offline = E.run_controller(
-        ts, placement, "fused", disturbance=E.trial_disturbance(ts, "rotate", placement, seed=0)
+    online = run_online(ts, placement, "fused", disturbance=act)
+    offline = run_controller(
+        ts, placement, "fused", disturbance=trial_disturbance(ts, "rotate", placement, seed=0)
     )
     size = abs(math.degrees(act.angle))
     assert 20.0 <= size <= 30.0

@@ -1,4 +1,4 @@
-"""Tests of the slot task's world (issue 24): the block and the tray (:mod:`pbdkit.sim.parts`), and
+"""Tests of the slot task's world (issue 24): the block and the tray (:mod:`pbdkit.sim._parts`), and
 the simulation holding a block instead of a glass (:class:`pbdkit.sim.Simulation`).
 
 The scenes are built from throwaway task specs (never registered) whose ``add_objects`` puts a
@@ -20,11 +20,11 @@ import mujoco
 from numpy.typing import NDArray
 
 from pbdkit.robots import katana
-from pbdkit.sim import Outcome, PlacementRange, Simulation, TaskSpec, solve_ik
-from pbdkit.sim import parts as P
-from pbdkit.sim.tasks import yaw_of, yaw_pose
-from pbdkit.sim.teacher import LIMIT_MARGIN
-from pbdkit.vision.color import CBCR_FROM_RGB, cbcr_from_rgb
+from pbdkit.sim import Outcome, PlacementRange, Simulation, TaskSpec
+from pbdkit.sim import _parts as P
+from pbdkit.sim._tasks import yaw_of, yaw_pose
+from pbdkit.sim._teacher import LIMIT_MARGIN, solve_ik
+from pbdkit.vision._color import CBCR_FROM_RGB, cbcr_from_rgb
 
 Float = NDArray[np.float64]
 

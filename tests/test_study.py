@@ -15,11 +15,12 @@ pytest.importorskip("mujoco")
 from typer.testing import CliRunner
 
 from pbdkit import Skill
-from pbdkit.apps import study as S
-from pbdkit.apps.cli import app
+from pbdkit.apps import _study as S
+from pbdkit.apps._cli import app
 from pbdkit.robots import katana
-from pbdkit.sim import experiment as E
-from pbdkit.sim.tasks import get_task
+from pbdkit.sim._sensing import observation_noise
+from pbdkit.sim._task_skill import TaskSkill, constrained_objects
+from pbdkit.sim._tasks import get_task
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -47,7 +48,7 @@ def test_grid_spans_twice_the_range_with_the_others_nominal() -> None:
 def test_a_posed_objects_grid_spans_x_and_twice_its_yaw_range() -> None:
     """The slot's tray is mapped over x and yaw (y at the range's centre), the yaw from -120 to
     120 degrees for a -60..60 range; the block stays at its nominal pose."""
-    from pbdkit.sim.tasks import yaw_of
+    from pbdkit.sim._tasks import yaw_of
 
     spec = get_task("slot")
     xs, yaws, places = S.grid_placements(spec, "tray", 5)
@@ -65,17 +66,17 @@ def test_a_posed_objects_grid_spans_x_and_twice_its_yaw_range() -> None:
 def test_observation_noise_has_the_asked_mean_error_on_moving_objects_only() -> None:
     spec = get_task("basin")
     truth = spec.nominal_objects()
-    draws = [E.observation_noise(spec, truth, 6.0, seed=1, index=i) for i in range(4000)]
+    draws = [observation_noise(spec, truth, 6.0, seed=1, index=i) for i in range(4000)]
     err = np.array([1e3 * np.linalg.norm(d["glass"] - truth["glass"]) for d in draws])
     assert err.mean() == pytest.approx(6.0, rel=0.03)  # the 3-D length's mean, by construction
     # Isotropic: each axis' standard deviation is 6 / sqrt(8 / pi) mm.
     per_axis = np.std([1e3 * (d["glass"] - truth["glass"]) for d in draws], axis=0)
     np.testing.assert_allclose(per_axis, 6.0 / math.sqrt(8 / math.pi), rtol=0.05)
     assert all(np.array_equal(d["basin"], truth["basin"]) for d in draws)  # fixed: known
-    same = E.observation_noise(spec, truth, 6.0, seed=1, index=3)
+    same = observation_noise(spec, truth, 6.0, seed=1, index=3)
     np.testing.assert_array_equal(same["glass"], draws[3]["glass"])
     with pytest.raises(ValueError, match="noise_mm"):
-        E.observation_noise(spec, truth, -1.0, seed=0, index=0)
+        observation_noise(spec, truth, -1.0, seed=0, index=0)
 
 
 @pytest.fixture(scope="module")
@@ -93,15 +94,15 @@ class FastLearning:
         self.fail_at = fail_at
         self.asked: list[int] = []
 
-    def __call__(self, task: object, *, n_demos: int, seed: int) -> E.TaskSkill:
+    def __call__(self, task: object, *, n_demos: int, seed: int) -> TaskSkill:
         self.asked.append(n_demos)
         if len(self.asked) == self.fail_at:
             raise RuntimeError("the teacher dropped the glass")
         spec = get_task(task)  # type: ignore[arg-type]
         demos = self.taught[:n_demos]
-        objects = E.constrained_objects(spec)
+        objects = constrained_objects(spec)
         skill = Skill.learn(demos, katana(), n_steps=100, max_components=3, task_objects=objects)
-        return E.TaskSkill(spec, demos, skill, 0.0, 0.0)
+        return TaskSkill(spec, demos, skill, 0.0, 0.0)
 
 
 @pytest.fixture
@@ -233,7 +234,7 @@ def test_sizes_are_kept_as_tuples() -> None:
     assert S.SMALL.runs(1, 3) == 25 * 3 + 5 * 6 + 6 * 6  # the shipped sizes are valid
 
 
-def _never(*args: object, **kwargs: object) -> E.TaskSkill:
+def _never(*args: object, **kwargs: object) -> TaskSkill:
     raise AssertionError("the study taught or learned before checking its arguments")
 
 

@@ -1,4 +1,4 @@
-"""The stereo tracker in the simulated world (pbdkit.sim.tracking) and vision in the loop of
+"""The stereo tracker in the simulated world (pbdkit.sim._tracking) and vision in the loop of
 ``pbdkit demo`` / ``pbdkit evaluate``."""
 
 from __future__ import annotations
@@ -13,12 +13,16 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
-from pbdkit.apps.cli import app
+from pbdkit.apps._cli import app
 from pbdkit.robots import katana
-from pbdkit.sim import Simulation, evaluation, get_task, nominal_objects, sample_objects, task_skill
-from pbdkit.sim import experiment as E
-from pbdkit.sim.teacher import random_start_posture
-from pbdkit.sim.tracking import (
+from pbdkit.sim import Simulation, get_task, nominal_objects, sample_objects
+from pbdkit.sim import _evaluation as evaluation
+from pbdkit.sim import _task_skill as task_skill
+from pbdkit.sim._evaluation import evaluate
+from pbdkit.sim._sensing import observe
+from pbdkit.sim._task_skill import TaskSkill
+from pbdkit.sim._teacher import random_start_posture
+from pbdkit.sim._tracking import (
     ObjectNotSeenError,
     SimTracker,
     label_patches,
@@ -153,7 +157,7 @@ def test_observed_objects_passes_fixed_objects_through() -> None:
             observed_objects(sim, tracker, fixed={"basin": [0.0, np.nan, 0.0]})
     # The experiment's observe(): given the glass only, the scene still has the basin at its
     # fixed place and the robot knows it (a skill without a basin constraint ignores it).
-    told = E.observe(get_task("basin"), {"glass": truth["glass"]}, tracker, arm=_arm(1))
+    told = observe(get_task("basin"), {"glass": truth["glass"]}, tracker, arm=_arm(1))
     assert list(told) == ["glass", "basin"]
     np.testing.assert_array_equal(told["basin"], truth["basin"])
     np.testing.assert_allclose(told["glass"], seen["glass"], rtol=0, atol=1e-12)
@@ -170,14 +174,14 @@ def test_bad_objects_are_named() -> None:
 
 
 @pytest.fixture(scope="module")
-def small_skill(small_task_skill: Callable[..., E.TaskSkill]) -> E.TaskSkill:
+def small_skill(small_task_skill: Callable[..., TaskSkill]) -> TaskSkill:
     # A fast teacher (durations halved), 3 demonstrations, a coarse time grid: the CLI paths
     # run in seconds instead of a minute; the full demo is tested in test_demo.py.
     return small_task_skill("coaster", 3, seed=0, n_steps=200, max_components=5)
 
 
 @pytest.fixture
-def fast_cli(monkeypatch: pytest.MonkeyPatch, small_skill: E.TaskSkill) -> None:
+def fast_cli(monkeypatch: pytest.MonkeyPatch, small_skill: TaskSkill) -> None:
     # Where pbdkit evaluate and pbdkit demo find it.
     monkeypatch.setattr(evaluation, "learn_task", lambda task, **kwargs: small_skill)
     monkeypatch.setattr(task_skill, "learn_task", lambda task, **kwargs: small_skill)
@@ -217,7 +221,7 @@ def test_evaluate_with_vision_reports_tracking_error(
 
 
 def test_evaluate_counts_unseen_placements_as_failures(
-    coaster_tracker: SimTracker, small_skill: E.TaskSkill
+    coaster_tracker: SimTracker, small_skill: TaskSkill
 ) -> None:
     # A tracker that refuses every blob: no execution, no ground-truth fallback.
     blind = SimTracker(
@@ -228,7 +232,7 @@ def test_evaluate_counts_unseen_placements_as_failures(
             min_area=10**6,
         )
     )
-    evaluation = E.evaluate(
+    evaluation = evaluate(
         "coaster", 2, 0, task_skill=small_skill, tracker=blind, controllers=["fused"]
     )
     assert evaluation.tracking_failures == 2

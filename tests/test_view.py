@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 from browser import CHROMIUM, free_port, launch
 
-from pbdkit.apps.view import HOST, check_port
-from pbdkit.apps.view_plan import (
+from pbdkit._rotations import matrix_from_quaternion
+from pbdkit.apps._view import HOST, check_port
+from pbdkit.apps._view_plan import (
     LatestWins,
     carry_transform,
     coarse_skill,
@@ -32,8 +33,7 @@ from pbdkit.apps.view_plan import (
     step_gaussians,
     typical_placements,
 )
-from pbdkit.learning.skill import Skill
-from pbdkit.prob.rotations import matrix_from_quaternion
+from pbdkit.skill._skill import Skill
 
 
 def _port(port: int) -> list[str]:
@@ -168,7 +168,7 @@ def test_typical_pose_of_an_oriented_skill_is_the_demonstrations_mean(
     """For the slot's pose skill (3 demonstrations, yaws 60 degrees apart): each object's
     typical pose is within 1 cm and 6 degrees of the demonstrations' mean position and yaw,
     well inside their spread."""
-    from pbdkit.sim.tasks import yaw_of
+    from pbdkit.sim._tasks import yaw_of
 
     ts = small_task_skill("slot", 3, 1)
     placed = typical_placements(ts.skill)
@@ -233,7 +233,7 @@ def test_the_plan_carries_the_glass_onto_the_coaster(small_task_skill: Callable[
 # ----------------------------------------------------------------------------- the command
 def _pbdkit(*args: str, **kwargs: Any) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "pbdkit.apps.cli", *args],
+        [sys.executable, "-m", "pbdkit", *args],
         capture_output=True,
         text=True,
         timeout=120,
@@ -273,7 +273,7 @@ def test_view_command_serves_and_stops_cleanly_on_a_signal(
     skill.save(path)
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "pbdkit.apps.cli", "view", "--skill", str(path), *_port(port)],
+        [sys.executable, "-m", "pbdkit", "view", "--skill", str(path), *_port(port)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -312,7 +312,7 @@ def coaster_view(small_task_skill: Callable[..., Any]) -> Iterator[Any]:
     """``pbdkit view --task coaster`` on a small skill (previews of 50 steps), served from a
     thread: (task skill, {"app": the app}, port)."""
     pytest.importorskip("viser")
-    from pbdkit.apps.view import ViewApp, served
+    from pbdkit.apps._view import ViewApp, served
 
     ts = small_task_skill("coaster", 3, 1)
     placement = ts.task.nominal_objects()

@@ -15,19 +15,18 @@ import pytest
 from numpy.typing import NDArray
 
 from pbdkit.vision import (
-    DEFAULT_THRESHOLD,
     ColorModel,
     PinholeCamera,
     StereoTracker,
     calibrate_camera,
-    calibrate_intrinsics,
     cbcr_from_rgb,
     find_blob,
-    reprojection_error,
-    threshold_from_probability,
     triangulate,
 )
-from pbdkit.vision.synthetic import Disc, random_discs, render_discs
+from pbdkit.vision._camera import calibrate_intrinsics
+from pbdkit.vision._color import DEFAULT_THRESHOLD, threshold_from_probability
+from pbdkit.vision._stereo import reprojection_error
+from pbdkit.vision._synthetic import Disc, random_discs, render_discs
 
 Float = NDArray[np.float64]
 

@@ -16,8 +16,8 @@ import pytest
 from arm_zoo import ARMS, ARMS_DIR, WIDE, grasp_errors
 
 from pbdkit import Robot, Skill
-from pbdkit.learning.datasets import reach_grasp_return
-from pbdkit.prob.gmm import GMM
+from pbdkit.datasets import reach_grasp_return
+from pbdkit.prob._gmm import GMM
 
 mujoco = pytest.importorskip("mujoco")
 

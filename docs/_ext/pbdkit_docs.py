@@ -5,8 +5,8 @@
   rewritten for the docs tree. The README stays the one source of the walkthroughs; a heading
   renamed there fails the build instead of leaving a stale copy.
 - References by the names users write resolve to where an object is documented, its defining
-  module: ``pbdkit.Skill`` to ``pbdkit.learning.skill.Skill``, ``pbdkit.sim.register_task`` to
-  ``pbdkit.sim.tasks.register_task``, and a short name to what the current module imports.
+  module: ``pbdkit.Skill`` to ``pbdkit.skill._skill.Skill``, ``pbdkit.sim.register_task`` to
+  ``pbdkit.sim._tasks.register_task``, and a short name to what the current module imports.
 - ``.. pbdkit-names:: PACKAGE`` is a table of a package's ``__all__``: each name, where it lives
   and the first paragraph of its docstring; ``.. pbdkit-modules::`` a table of modules;
   ``.. pbdkit-cli::`` the ``--help`` of every ``pbdkit`` command. The module pages are
@@ -43,7 +43,19 @@ from sphinx.util.nodes import nested_parse_with_titles
 logger = logging.getLogger(__name__)
 
 #: Packages whose ``__all__`` is public API: each name must be documented.
-PUBLIC_PACKAGES = ("pbdkit", "pbdkit.robots", "pbdkit.sim", "pbdkit.vision")
+PUBLIC_PACKAGES = (
+    "pbdkit",
+    "pbdkit.prob",
+    "pbdkit.motion",
+    "pbdkit.robots",
+    "pbdkit.data",
+    "pbdkit.reproduction",
+    "pbdkit.skill",
+    "pbdkit.datasets",
+    "pbdkit.sim",
+    "pbdkit.vision",
+    "pbdkit.apps",
+)
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 SRC = README.parent / "src"
@@ -144,13 +156,9 @@ def _import(path: str) -> tuple[Any, Any, str] | None:
     that path. The object is :data:`_MISSING` for an attribute a class declares but does not
     hold (an instance attribute, a dataclass field without a default): its docstring's
     "Attributes" section documents it."""
-    from pbdkit._moved import MOVED
-
     parts = path.split(".")
     for i in range(len(parts), 0, -1):
         modname = ".".join(parts[:i])
-        if modname in MOVED:  # the old paths warn; reached through the parent, not imported
-            continue
         try:
             obj: Any = importlib.import_module(modname)
         except ImportError:
@@ -177,7 +185,7 @@ def canonical_name(path: str, env: BuildEnvironment) -> tuple[str | None, bool]:
     if isinstance(obj, ModuleType):
         return (obj.__name__ if obj.__name__ in domain.modules else None), True
     if (inspect.isclass(obj) or inspect.isroutine(obj)) and hasattr(obj, "__qualname__"):
-        name = f"{obj.__module__}.{obj.__qualname__}"
+        name = _public_home(obj.__module__, obj.__qualname__, domain)
     elif inspect.isclass(parent):  # a property or an attribute
         owner, _ = canonical_name(f"{parent.__module__}.{parent.__qualname__}", env)
         name = f"{owner}.{attr}"
@@ -201,6 +209,18 @@ def canonical_name(path: str, env: BuildEnvironment) -> tuple[str | None, bool]:
     documented = name in domain.objects
     # an attribute the class does not hold exists only as far as its docstring says so
     return (name if documented else None), documented or obj is not _MISSING
+
+
+def _public_home(module: str, qualname: str, domain: Any) -> str:
+    """Where an object defined in ``module`` is documented: its module's page if that module is
+    public, else the page of the nearest public package above it, which exports it (a private
+    module's names are documented by the package that curates them)."""
+    name = f"{module}.{qualname}"
+    parts = module.split(".")
+    while name not in domain.objects and any(p.startswith("_") for p in parts):
+        parts = parts[:-1]
+        name = f"{'.'.join(parts)}.{qualname}"
+    return name
 
 
 def _assigns(modname: str, attr: str) -> bool:
@@ -321,7 +341,7 @@ _HELP_SCRIPT = """
 import json, sys
 import typer.main
 from typer.testing import CliRunner
-from pbdkit.apps.cli import app
+from pbdkit.apps._cli import app
 names = list(getattr(typer.main.get_command(app), "commands", {}))
 env = {"COLUMNS": "96", "NO_COLOR": "1", "TERM": "dumb"}
 out = {}
@@ -454,15 +474,7 @@ def _has_own_doc(cls: Any, name: str) -> bool:
 
 
 #: The layers, bottom up: each gets a page of its own, and each of its public modules.
-LAYERS = (
-    "pbdkit.prob",
-    "pbdkit.motion",
-    "pbdkit.robots",
-    "pbdkit.learning",
-    "pbdkit.sim",
-    "pbdkit.vision",
-    "pbdkit.apps",
-)
+LAYERS = PUBLIC_PACKAGES[1:]
 GENERATED = "api/generated"
 
 
@@ -475,19 +487,15 @@ def _public_modules(package: ModuleType) -> list[str]:
 
 
 def module_page(name: str) -> tuple[str, list[str]]:
-    """The reST page of a module (a package lists its modules), and the modules listed."""
+    """The reST page of a public module or package, and the public modules it lists.
+
+    A package's page documents the names of its ``__all__``, wherever they are defined: its
+    implementation modules are private (``_name.py``) and have no page of their own."""
     module = importlib.import_module(name)
     lines = [name, "=" * len(name), "", f".. automodule:: {name}"]
     children = _public_modules(module) if hasattr(module, "__path__") else []
-    # a name a module re-exports in its __all__ is documented where it is defined
-    reexported = [n for n in getattr(module, "__all__", ()) if not _defined_in(module, n)]
-    if reexported and not children:
-        lines.append(f"   :exclude-members: {', '.join(reexported)}")
     if children:
-        # a package's own page documents what it defines; what it re-exports from its modules
-        # is in the table, and documented on their pages
-        lines += ["   :ignore-module-all:", "", f".. pbdkit-names:: {name}", ""]
-        lines += [".. rubric:: Modules", "", f".. pbdkit-modules:: {' '.join(children)}"]
+        lines += ["", ".. rubric:: Modules", "", f".. pbdkit-modules:: {' '.join(children)}"]
     return "\n".join(lines) + "\n", children
 
 

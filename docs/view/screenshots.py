@@ -16,10 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import pbdkit
-from pbdkit.apps.view import HOST, ViewApp, served
-from pbdkit.apps.view_plan import typical_placements
-from pbdkit.sim.task_skill import learn_task
-from pbdkit.sim.tasks import yaw_pose
+from pbdkit.apps._view import HOST, ViewApp, served
+from pbdkit.apps._view_plan import typical_placements
+from pbdkit.sim._task_skill import learn_task
+from pbdkit.sim._tasks import yaw_pose
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent.parent / "tests"))

@@ -33,50 +33,45 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from . import _moved
-
 if TYPE_CHECKING:
-    from . import robots
-    from .learning.bags import read_bag, write_trajectory_bag
-    from .learning.controller import Command, Controller
-    from .learning.demonstration import (
+    from . import datasets, robots
+    from .data import (
         Demonstration,
         LimitWarning,
         demonstration_from_csv,
         load_demonstrations,
+        read_bag,
         save_demonstrations,
+        write_trajectory_bag,
     )
-    from .learning.probabilistic_ik import ReachWarning, ReproductionResult
-    from .learning.skill import Skill
-    from .prob import gaussian
-    from .prob.frames import FrameModel
-    from .prob.gmm import GMM
-    from .robots.kinematics import damped_pinv, nullspace_projector
-    from .robots.model import Robot
+    from .prob import GMM, FrameModel, gaussian
+    from .reproduction import Command, Controller, ReachWarning, ReproductionResult
+    from .robots import Robot, damped_pinv, nullspace_projector
+    from .skill import Skill
 
-# The public names and the modules they live in. They are imported on first use (PEP 562), so
-# that `import pbdkit` and the command line start in a fraction of a second: scikit-learn,
+# The public names and the sub-packages they live in. They are imported on first use (PEP 562),
+# so that `import pbdkit` and the command line start in a fraction of a second: scikit-learn,
 # SciPy and pinocchio are loaded when a name that needs them is first used.
 _WHERE = {
-    "GMM": "prob.gmm",
-    "FrameModel": "prob.frames",
-    "Command": "learning.controller",
-    "Controller": "learning.controller",
-    "Demonstration": "learning.demonstration",
-    "LimitWarning": "learning.demonstration",
-    "ReachWarning": "learning.probabilistic_ik",
-    "ReproductionResult": "learning.probabilistic_ik",
-    "Robot": "robots.model",
-    "Skill": "learning.skill",
-    "damped_pinv": "robots.kinematics",
-    "demonstration_from_csv": "learning.demonstration",
-    "load_demonstrations": "learning.demonstration",
-    "nullspace_projector": "robots.kinematics",
-    "read_bag": "learning.bags",
-    "save_demonstrations": "learning.demonstration",
-    "write_trajectory_bag": "learning.bags",
+    "GMM": "prob",
+    "FrameModel": "prob",
+    "Command": "reproduction",
+    "Controller": "reproduction",
+    "Demonstration": "data",
+    "LimitWarning": "data",
+    "ReachWarning": "reproduction",
+    "ReproductionResult": "reproduction",
+    "Robot": "robots",
+    "Skill": "skill",
+    "damped_pinv": "robots",
+    "demonstration_from_csv": "data",
+    "load_demonstrations": "data",
+    "nullspace_projector": "robots",
+    "read_bag": "data",
+    "save_demonstrations": "data",
+    "write_trajectory_bag": "data",
 }
-_SUBMODULES = {"gaussian": "prob.gaussian", "robots": "robots"}
+_SUBMODULES = {"datasets": "datasets", "gaussian": "prob.gaussian", "robots": "robots"}
 
 __all__ = [
     "GMM",
@@ -90,6 +85,7 @@ __all__ = [
     "Robot",
     "Skill",
     "damped_pinv",
+    "datasets",
     "demonstration_from_csv",
     "gaussian",
     "load_demonstrations",
@@ -100,8 +96,6 @@ __all__ = [
     "write_trajectory_bag",
 ]
 __version__ = "0.1.0"
-
-_moved.install()
 
 
 def __getattr__(name: str) -> Any:

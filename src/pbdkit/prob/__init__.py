@@ -1,3 +1,13 @@
-"""Probability: Gaussians in information form (:mod:`.gaussian`), the GMM (:mod:`.gmm`),
-Gaussian mixture regression (:mod:`.gmr`), rotations and poses (:mod:`.rotations`) and frames
-(:mod:`.frames`). The bottom layer: numpy, SciPy and scikit-learn only."""
+"""Probability: the GMM (:class:`GMM`), its choice of K (:class:`ModelSelection`), Gaussian mixture
+regression (``GMM.regress``), task-parameterized frames (:class:`FrameModel`) and products of
+Gaussians in information form (:mod:`pbdkit.prob.gaussian`).
+
+The bottom layer: numpy, SciPy and scikit-learn only."""
+
+from __future__ import annotations
+
+from . import gaussian
+from ._frames import FrameModel
+from ._gmm import GMM, ModelSelection
+
+__all__ = ["GMM", "FrameModel", "ModelSelection", "gaussian"]

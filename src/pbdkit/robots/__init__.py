@@ -1,4 +1,6 @@
-"""Robot models shipped with pbdkit.
+"""Robots: a URDF's kinematics and limits (:class:`Robot`), the arms shipped with pbdkit
+(:func:`katana`, :func:`panda`, by name: :func:`load`) and the pseudo-inverse the reproduction
+uses (:func:`damped_pinv`, :func:`nullspace_projector`).
 
 =========  ======  ==============================================================================
 name       joints  source
@@ -6,171 +8,35 @@ name       joints  source
 katana     5       Neuronics Katana 6M180 (the paper's arm): ``katana_6m180.urdf`` in this package,
                    written from published dimensions, primitive geometry and inertias for MuJoCo.
                    Joints pan, lift1, lift2, lift3, wrist_roll; tip frame ``tool``.
-                   Limits: velocity 1.19 rad/s (the URDF's, the top motor speed); acceleration
-                   6 rad/s^2 and jerk 60 rad/s^3 on every joint from
-                   ``katana_6m180_joint_limits.yaml`` (the maker publishes none: conservative
-                   values, about twice the peaks of the simulated teacher's demonstrations).
 panda      7       Franka Emika Panda, from its published modified-DH parameters (generated at call
                    time, kinematics only). Joints panda_joint1..7; tip frame ``flange``.
-                   Limits: Franka's published velocity, acceleration and jerk limits from
-                   ``panda_joint_limits.yaml``; position limits in the generated URDF.
 =========  ======  ==============================================================================
-
-The ``*_joint_limits.yaml`` files are in the ``joint_limits.yaml`` format of MoveIt and
-ros2_control (see :meth:`pbdkit.Robot.from_urdf`). Everything is read from the package's files.
-
-Use :func:`load` to get a robot by name (e.g. from a command-line option),
-:func:`katana_urdf_path` for the file a simulator loads, and :func:`katana_joint_limits_path` /
-:func:`panda_joint_limits_path` for the limit files (to load a variant with
-``Robot.from_urdf(..., joint_limits=path)``).
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-from importlib.resources import files
-from pathlib import Path
-
-from .model import Robot, urdf_from_dh
+from ._kinematics import damped_pinv, nullspace_projector
+from ._robot import Robot, urdf_from_dh
+from ._shipped import (
+    available,
+    katana,
+    katana_joint_limits_path,
+    katana_urdf_path,
+    load,
+    panda,
+    panda_joint_limits_path,
+)
 
 __all__ = [
-    "PANDA_DH",
+    "Robot",
     "available",
+    "damped_pinv",
     "katana",
     "katana_joint_limits_path",
     "katana_urdf_path",
     "load",
+    "nullspace_projector",
     "panda",
     "panda_joint_limits_path",
+    "urdf_from_dh",
 ]
-
-_KATANA_FILE = "katana_6m180.urdf"
-_KATANA_LIMITS_FILE = "katana_6m180_joint_limits.yaml"
-_PANDA_LIMITS_FILE = "panda_joint_limits.yaml"
-
-#: Franka Panda modified-DH table (Craig), rows (a_{i-1}, alpha_{i-1}, d_i, theta_offset_i), from
-#: Franka's published "Robot and interface specifications"; the flange is d = 0.107 m after joint 7.
-PANDA_DH: tuple[tuple[float, float, float, float], ...] = (
-    (0.0, 0.0, 0.333, 0.0),
-    (0.0, -math.pi / 2, 0.0, 0.0),
-    (0.0, math.pi / 2, 0.316, 0.0),
-    (0.0825, math.pi / 2, 0.0, 0.0),
-    (-0.0825, -math.pi / 2, 0.384, 0.0),
-    (0.0, math.pi / 2, 0.0, 0.0),
-    (0.088, math.pi / 2, 0.0, 0.0),
-)
-_PANDA_LOWER = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
-_PANDA_UPPER = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
-_PANDA_EFFORT = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
-
-
-def katana_urdf_path() -> Path:
-    """Path of the Katana 6M180 URDF shipped with pbdkit (primitive geometry only).
-
-    Returns
-    -------
-    path : pathlib.Path
-    """
-    return _package_file(_KATANA_FILE)
-
-
-def katana_joint_limits_path() -> Path:
-    """Path of the Katana's ``joint_limits.yaml`` shipped with pbdkit (acceleration and jerk).
-
-    Returns
-    -------
-    path : pathlib.Path
-    """
-    return _package_file(_KATANA_LIMITS_FILE)
-
-
-def panda_joint_limits_path() -> Path:
-    """Path of the Panda's ``joint_limits.yaml`` shipped with pbdkit (Franka's published
-    velocity, acceleration and jerk limits).
-
-    Returns
-    -------
-    path : pathlib.Path
-    """
-    return _package_file(_PANDA_LIMITS_FILE)
-
-
-def _package_file(name: str) -> Path:
-    return Path(str(files(__name__).joinpath(name)))
-
-
-def katana() -> Robot:
-    """The 5-DOF Katana 6M180 of the paper, tip = the ``tool`` frame (0.1505 m on the roll axis).
-
-    Returns
-    -------
-    robot : Robot
-        Joints pan, lift1, lift2, lift3, wrist_roll; base = ``base_link``. Velocity limits
-        1.19 rad/s (the URDF's), acceleration 6 rad/s^2 and jerk 60 rad/s^3 on every joint
-        (:func:`katana_joint_limits_path`: conservative values, the maker publishes none).
-    """
-    return Robot.from_urdf(
-        katana_urdf_path().read_text(encoding="utf-8"),
-        tip="tool",
-        joint_limits=katana_joint_limits_path(),
-    )
-
-
-def panda() -> Robot:
-    """The 7-DOF Franka Emika Panda from its modified-DH table, tip = the ``flange`` frame.
-
-    Returns
-    -------
-    robot : Robot
-        Joints panda_joint1 ... panda_joint7; links panda_link0 (base) ... panda_link7.
-        Franka's published limits ("Robot and interface specifications"): position in the
-        generated URDF; velocity 2.175 rad/s (joints 1-4) and 2.61 rad/s (5-7), acceleration
-        15, 7.5, 10, 12.5, 15, 20, 20 rad/s^2 and jerk 7500, 3750, 5000, 6250, 7500, 10000,
-        10000 rad/s^3 from :func:`panda_joint_limits_path`.
-    """
-    urdf = urdf_from_dh(
-        PANDA_DH,
-        lower=_PANDA_LOWER,
-        upper=_PANDA_UPPER,
-        tip_offset=(0.0, 0.0, 0.107),
-        convention="modified",
-        name="panda",
-        joint_names=[f"panda_joint{i}" for i in range(1, 8)],
-        link_prefix="panda_link",
-        tip="flange",
-        effort=_PANDA_EFFORT,
-    )
-    return Robot.from_urdf(urdf, tip="flange", joint_limits=panda_joint_limits_path())
-
-
-_FACTORIES: dict[str, Callable[[], Robot]] = {"katana": katana, "panda": panda}
-
-
-def available() -> list[str]:
-    """Names of the shipped robots, for :func:`load`.
-
-    Returns
-    -------
-    names : list of str
-    """
-    return sorted(_FACTORIES)
-
-
-def load(name: str) -> Robot:
-    """A shipped robot by name.
-
-    Parameters
-    ----------
-    name : str
-        One of :func:`available`.
-
-    Returns
-    -------
-    robot : Robot
-    """
-    try:
-        factory = _FACTORIES[name]
-    except KeyError:
-        raise ValueError(f"name must be one of {available()}, got {name!r}") from None
-    return factory()

@@ -1,40 +1,33 @@
 """The simulated world of the experiment (MuJoCo): tasks, scene, cameras, execution, teacher.
 
-This subpackage is the only part of pbdkit that imports MuJoCo (the ``sim`` extra:
-``pip install pbdkit[sim]``); learning and reproduction never depend on it.
+The only part of pbdkit that imports MuJoCo (the ``sim`` extra: ``pip install pbdkit[sim]``);
+learning and reproduction never depend on it. Names are imported on first use.
 
-- :mod:`pbdkit.sim.tasks`: a task is one :class:`TaskSpec` (placement ranges, scene objects, the
-  teacher's via points, the success judge) in a registry (:func:`register_task`,
-  :func:`get_task`, :func:`task_names`); the paper's two tasks, ``"coaster"`` and ``"basin"``
-  (:mod:`pbdkit.sim.taskdefs`), are registered when this package is imported. The entry points
-  below take a task's name or its spec and resolve a name once; what they call takes the spec.
-  Which objects move (:func:`tracked_objects`: tracked by the cameras, constrained in task
-  space) or are fixed (:func:`fixed_objects`: the basin) comes from the ranges.
-- :func:`build_scene` (:mod:`pbdkit.sim.world`), :class:`Simulation`: the Katana (from the same
-  URDF as :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240
-  cameras.
-- :func:`execute`: plays a joint trajectory under physics and judges the outcome with the task's
-  judge (:class:`ExecutionResult`, :class:`Outcome`).
-- :func:`execute_online` (:mod:`pbdkit.sim.online`): runs a :class:`pbdkit.Controller` in the
-  physics loop, told object positions at 15 Hz by the cameras (through a
-  :class:`pbdkit.vision.TrackFilter`) or the truth.
-- :mod:`pbdkit.sim.perturb`: disturbances for both ways of running, a registry like the tasks'
-  (:func:`register_perturbation`, :func:`perturbation_names`; built in: ``move``, an object
-  slides; ``push``, a shove on the arm; ``rotate``, an object placed as a pose turns).
+- Tasks: a task is one :class:`TaskSpec` (placement ranges, scene objects, the teacher's via
+  points, the success judge) in a registry (:func:`register_task`, :func:`get_task`,
+  :func:`task_names`); the built-in ``"coaster"`` and ``"basin"`` (the paper's two) and
+  ``"slot"``. A task's name becomes its spec once, at the edge (the command line,
+  :func:`evaluate`); below that, everything takes the spec.
+- :class:`Simulation` (:func:`build_scene`): the Katana (from the same URDF as
+  :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240 cameras.
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
+- :func:`learn_task`: a task's skill (:class:`TaskSkill`).
+- :func:`execute`: plays a joint trajectory under physics and judges it (:class:`ExecutionResult`);
+  :func:`execute_online` runs a :class:`pbdkit.Controller` in the physics loop.
+- Disturbances (:class:`Perturbation`, :func:`register_perturbation`,
+  :func:`perturbation_names`): ``move``, ``push``, ``rotate``.
+- :func:`evaluate`: the success rate of every controller over new placements
+  (:class:`Evaluation`), serially or on Dask workers.
 - :func:`save_video`: recorded frames to MP4.
-- The experiment (:mod:`pbdkit.sim.experiment` gathers its names), one module per concern:
-  controller names (:mod:`~pbdkit.learning.naming`), a task's skill
-  (:mod:`~pbdkit.sim.task_skill`), one controller's run (:mod:`~pbdkit.sim.runs`), what is
-  measured (:mod:`~pbdkit.sim.metrics`), what the skill is told (:mod:`~pbdkit.sim.sensing`),
-  trials (:mod:`~pbdkit.sim.trials`) on Dask workers (:mod:`~pbdkit.sim.parallel`, a pure
-  executor), and the evaluation (:mod:`~pbdkit.sim.evaluation`).
 
 Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (``osmesa`` if only OSMesa is installed);
 set it before importing this package to choose another backend.
 """
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from . import _gl  # noqa: F401  (must run before mujoco is imported)
 
@@ -45,84 +38,98 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
         "pbdkit.sim needs MuJoCo: install the 'sim' extra, e.g. pip install 'pbdkit[sim]'"
     ) from exc
 
-from . import taskdefs  # noqa: F401  (registers the built-in tasks)
-from .execute import ExecutionResult, evaluate_outcome, execute
-from .online import OnlineRun, execute_online
-from .perturb import (
-    PERTURBATIONS,
-    Disturbance,
-    DisturbanceSetup,
-    Perturbation,
-    PushArm,
-    SlideObject,
-    TurnObject,
-    get_perturbation,
-    perturbation_names,
-    register_perturbation,
-    unregister_perturbation,
-)
-from .scene import CAMERAS, SceneInfo, Simulation, build_scene
-from .tasks import (
-    ObjectMove,
-    ObjectTurn,
-    Outcome,
-    PlacementRange,
-    RunStats,
-    TaskSpec,
-    ViaPoint,
-    fixed_objects,
-    full_placement,
-    get_task,
-    nominal_objects,
-    register_task,
-    sample_objects,
-    task_names,
-    tracked_objects,
-    unregister_task,
-)
-from .teacher import solve_ik, teach, teach_one, tool_pitch
-from .video import save_video
+from . import _taskdefs  # noqa: F401  (registers the built-in tasks)
+
+if TYPE_CHECKING:
+    from ._evaluation import Evaluation, evaluate
+    from ._execute import ExecutionResult, execute
+    from ._online import execute_online
+    from ._perturb import Disturbance, Perturbation, perturbation_names, register_perturbation
+    from ._scene import Simulation, build_scene
+    from ._task_skill import TaskSkill, learn_task
+    from ._tasks import (
+        ObjectMove,
+        ObjectTurn,
+        Outcome,
+        PlacementRange,
+        TaskSpec,
+        ViaPoint,
+        get_task,
+        nominal_objects,
+        register_task,
+        sample_objects,
+        task_names,
+    )
+    from ._teacher import teach
+    from ._video import save_video
+
+_WHERE = {
+    "Disturbance": "_perturb",
+    "Evaluation": "_evaluation",
+    "ExecutionResult": "_execute",
+    "ObjectMove": "_tasks",
+    "ObjectTurn": "_tasks",
+    "Outcome": "_tasks",
+    "Perturbation": "_perturb",
+    "PlacementRange": "_tasks",
+    "Simulation": "_scene",
+    "TaskSkill": "_task_skill",
+    "TaskSpec": "_tasks",
+    "ViaPoint": "_tasks",
+    "build_scene": "_scene",
+    "evaluate": "_evaluation",
+    "execute": "_execute",
+    "execute_online": "_online",
+    "get_task": "_tasks",
+    "learn_task": "_task_skill",
+    "nominal_objects": "_tasks",
+    "perturbation_names": "_perturb",
+    "register_perturbation": "_perturb",
+    "register_task": "_tasks",
+    "sample_objects": "_tasks",
+    "save_video": "_video",
+    "task_names": "_tasks",
+    "teach": "_teacher",
+}
 
 __all__ = [
-    "CAMERAS",
-    "PERTURBATIONS",
     "Disturbance",
-    "DisturbanceSetup",
+    "Evaluation",
     "ExecutionResult",
     "ObjectMove",
     "ObjectTurn",
-    "OnlineRun",
     "Outcome",
     "Perturbation",
     "PlacementRange",
-    "PushArm",
-    "RunStats",
-    "SceneInfo",
     "Simulation",
-    "SlideObject",
+    "TaskSkill",
     "TaskSpec",
-    "TurnObject",
     "ViaPoint",
     "build_scene",
-    "evaluate_outcome",
+    "evaluate",
     "execute",
     "execute_online",
-    "fixed_objects",
-    "full_placement",
-    "get_perturbation",
     "get_task",
+    "learn_task",
     "nominal_objects",
     "perturbation_names",
     "register_perturbation",
     "register_task",
     "sample_objects",
     "save_video",
-    "solve_ik",
     "task_names",
     "teach",
-    "teach_one",
-    "tool_pitch",
-    "tracked_objects",
-    "unregister_perturbation",
-    "unregister_task",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'pbdkit.sim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{where}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

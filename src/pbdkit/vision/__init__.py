@@ -15,11 +15,11 @@ Pipeline and names
 - :func:`triangulate`: two views -> world points (OpenCV DLT + Gauss-Newton refinement).
 - :class:`StereoTracker`: two frames -> ``{name: Track}``, a status and a position or None.
 - :class:`PoseModel`, :class:`PoseTrack`: an object that turns, located by two patches (its
-  ends): its pose, position and yaw about the vertical (:mod:`pbdkit.vision.pose`;
+  ends): its pose, position and yaw about the vertical (:mod:`pbdkit.vision._pose`;
   :meth:`StereoTracker.track_objects`).
 - :class:`TrackFilter`: a stream of tracks while a skill runs -> the positions to trust (holds
   the last good one when the arm hides a patch or carries the object; refuses jumps).
-- :mod:`pbdkit.vision.synthetic`: images of colored discs at known 3-D positions (for tests).
+- :mod:`pbdkit.vision._synthetic`: images of colored discs at known 3-D positions (for tests).
 
 Beyond the paper, both measured to be needed: pixels near the neutral point of the CbCr plane
 (gray, black, white) never match a color (``min_chroma``, see :class:`ColorModel`), and a blob is
@@ -39,48 +39,23 @@ not import it.
 
 from __future__ import annotations
 
-from .blobs import Blob, BlobStatus, find_blob
-from .camera import PinholeCamera, calibrate_camera, calibrate_intrinsics
-from .color import (
-    DEFAULT_MIN_CHROMA,
-    DEFAULT_THRESHOLD,
-    ColorModel,
-    cbcr_from_rgb,
-    check_image,
-    threshold_from_probability,
-)
-from .filter import TrackEvent, TrackFilter
-from .pose import PoseModel, PoseTrack
-from .stereo import (
-    ObjectTrack,
-    StereoTracker,
-    Track,
-    TrackStatus,
-    reprojection_error,
-    triangulate,
-)
+from ._blobs import find_blob
+from ._camera import PinholeCamera, calibrate_camera
+from ._color import ColorModel, cbcr_from_rgb
+from ._filter import TrackFilter
+from ._pose import PoseModel, PoseTrack
+from ._stereo import StereoTracker, Track, triangulate
 
 __all__ = [
-    "DEFAULT_MIN_CHROMA",
-    "DEFAULT_THRESHOLD",
-    "Blob",
-    "BlobStatus",
     "ColorModel",
-    "ObjectTrack",
     "PinholeCamera",
     "PoseModel",
     "PoseTrack",
     "StereoTracker",
     "Track",
-    "TrackEvent",
     "TrackFilter",
-    "TrackStatus",
     "calibrate_camera",
-    "calibrate_intrinsics",
     "cbcr_from_rgb",
-    "check_image",
     "find_blob",
-    "reprojection_error",
-    "threshold_from_probability",
     "triangulate",
 ]

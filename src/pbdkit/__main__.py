@@ -1,0 +1,5 @@
+"""``python -m pbdkit``: the ``pbdkit`` command."""
+
+from pbdkit.apps import main
+
+main()

@@ -1,0 +1,942 @@
+"""``pbdkit view``: the skill live in a browser. Drag an object and the plan follows.
+
+A `viser <https://viser.studio>`_ server, bound to 127.0.0.1, serves a page with a 3-D scene and
+a panel:
+
+- the arm, drawn from its URDF (``--skill``; with yourdfpy, plus a stick figure through its
+  links for a URDF without visual geometry) or from the MuJoCo scene of the task (``--task``:
+  the table and the objects as the simulation has them);
+- each object the skill knows, as a handle to drag: across the table and about the vertical for
+  a task (x, y, and yaw for an object placed as a pose), in 3-D for a skill file; and as number
+  fields in the panel;
+- on every move, the skill reproduced for the new placement (:meth:`pbdkit.Skill.reproduce`,
+  with the chosen controller), and the scene redrawn: the planned hand path, each segment
+  colored by the constraint that drives that step (the largest share of
+  :attr:`~pbdkit.ReproductionResult.influence`, colors as in the
+  report's Fig. 6); the arm at the step of the time slider (and ``play``); the constraints'
+  Gaussians at that step, as ellipsoids of :data:`N_SD` standard deviations of the hand
+  position each expects (in the object's frame, so they turn with it; the joint-space one
+  through the Jacobian), the driving one opaque. A newer move replaces one that waits to be
+  planned (:class:`LatestWins`): the page shows the latest placement, never a backlog.
+- for a task: ``run in physics`` executes the plan in MuJoCo and replays it with the outcome;
+  ``online`` runs the controller in the physics loop at the wall clock's pace, the objects still
+  draggable (an object in the hand stays there).
+
+The library does not need any of this: viser and yourdfpy are the optional extra
+``pbdkit[view]`` and are imported only here, when the command runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import io
+import math
+import signal
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._rotations import exp_map, matrix_from_quaternion, pose_matrix
+from ..data._placement import position_of
+from ..reproduction._constraints import JOINT
+from ..skill._naming import controller_names, controller_use
+from ._view_plan import (
+    COLOR_NAMES,
+    JOINT_RGB,
+    N_SD,
+    OBJECT_RGBS,
+    LatestWins,
+    Plan,
+    carry_transform,
+    coarse_skill,
+    constraint_colors,
+    ellipsoid_pose,
+    make_plan,
+    quat_wxyz,
+    step_gaussians,
+)
+
+if TYPE_CHECKING:
+    import viser
+
+    from ..sim._task_skill import TaskSkill
+    from ..skill._skill import Skill
+    from ._view_world import Frame, SimDrawing
+
+__all__ = [
+    "HOST",
+    "MIN_PREVIEW_STEPS",
+    "PREVIEW_BUDGET",
+    "PREVIEW_STEPS",
+    "ViewApp",
+    "check_port",
+    "serve",
+    "served",
+]
+
+Float = NDArray[np.float64]
+
+#: The page is served on this interface only.
+HOST = "127.0.0.1"
+#: While an object is dragged, plans are previews on a grid of at most this many steps
+#: (:func:`pbdkit.apps._view_plan.coarse_skill`); the full plan follows when the drag ends.
+PREVIEW_STEPS = 250
+#: ... and fewer where a skill's preview would take longer than this (s) to plan
+#: (:meth:`ViewApp.calibrate_preview`), down to :data:`MIN_PREVIEW_STEPS`.
+PREVIEW_BUDGET = 0.030
+MIN_PREVIEW_STEPS = 100
+#: At most this many segments in the drawn path.
+PATH_SEGMENTS = 400
+
+
+def check_port(port: int) -> None:
+    """Refuse a port that is taken on :data:`HOST` (viser would silently take the next one).
+
+    Raises
+    ------
+    ValueError
+        The port is not in 1..65535, or something listens on it.
+    """
+    if not 1 <= port <= 65535:
+        raise ValueError(f"--port must be in 1..65535, got {port}")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((HOST, port))
+        except OSError as exc:
+            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                why = "in use" if exc.errno == errno.EADDRINUSE else "not allowed"
+                raise ValueError(
+                    f"port {port} on {HOST} is {why}: choose another with --port"
+                ) from None
+            raise
+
+
+def _wxyz_of(value: Float) -> tuple[float, float, float, float]:
+    if value.shape == (4, 4):
+        w = quat_wxyz(value[:3, :3])
+        return (float(w[0]), float(w[1]), float(w[2]), float(w[3]))
+    return (1.0, 0.0, 0.0, 0.0)
+
+
+def _yaw_deg(value: Float) -> float:
+    return math.degrees(math.atan2(float(value[1, 0]), float(value[0, 0])))
+
+
+def _yaw_pose(position: Float, yaw_deg: float) -> Float:
+    """A pose at ``position`` turned about the vertical by ``yaw_deg``."""
+    return pose_matrix(position, exp_map([0.0, 0.0, math.radians(yaw_deg)]))
+
+
+class ViewApp:
+    """The page: scene, panel, planner (module docstring). :func:`serve` runs it.
+
+    Parameters
+    ----------
+    skill : Skill
+    objects : mapping str -> array
+        Where the objects start (every object the skill knows; for a task, every object of the
+        task).
+    server : viser.ViserServer
+        Bound to :data:`HOST`; the app adds its scene and panel.
+    task_skill : TaskSkill, optional
+        For ``--task``: the task's skills (controllers, ``fused-position``), the MuJoCo scene
+        and the runs in physics.
+    urdf : path, optional
+        The URDF to draw the arm from (meshes are looked up beside it); default: the skill's
+        robot's URDF text.
+    title : str
+        Shown at the top of the panel.
+    preview_steps : int or None
+        While a handle is held, plans are previews of at most this many steps
+        (:func:`coarse_skill`; fewer if a preview would take more than
+        :data:`PREVIEW_BUDGET`, :meth:`calibrate_preview`); the full plan follows its release.
+        None: full plans only.
+    """
+
+    def __init__(
+        self,
+        skill: Skill,
+        objects: Mapping[str, Any],
+        server: viser.ViserServer,
+        *,
+        task_skill: TaskSkill | None = None,
+        urdf: Path | None = None,
+        title: str = "pbdkit view",
+        preview_steps: int | None = PREVIEW_STEPS,
+    ) -> None:
+        self.skill = skill
+        #: Steps of a preview plan (None, or a skill of no more steps: no previews).
+        self.preview_steps = (
+            preview_steps if preview_steps is not None and preview_steps < skill.n_steps else None
+        )
+        self._coarse_skills: dict[tuple[int, int], Skill] = {}
+        self.preview_seconds: float | None = None
+        self._max_preview_steps = self.preview_steps or 0
+        self._preview_times: deque[float] = deque(maxlen=5)
+        self._dragging: set[str] = set()
+        self.ts = task_skill
+        self.server = server
+        self._lock = threading.RLock()
+        self.objects: dict[str, Float] = {
+            k: np.asarray(v, dtype=np.float64).copy() for k, v in objects.items()
+        }
+        missing = [k for k in skill.object_names if k not in self.objects]
+        if missing:
+            raise ValueError(f"objects: no placement for {missing} (the skill's objects)")
+        oriented = task_skill is not None and task_skill.position_skill is not None
+        self.controllers = controller_names(skill.object_names, oriented=oriented)
+        self.controller = "fused"
+        self.colors = constraint_colors([JOINT, *skill.object_names])
+        self.plan: Plan | None = None
+        self.step = 0
+        self.plans = 0
+        self._run_thread: threading.Thread | None = None
+        self._live: Any = None  # the online run's Sampler while it runs
+        #: The last run in physics (:class:`pbdkit.sim._runs.ControllerRun` or
+        #: :class:`~pbdkit.sim._runs.OnlineControllerRun`) and its line in the panel.
+        self.last_run: Any = None
+        self.result_text = ""
+        self._stop = threading.Event()
+        self._updating_fields = False
+        self._playing = threading.Event()
+        self._draw_world: SimDrawing | None = None
+        self._urdf_arm: _UrdfArm | None = None
+        self._build_scene(urdf)
+        self._build_panel(title)
+        self.planner: LatestWins[tuple[dict[str, Float], str, bool]] = LatestWins(
+            self._replan, on_error=self._report_error
+        )
+        self._player = threading.Thread(
+            target=self._play_loop, name="pbdkit-view-play", daemon=True
+        )
+        self._player.start()
+        self.request_plan()
+
+    # ------------------------------------------------------------------ scene
+    def _build_scene(self, urdf: Path | None) -> None:
+        scene = self.server.scene
+        scene.set_up_direction("+z")
+        scene.add_grid("/grid", width=2.0, height=2.0, cell_size=0.1, position=(0.0, 0.0, -0.001))
+        # Look at the middle of the base and the objects, from a distance the arm's reach sets.
+        objects = np.mean([position_of(v) for v in self.objects.values()], axis=0)
+        reach = float(self.skill.reach) if np.isfinite(self.skill.reach) else 1.0
+        centre = 0.5 * objects + np.array([0.0, 0.0, 0.15 * reach])
+        view = np.array([0.9, -1.2, 0.8])
+        self.server.initial_camera.position = centre + 1.05 * reach * view / np.linalg.norm(view)
+        self.server.initial_camera.look_at = centre
+        if self.ts is not None:
+            from ._view_world import SimDrawing
+
+            self._draw_world = SimDrawing(self.server, self.ts.task, self.objects)
+        else:
+            self._urdf_arm = _UrdfArm(self.server, self.skill.robot, urdf)
+        self.handles: dict[str, Any] = {}
+        movable = self._movable()
+        for name in movable:
+            value = self.objects[name]
+            posed = value.shape == (4, 4)
+            if self.ts is not None:  # on the table: across it, and about the vertical
+                axes, rotations = (True, True, False), posed
+            else:
+                axes, rotations = (True, True, True), posed
+            handle = scene.add_transform_controls(
+                f"/objects/{name}",
+                scale=0.12,
+                active_axes=axes,
+                disable_rotations=not rotations,
+                depth_test=False,
+                position=np.asarray(position_of(value), dtype=np.float64),
+                wxyz=_wxyz_of(value),
+            )
+            if self.ts is None:
+                color = self.colors.get(name, (90, 90, 90))
+                scene.add_icosphere(f"/objects/{name}/marker", radius=0.02, color=color)
+                scene.add_frame(f"/objects/{name}/axes", axes_length=0.06, axes_radius=0.003)
+            scene.add_label(f"/objects/{name}/label", name, position=(0.0, 0.0, 0.05))
+            handle.on_update(self._dragged(name))
+            self.handles[name] = handle
+        self.path: Any = None
+        self.gauss: dict[str, Any] = {}
+        for name in [JOINT, *self.skill.object_names]:
+            self.gauss[name] = scene.add_icosphere(
+                f"/plan/gauss/{name}",
+                radius=1.0,
+                color=self.colors[name],
+                opacity=0.3,
+                subdivisions=3,
+                cast_shadow=False,
+                receive_shadow=False,
+            )
+        self.hand = scene.add_frame("/plan/hand", axes_length=0.05, axes_radius=0.003)
+        # A dot at the hand in the color of the constraint that drives the step.
+        self.hand_dot: Any = scene.add_icosphere(
+            "/plan/hand/driving", radius=0.012, color=self.colors[JOINT], cast_shadow=False
+        )
+
+    def _movable(self) -> list[str]:
+        """The objects that can be dragged: the skill's (for a task, those that move)."""
+        if self.ts is not None:
+            fixed = set(self.ts.task.fixed_objects)
+            return [k for k in self.objects if k not in fixed]
+        return list(self.skill.object_names)
+
+    # ------------------------------------------------------------------ panel
+    def _build_panel(self, title: str) -> None:
+        gui = self.server.gui
+        gui.add_markdown(f"**{title}**: drag an object; the plan follows.")
+        names = {JOINT_RGB: "green", **dict(zip(OBJECT_RGBS, COLOR_NAMES, strict=True))}
+        legend = ", ".join(f"{k} {names[c]}" for k, c in self.colors.items())
+        gui.add_markdown(
+            f"Path and dot at the hand: the constraint that drives ({legend}); ellipsoids: "
+            f"each constraint's {N_SD:g}-sd Gaussian at the step, the driving one opaque."
+        )
+        self.ui_controller: Any = gui.add_dropdown(
+            "controller", tuple(self.controllers), initial_value=self.controller
+        )
+        self.ui_controller.on_update(self._controller_changed)
+        self.ui_status: Any = gui.add_markdown("planning ...")
+        self.ui_end: Any = gui.add_text("hand at the end (mm)", initial_value="", disabled=True)
+        self.ui_reproduce: Any = gui.add_text("reproduce (ms)", initial_value="", disabled=True)
+        self.ui_driving: Any = gui.add_text("driving now", initial_value="", disabled=True)
+        self.ui_step: Any = gui.add_slider("step", min=0, max=1, step=1, initial_value=0)
+        self.ui_step.on_update(self._step_changed)
+        self.ui_play: Any = gui.add_button("play")
+        self.ui_play.on_click(self._play_clicked)
+        self.ui_fields: dict[str, tuple[Any, Any]] = {}
+        with gui.add_folder("objects"):
+            for name in self._movable():
+                value = self.objects[name]
+                pos: Any = gui.add_vector3(
+                    f"{name} (m)",
+                    initial_value=np.round(position_of(value), 4),
+                    step=0.005,
+                )
+                yaw: Any = None
+                if value.shape == (4, 4):
+                    yaw = gui.add_number(
+                        f"{name} yaw (deg)", initial_value=round(_yaw_deg(value), 2), step=1.0
+                    )
+                    yaw.on_update(self._field_changed(name))
+                pos.on_update(self._field_changed(name))
+                self.ui_fields[name] = (pos, yaw)
+        self.ui_run: Any = None
+        self.ui_online: Any = None
+        self.ui_result: Any = None
+        if self.ts is not None:
+            with gui.add_folder("physics (MuJoCo)"):
+                self.ui_run = gui.add_button("run in physics")
+                self.ui_run.on_click(self._run_clicked)
+                self.ui_online = gui.add_button("online")
+                self.ui_online.on_click(self._online_clicked)
+                self.ui_result = gui.add_markdown("")
+
+    # ------------------------------------------------------------------ events
+    def _dragged(self, name: str) -> Callable[[Any], None]:
+        def on_update(event: Any) -> None:
+            arrived = time.perf_counter()
+            # While the handle is held: previews; at its release, the full plan. viser runs
+            # these callbacks in a thread pool, possibly out of order: an update handled after
+            # the release plans in full too (and a preview plans in full once nothing is held).
+            phase = getattr(event, "phase", "end")
+            if phase in ("start", "end"):
+                self.hold(name, phase == "start")
+            with self._lock:
+                held = name in self._dragging
+            handle = self.handles[name]
+            self.move_object(
+                name,
+                self._placement_from(name, np.array(handle.position), np.array(handle.wxyz)),
+                arrived=arrived,
+                from_handle=True,
+                preview=held,
+            )
+
+        return on_update
+
+    def _placement_from(self, name: str, position: Float, wxyz: Float) -> Float:
+        old = self.objects[name]
+        if self.ts is not None:  # keep the object on its support
+            position = np.array([position[0], position[1], position_of(old)[2]])
+        if old.shape != (4, 4):
+            return np.asarray(position, dtype=np.float64)
+        rot = matrix_from_quaternion(wxyz)
+        if self.ts is not None:
+            return _yaw_pose(position, math.degrees(math.atan2(rot[1, 0], rot[0, 0])))
+        pose = np.eye(4)
+        pose[:3, :3] = rot
+        pose[:3, 3] = position
+        return pose
+
+    def _field_changed(self, name: str) -> Callable[[Any], None]:
+        def on_update(event: Any) -> None:
+            if self._updating_fields or event.client_id is None:
+                return  # set by the server itself
+            arrived = time.perf_counter()
+            pos, yaw = self.ui_fields[name]
+            p = np.array(pos.value, dtype=np.float64)
+            old = self.objects[name]
+            if old.shape == (4, 4):
+                value = _yaw_pose(p, float(yaw.value)) if self.ts is not None else old.copy()
+                if self.ts is None:
+                    value[:3, 3] = p
+            else:
+                value = p
+            self.move_object(name, value, arrived=arrived)
+
+        return on_update
+
+    def move_object(
+        self,
+        name: str,
+        placement: Any,
+        *,
+        arrived: float | None = None,
+        from_handle: bool = False,
+        preview: bool = False,
+    ) -> None:
+        """Put object ``name`` at ``placement`` (as a drag does) and plan for it.
+
+        The handle and the panel's fields follow, the scene's object moves at once, and the
+        plan is queued (:class:`LatestWins`): a preview (:func:`coarse_skill`, as while the
+        handle is held) with ``preview``, else the full plan. In an online run the object
+        moves in the physics too.
+        """
+        if name not in self.handles:
+            raise ValueError(f"object {name!r} cannot be moved here; movable: {list(self.handles)}")
+        value = np.asarray(placement, dtype=np.float64)
+        if value.shape != self.objects[name].shape or not np.isfinite(value).all():
+            raise ValueError(
+                f"{name}: a placement of shape {self.objects[name].shape} is needed, got "
+                f"{value.shape}"
+            )
+        arrived = time.perf_counter() if arrived is None else arrived
+        with self._lock:
+            self.objects[name] = value.copy()
+            if not from_handle:
+                handle = self.handles[name]
+                handle.position = np.asarray(position_of(value), dtype=np.float64)
+                handle.wxyz = _wxyz_of(value)
+            self._set_fields(name, value)
+            live = self._live
+            if live is not None:
+                with live.lock:
+                    live.moves[name] = value.copy()
+        self.request_plan(arrived, preview=preview)
+
+    def hold(self, name: str, held: bool) -> None:
+        """Mark object ``name`` as held (a drag under way: plans are previews) or released,
+        as the handle's drag events do."""
+        with self._lock:
+            if held:
+                self._dragging.add(name)
+            else:
+                self._dragging.discard(name)
+
+    def _set_fields(self, name: str, value: Float) -> None:
+        pos, yaw = self.ui_fields[name]
+        self._updating_fields = True
+        try:
+            pos.value = np.round(position_of(value), 4)
+            if yaw is not None:
+                yaw.value = round(_yaw_deg(value), 2)
+        finally:
+            self._updating_fields = False
+
+    def _controller_changed(self, event: Any) -> None:
+        self.controller = str(self.ui_controller.value)
+        self.request_plan()
+
+    def request_plan(self, arrived: float | None = None, *, preview: bool = False) -> None:
+        """Queue a plan (``preview``: on the coarse grid) for the current placement and
+        controller."""
+        preview = preview and self.preview_steps is not None
+        with self._lock:
+            request = ({k: v.copy() for k, v in self.objects.items()}, self.controller, preview)
+        self.planner.submit(request, arrived, "preview" if preview else "full")
+
+    def preview_skill(self, skill: Skill) -> Skill:
+        """The preview skill of ``skill`` (:func:`coarse_skill`, built once per size)."""
+        assert self.preview_steps is not None
+        key = (id(skill), self.preview_steps)
+        coarse = self._coarse_skills.get(key)
+        if coarse is None:
+            coarse = coarse_skill(skill, self.preview_steps)
+            coarse.constraints()  # its GMR, once
+            self._coarse_skills[key] = coarse
+        return coarse
+
+    def calibrate_preview(self, plan: Plan, use: list[str] | None) -> None:
+        """Fit the previews to :data:`PREVIEW_BUDGET`: time a preview of ``plan`` (a full
+        plan; the least of three runs), take the cost as affine in the number of steps through
+        it and the full plan's, and use the number of steps that fits the budget (between
+        :data:`MIN_PREVIEW_STEPS` and the present number)."""
+        if self.preview_steps is None:
+            return
+        full_steps = plan.skill.n_steps
+        coarse = self.preview_skill(plan.skill)
+        times = []
+        for _ in range(3):  # the least of three: the page may be loading meanwhile
+            start = time.perf_counter()
+            make_plan(coarse, plan.objects, plan.controller, use, preview=True)
+            times.append(time.perf_counter() - start)
+        t_coarse = min(times)
+        n = self.preview_steps
+        if t_coarse > PREVIEW_BUDGET and plan.seconds > t_coarse and full_steps > n:
+            per_step = (plan.seconds - t_coarse) / (full_steps - n)
+            fixed = t_coarse - per_step * n
+            fit = int((PREVIEW_BUDGET - fixed) / per_step)
+            self.preview_steps = min(n, max(MIN_PREVIEW_STEPS, fit))
+        self.preview_seconds = t_coarse
+
+    def _adapt_preview(self, seconds: float) -> None:
+        """Keep the previews within :data:`PREVIEW_BUDGET` as they are planned: over the last
+        five, a median over the budget takes steps away, one under 0.6 of it gives some back
+        (up to the preview size asked for); the calibration at the first plan can be off on a
+        busy machine (the page loading)."""
+        times = self._preview_times
+        times.append(seconds)
+        if self.preview_steps is None or len(times) < times.maxlen:  # type: ignore[operator]
+            return
+        med = float(np.median(times))
+        n = self.preview_steps
+        if med > PREVIEW_BUDGET:
+            new = max(MIN_PREVIEW_STEPS, int(n * PREVIEW_BUDGET / med))
+        elif med < 0.6 * PREVIEW_BUDGET:
+            new = min(self._max_preview_steps, int(n * 0.8 * PREVIEW_BUDGET / med))
+        else:
+            return
+        if new != n:
+            self.preview_steps = new
+            times.clear()
+
+    def _skill_for(self, controller: str) -> tuple[Skill, list[str] | None]:
+        if self.ts is not None:
+            return self.ts.skill_for(controller)
+        return self.skill, controller_use(controller, self.skill.object_names)
+
+    def _replan(self, request: tuple[dict[str, Float], str, bool]) -> None:
+        objects, controller, preview = request
+        skill, use = self._skill_for(controller)
+        if preview:
+            skill = self.preview_skill(skill)
+        plan = make_plan(skill, objects, controller, use, preview=preview)
+        if not preview and self.preview_seconds is None:
+            self.calibrate_preview(plan, use)
+        elif preview:
+            self._adapt_preview(plan.seconds)
+        with self._lock:
+            old = self.plan
+            frac = 0.0 if old is None else self.step / max(len(old.times) - 1, 1)
+            self.plan = plan
+            self.plans += 1
+            n = len(plan.times)
+            step = self._first_step(plan) if old is None else round(frac * (n - 1))
+            self._draw_plan(plan)
+            self._updating_fields = True
+            try:
+                self.ui_step.max = n - 1
+                self.ui_step.value = step
+            finally:
+                self._updating_fields = False
+            self._show_step(step)
+        self.server.flush()
+        if preview:
+            with self._lock:
+                settled = not self._dragging
+            if settled:  # the release's full plan may have come first (module docstring)
+                self.request_plan()
+
+    def _first_step(self, plan: Plan) -> int:
+        """The step where the first object's constraint is tightest (the grasp)."""
+        if not self.skill.object_names:
+            return 0
+        c = plan.constraints
+        name = self.skill.object_names[0]
+        k = int(np.argmin(np.trace(c.task_cov[name][:, :3, :3], axis1=1, axis2=2)))
+        return min(k + plan.lead, len(plan.times) - 1)
+
+    def _draw_plan(self, plan: Plan) -> None:
+        pts = plan.result.positions
+        n = len(pts) - 1
+        idx = np.unique(np.linspace(0, n, min(n, PATH_SEGMENTS) + 1).round().astype(int))
+        seg = np.stack([pts[idx[:-1]], pts[idx[1:]]], axis=1)
+        colors = np.array([self.colors[plan.driving[i]] for i in idx[:-1]], dtype=np.uint8)
+        colors = np.repeat(colors[:, None, :], 2, axis=1)
+        self.path = self.server.scene.add_line_segments(
+            "/plan/path", points=seg.astype(np.float32), colors=colors, thickness=0.004
+        )
+        end = 1e3 * plan.end
+        self.ui_end.value = ", ".join(f"{v:.1f}" for v in end)
+        self.ui_reproduce.value = f"{1e3 * plan.seconds:.1f}"
+        kind = "preview, " if plan.preview else ""
+        text = (
+            f"**{plan.controller}**: {kind}{len(plan.times)} steps, {plan.times[-1]:.1f} s; "
+            f"planned in {1e3 * plan.seconds:.0f} ms."
+        )
+        outside = self._outside_range(plan.objects)
+        if outside:
+            text += f" Outside the demonstrated range: {', '.join(outside)} (extrapolating)."
+        if plan.messages:
+            text += " " + plan.messages[0].split(".")[0] + "."
+        self.ui_status.content = text
+
+    def _outside_range(self, objects: Mapping[str, Float]) -> list[str]:
+        if self.ts is None:
+            return []
+        ranges = self.ts.task.ranges
+        return [k for k, v in objects.items() if k in ranges and not ranges[k].contains(v)]
+
+    def _step_changed(self, event: Any) -> None:
+        if self._updating_fields:
+            return
+        with self._lock:
+            self._show_step(int(self.ui_step.value))
+
+    def _show_step(self, step: int) -> None:
+        plan = self.plan
+        if plan is None:
+            return
+        step = int(np.clip(step, 0, len(plan.times) - 1))
+        self.step = step
+        q = plan.result.joints[step]
+        with self.server.atomic():
+            if self._running():
+                pass  # the physics draws the arm
+            elif self._draw_world is not None:
+                carry = carry_transform(self.skill.robot, plan, step)
+                self._draw_world.show_plan(q, plan.objects | self._fixed_objects(), carry)
+            elif self._urdf_arm is not None:
+                self._urdf_arm.show(q)
+            robot: Any = self.skill.robot
+            hand = robot.fk_pose(q) if hasattr(robot, "fk_pose") else None
+            if hand is not None:
+                self.hand.position = np.asarray(hand[:3, 3])
+                self.hand.wxyz = quat_wxyz(hand[:3, :3])
+            driving = plan.driving[step]
+            self.hand_dot.color = self.colors[driving]
+            for name, (mean, cov) in step_gaussians(plan, step).items():
+                node = self.gauss[name]
+                axes, wxyz = ellipsoid_pose(cov)
+                node.position = np.asarray(mean)
+                node.wxyz = wxyz
+                node.scale = np.asarray(axes)
+                node.opacity = 0.75 if name == driving else 0.25
+                node.visible = plan.result.used is None or name in plan.result.used
+            share = plan.result.influence[driving][step]
+            when = plan.times[step]
+            self.ui_driving.value = f"{driving} ({100 * share:.0f} %) at {when:.2f} s"
+
+    def _fixed_objects(self) -> dict[str, Float]:
+        if self.ts is None:
+            return {}
+        return {k: v for k, v in self.objects.items() if k in self.ts.task.fixed_objects}
+
+    # ------------------------------------------------------------------ time
+    def _play_clicked(self, event: Any) -> None:
+        if self._playing.is_set():
+            self._playing.clear()
+            self.ui_play.label = "play"
+        else:
+            plan = self.plan
+            if plan is not None and self.step >= len(plan.times) - 1:
+                self.ui_step.value = 0
+            self._playing.set()
+            self.ui_play.label = "pause"
+
+    def _play_loop(self) -> None:
+        last = time.perf_counter()
+        while not self._stop.is_set():
+            if not self._playing.wait(timeout=0.2):
+                last = time.perf_counter()
+                continue
+            time.sleep(1.0 / 30.0)
+            now = time.perf_counter()
+            with self._lock:
+                plan = self.plan
+                if plan is None:
+                    continue
+                t = plan.times[self.step] + (now - last)
+                step = int(np.searchsorted(plan.times, t))
+                if step >= len(plan.times) - 1:
+                    step = len(plan.times) - 1
+                    self._playing.clear()
+                    self.ui_play.label = "play"
+                self.ui_step.value = step  # redraws through _step_changed
+            last = now
+
+    # ------------------------------------------------------------------ physics
+    def _running(self) -> bool:
+        return self._run_thread is not None and self._run_thread.is_alive()
+
+    def _run_clicked(self, event: Any) -> None:
+        self.start_run(online=False)
+
+    def _online_clicked(self, event: Any) -> None:
+        self.start_run(online=True)
+
+    def start_run(self, *, online: bool) -> threading.Thread:
+        """Run the current plan's controller in MuJoCo (``online``: in the physics loop, live)
+        in a background thread; the page replays it and shows the outcome."""
+        if self.ts is None:
+            raise ValueError("runs in physics need a task (pbdkit view --task)")
+        with self._lock:
+            if self._running():
+                raise ValueError("a run is going on")
+            objects = {k: v.copy() for k, v in self.objects.items()}
+            controller = self.controller
+            thread = threading.Thread(
+                target=self._run_in_physics,
+                args=(objects, controller, online),
+                name="pbdkit-view-physics",
+                daemon=True,
+            )
+            self._run_thread = thread
+        thread.start()
+        return thread
+
+    def _run_in_physics(self, objects: dict[str, Float], controller: str, online: bool) -> None:
+        from ..sim._runs import run_controller, run_online
+        from ._view_world import RunStopped, Sampler
+
+        assert self.ts is not None and self._draw_world is not None
+        world = self._draw_world
+        self._set_result(f"running {'online' if online else 'in physics'} ({controller}) ...")
+        for b in (self.ui_run, self.ui_online):
+            if b is not None:
+                b.disabled = True
+        self._playing.clear()
+        sampler = Sampler(show=world.show_frame if online else None, realtime=online)
+        sampler.stop = self._stop
+        try:
+            if online:
+                with self._lock:
+                    self._live = sampler
+                run: Any = run_online(self.ts, objects, controller, disturbance=sampler)
+            else:
+                run = run_controller(self.ts, objects, controller, disturbance=sampler)
+            with self._lock:
+                self._live = None
+            if not online:
+                self._replay(sampler.frames)
+            self.last_run = run
+            verdict = "**success**" if run.success else "**failure**"
+            metrics = run.execution.outcome.metrics
+            shown = ", ".join(
+                f"{k} {float(v):.1f}" for k, v in metrics.items() if isinstance(v, (int, float))
+            )
+            self._set_result(
+                f"{controller} {'online' if online else 'in physics'}: {verdict} ({shown})"
+            )
+        except RunStopped:
+            self._set_result("run stopped")
+        except Exception as exc:
+            self._set_result(f"run failed: {' '.join(str(exc).split())}")
+        finally:
+            with self._lock:
+                self._live = None
+            for b in (self.ui_run, self.ui_online):
+                if b is not None:
+                    b.disabled = False
+
+    def _replay(self, frames: list[Frame]) -> None:
+        assert self._draw_world is not None
+        if not frames:
+            return
+        start = time.perf_counter() - frames[0].t
+        for frame in frames:
+            if self._stop.is_set():
+                return
+            wait = start + frame.t - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            self._draw_world.show_frame(frame)
+
+    def _set_result(self, text: str) -> None:
+        if self.ui_result is not None:
+            self.ui_result.content = text
+        self.result_text = text
+
+    def _report_error(self, exc: BaseException) -> None:
+        self.ui_status.content = f"could not plan: {' '.join(str(exc).split())}"
+
+    # ------------------------------------------------------------------ end
+    def wait_idle(self, timeout: float | None = 30.0) -> bool:
+        """Block until the planner has planned the latest placement."""
+        return self.planner.wait_idle(timeout)
+
+    def close(self) -> None:
+        """Stop planning, playing and any run (the server is the caller's)."""
+        self._stop.set()
+        self._playing.clear()
+        self.planner.close()
+        thread = self._run_thread
+        if thread is not None:
+            thread.join(timeout=10.0)
+        if self._draw_world is not None:
+            self._draw_world.close()
+
+
+class _UrdfArm:
+    """The arm drawn from a URDF with yourdfpy (viser's ``ViserUrdf``), plus a stick figure
+    through its links' origins (a URDF without visual geometry, such as one made from a DH
+    table, still shows)."""
+
+    def __init__(self, server: viser.ViserServer, robot: Any, urdf: Path | None) -> None:
+        from functools import partial
+
+        import yourdfpy
+        from viser.extras import ViserUrdf
+
+        if urdf is not None:
+            loaded = yourdfpy.URDF.load(
+                str(urdf),
+                build_scene_graph=True,
+                load_meshes=True,
+                filename_handler=partial(yourdfpy.filename_handler_magic, dir=urdf.parent),
+            )
+        else:
+            loaded = yourdfpy.URDF.load(
+                io.StringIO(robot.urdf), build_scene_graph=True, load_meshes=True
+            )
+        self.urdf = loaded
+        self.viser_urdf = ViserUrdf(server, loaded, root_node_name="/arm")
+        names = list(self.viser_urdf.get_actuated_joint_names())
+        self._index = [names.index(j) if j in names else -1 for j in robot.joint_names]
+        self._cfg = np.zeros(len(names))
+        self._links = [j.child for j in loaded.robot.joints]
+        self._parents = [j.parent for j in loaded.robot.joints]
+        self._base = loaded.base_link
+        self._server = server
+        self.sticks: Any = None
+
+    def show(self, q: Float) -> None:
+        for i, k in enumerate(self._index):
+            if k >= 0:
+                self._cfg[k] = q[i]
+        self.viser_urdf.update_cfg(self._cfg)
+        pts = []
+        for parent, child in zip(self._parents, self._links, strict=True):
+            a = self.urdf.get_transform(parent, self._base)[:3, 3]
+            b = self.urdf.get_transform(child, self._base)[:3, 3]
+            if np.linalg.norm(b - a) > 1e-6:
+                pts.append([a, b])
+        if pts:
+            self.sticks = self._server.scene.add_line_segments(
+                "/arm_sticks",
+                points=np.array(pts, dtype=np.float32),
+                colors=(60, 60, 60),
+                thickness=0.012,
+            )
+
+
+def serve(
+    app_factory: Callable[[viser.ViserServer], ViewApp],
+    *,
+    port: int,
+    open_browser: bool = True,
+    say: Callable[[str], None] = print,
+    ready: Callable[[ViewApp], None] | None = None,
+    stop: threading.Event | None = None,
+) -> None:
+    """Serve the page until SIGINT or SIGTERM (or ``stop``), then stop cleanly.
+
+    ``app_factory`` builds the :class:`ViewApp` on the server. ``ready`` is called with it once
+    the page is served (tests and benchmarks).
+
+    Raises
+    ------
+    ValueError
+        The port is taken (checked first: viser would take the next free one).
+    """
+    import viser
+
+    check_port(port)
+    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
+        server = viser.ViserServer(host=HOST, port=port, verbose=False)
+    server.gui.configure_theme(show_share_button=False)  # sharing goes through viser's servers
+    done = stop if stop is not None else threading.Event()
+    app: ViewApp | None = None
+    previous: dict[signal.Signals, Any] = {}
+    try:
+        if server.get_port() != port:
+            raise ValueError(f"port {port} on {HOST} is in use: choose another with --port")
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                previous[sig] = signal.signal(sig, lambda *_: done.set())
+        app = app_factory(server)
+        url = f"http://{HOST}:{port}"
+        say(f"serving {url} (Ctrl+C to stop)")
+        if open_browser:
+            import webbrowser
+
+            webbrowser.open(url)
+        if ready is not None:
+            ready(app)
+        while not done.wait(timeout=0.5):
+            pass
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if app is not None:
+            app.close()
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+
+
+@contextlib.contextmanager
+def served(
+    app_factory: Callable[[viser.ViserServer], ViewApp], *, port: int, timeout: float = 120.0
+) -> Iterator[ViewApp]:
+    """Serve the page from a background thread while the block runs (a notebook, a test, a
+    benchmark): yields the app once the page is served, and stops the server at the end.
+
+    Raises
+    ------
+    ValueError
+        As :func:`serve` (a port in use).
+    TimeoutError
+        The page was not served within ``timeout`` seconds.
+    """
+    stop = threading.Event()
+    started = threading.Event()
+    box: dict[str, Any] = {}
+
+    def ready(app: ViewApp) -> None:
+        box["app"] = app
+        started.set()
+
+    def run() -> None:
+        try:
+            serve(
+                app_factory,
+                port=port,
+                open_browser=False,
+                say=lambda _: None,
+                ready=ready,
+                stop=stop,
+            )
+        except BaseException as exc:  # handed to the caller's thread
+            box["error"] = exc
+            started.set()
+
+    thread = threading.Thread(target=run, name="pbdkit-view-server", daemon=True)
+    thread.start()
+    if not started.wait(timeout):
+        stop.set()
+        raise TimeoutError(f"the view was not served within {timeout:g} s")
+    if "error" in box:
+        raise box["error"]
+    try:
+        yield box["app"]
+    finally:
+        stop.set()
+        thread.join(timeout=30.0)

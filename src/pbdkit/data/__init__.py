@@ -1,0 +1,26 @@
+"""Demonstrations: what a teacher recorded (:class:`Demonstration`), its files, and ROS bags in
+(:func:`read_bag`) and out (:func:`write_trajectory_bag`, :func:`write_demonstration_bag`).
+
+Above :mod:`pbdkit.robots`; never imports the simulator, OpenCV or matplotlib."""
+
+from __future__ import annotations
+
+from ._bags import read_bag, write_demonstration_bag, write_trajectory_bag
+from ._demonstration import (
+    Demonstration,
+    LimitWarning,
+    demonstration_from_csv,
+    load_demonstrations,
+    save_demonstrations,
+)
+
+__all__ = [
+    "Demonstration",
+    "LimitWarning",
+    "demonstration_from_csv",
+    "load_demonstrations",
+    "read_bag",
+    "save_demonstrations",
+    "write_demonstration_bag",
+    "write_trajectory_bag",
+]

@@ -1,0 +1,592 @@
+"""Jerk-limited trajectory generation (Ruckig): commands and setpoints a real arm accepts.
+
+Ruckig (community version, https://github.com/pantor/ruckig, MIT) computes, from a current state
+(position, velocity, acceleration) to a target state, the time-optimal trajectory within
+velocity, acceleration and jerk limits (piecewise-constant jerk); it is what MoveIt 2 and
+Franka's tools use for online motion. pbdkit calls it state to state and chains its
+trajectories with polynomial pieces, each starting in the state the previous one ended in: the
+result is one continuous motion (position, velocity and acceleration continuous, jerk within
+the limit), so its samples pass the divided-difference check of :mod:`pbdkit.motion._limits` at any
+rate.
+
+- :func:`point_to_point`: a move between two postures at rest, sampled every ``dt`` (the
+  lead-in of a reproduction from a distant posture).
+- :func:`follow`: the :class:`Motion` through a timed trajectory's samples (a reproduction,
+  played over :meth:`pbdkit.Skill.times`) from a given state: the pieces of the spline through
+  them where those are within the limits, quintic joins and Ruckig trajectories elsewhere,
+  each planned once; sampled at any rate (:func:`follow_samples`: the simulator's 500 Hz
+  servos, a 1 kHz ``ros2_control`` or Franka loop, the online controller's cycle).
+
+Ruckig is imported when one of them is first used.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from ._limits import MotionLimits
+
+__all__ = [
+    "MERGE_SAMPLES",
+    "Motion",
+    "follow",
+    "follow_samples",
+    "point_to_point",
+    "spline_derivatives",
+    "valid_target",
+]
+
+#: A sample :func:`follow_samples` cannot reach in its time is passed by toward one of the next
+#: ones, up to this many samples ahead.
+MERGE_SAMPLES = 8
+#: :func:`follow` takes a piece of the spline through the samples as it is where the piece is
+#: within this fraction of the limits (the rest is room for joining it from where the motion
+#: is).
+SPLINE_MARGIN = 0.99
+
+Float = NDArray[np.float64]
+
+
+def _ruckig() -> Any:
+    import ruckig
+
+    return ruckig
+
+
+def valid_target(velocity: Float, acceleration: Float, limits: MotionLimits) -> tuple[Float, Float]:
+    """A target velocity and acceleration Ruckig accepts: ``|v| <= V``, ``|a| <= A`` and
+    ``|v| + a^2 / (2 J) <= V`` (a state with an acceleration must have come from, and must go
+    to, velocities within the limit while its acceleration ramps at the jerk limit)."""
+    vmax, amax, jmax = limits.velocity, limits.acceleration, limits.jerk
+    v = np.clip(velocity, -vmax, vmax)
+    a = np.clip(acceleration, -amax, amax)
+    with np.errstate(invalid="ignore"):
+        room = np.sqrt(np.maximum(2.0 * jmax * (vmax - np.abs(v)), 0.0))
+    room = np.where(np.isnan(room), np.inf, room)  # inf - inf where nothing is limited
+    return v, np.clip(a, -room, room)
+
+
+def point_to_point(
+    start: npt.ArrayLike, goal: npt.ArrayLike, dt: float, limits: MotionLimits
+) -> tuple[Float, Float, Float]:
+    """The time-optimal move from ``start`` to ``goal``, at rest at both ends, every ``dt``.
+
+    Phase-synchronized (Ruckig): the joints move together along the straight line in joint
+    space (where Ruckig cannot, it falls back to arriving together).
+
+    Returns
+    -------
+    positions, velocities, accelerations : ndarray, shape (K, n)
+        K >= 1 samples every ``dt`` from the start (sample 0) to the goal at rest (last, the
+        first sample at or after the move's end).
+    """
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    p0 = np.asarray(start, dtype=np.float64)
+    p1 = np.asarray(goal, dtype=np.float64)
+    n = p0.shape[0]
+    if np.array_equal(p0, p1):
+        return p0[None].copy(), np.zeros((1, n)), np.zeros((1, n))
+    rk = _ruckig()
+    inp = rk.InputParameter(n)
+    inp.max_velocity = limits.velocity.tolist()
+    inp.max_acceleration = limits.acceleration.tolist()
+    inp.max_jerk = limits.jerk.tolist()
+    inp.synchronization = rk.Synchronization.Phase
+    inp.current_position = p0.tolist()
+    inp.target_position = p1.tolist()
+    traj = rk.Trajectory(n)
+    result = rk.Ruckig(n).calculate(inp, traj)
+    if result not in (rk.Result.Working, rk.Result.Finished):
+        raise RuntimeError(f"Ruckig could not plan the move: {result}")
+    duration = float(traj.duration)
+    count = max(1, math.ceil(duration / dt - 1e-9))
+    rows = [traj.at_time(min(k * dt, duration)) for k in range(count + 1)]
+    pos = np.array([r[0] for r in rows], dtype=np.float64)
+    vel = np.array([r[1] for r in rows], dtype=np.float64)
+    acc = np.array([r[2] for r in rows], dtype=np.float64)
+    pos[0], pos[-1] = p0, p1  # exactly where it starts and ends, at rest
+    vel[[0, -1]] = 0.0
+    acc[[0, -1]] = 0.0
+    return pos, vel, acc
+
+
+class Motion:
+    """A continuous jerk-limited motion: Ruckig trajectories one after another, each starting in
+    the state the previous one ended in, from a start state at ``t0`` (position, velocity and
+    acceleration continuous, jerk within the limits it was planned with).
+
+    Samples of it at any times pass the divided-difference check of :mod:`pbdkit.motion._limits`
+    against those limits (a divided difference of order k is a weighted average of the k-th
+    derivative); before ``t0`` it is the start state, after :attr:`end` it holds the last
+    position (at rest when it was planned to end so).
+
+    Attributes
+    ----------
+    t0, end : float
+        Start and end times (s).
+    """
+
+    def __init__(self, t0: float, start: tuple[Float, Float, Float]) -> None:
+        self.t0 = float(t0)
+        self.end = self.t0
+        #: Built by :func:`follow`: when the motion reaches each of the samples it follows
+        #: (their own times, later where the limits kept it behind).
+        self.sample_times: Float = np.array([self.t0])
+        self._start = tuple(np.array(x, dtype=np.float64) for x in start)
+        self._starts: list[float] = []
+        self._segments: list[tuple[float, Any]] = []  # (duration, ruckig.Trajectory)
+
+    def append(self, trajectory: Any) -> None:
+        """The next segment (a ``ruckig.Trajectory`` from the state at :attr:`end`)."""
+        duration = float(trajectory.duration)
+        self._starts.append(self.end)
+        self._segments.append((duration, trajectory))
+        self.end += duration
+
+    def at(self, t: float) -> tuple[Float, Float, Float]:
+        """Position, velocity and acceleration at time ``t`` (s)."""
+        if t <= self.t0 or not self._segments:
+            p, v, a = self._start
+            return p.copy(), v.copy(), a.copy()
+        k = max(0, bisect.bisect_right(self._starts, t) - 1)
+        duration, traj = self._segments[k]
+        local = t - self._starts[k]
+        if local >= duration:
+            p, v, a = traj.at_time(duration)
+            # Beyond the last segment: at rest where it ended (or moving on at its velocity).
+            pv, vv = np.array(p), np.array(v)
+            return pv + vv * (local - duration), vv, np.zeros_like(pv)
+        p, v, a = traj.at_time(local)  # a quintic's rows, or Ruckig's lists
+        return np.array(p), np.array(v), np.array(a)
+
+    def sample(self, times: Float) -> tuple[Float, Float, Float]:
+        """:meth:`at` for every time, as arrays (len(times), n)."""
+        rows = [self.at(float(t)) for t in times]
+        return (
+            np.array([r[0] for r in rows], dtype=np.float64),
+            np.array([r[1] for r in rows], dtype=np.float64),
+            np.array([r[2] for r in rows], dtype=np.float64),
+        )
+
+    def every(self, period: float, n_steps: int | None = None) -> tuple[Float, Float, Float]:
+        """:meth:`sample` every ``period`` from :attr:`t0`: ``n_steps`` rows, or (default) until
+        the first at or after :attr:`end`."""
+        total = math.ceil((self.end - self.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
+        return self.sample(self.t0 + period * np.arange(total, dtype=np.float64))
+
+
+def spline_derivatives(
+    t: Float, q: Float, start_velocity: Float | None = None
+) -> tuple[Float, Float]:
+    """Velocity and acceleration at the samples of the cubic spline through them, at rest at
+    the end and at the start (or moving at ``start_velocity`` there)."""
+    from scipy.interpolate import CubicSpline
+
+    n = q.shape[1]
+    start = np.zeros(n) if start_velocity is None else start_velocity
+    spline = CubicSpline(t, q, axis=0, bc_type=((1, start), (1, np.zeros(n))))
+    return np.asarray(spline(t, 1), dtype=np.float64), np.asarray(spline(t, 2), dtype=np.float64)
+
+
+def follow(
+    t: Float,
+    q: Float,
+    limits: MotionLimits,
+    *,
+    velocities: Float | None = None,
+    accelerations: Float | None = None,
+    start: tuple[Float, Float, Float] | None = None,
+) -> Motion:
+    """The jerk-limited motion through timed samples, segment by segment.
+
+    From ``start`` (position, velocity, acceleration at t[0]; default: at rest at q[0]), each
+    sample is reached with its velocity and acceleration (the cubic spline's by default) at
+    its time, the motion coming to rest at the last one. Segment by segment, from the state
+    the motion is in:
+
+    1. on the samples' states and on time: the quintic to the next sample's state (with the
+       spline's derivatives, the spline's own piece: smooth, its jerk constant), where it is
+       within ``SPLINE_MARGIN`` of the limits and ends in a state the next segment can take
+       over (v + a|a| / 2J within the velocity limit);
+    2. else, on time: the quintic from the motion's state to a sample's of the next
+       :data:`MERGE_SAMPLES` (the next one, or a later one with the time of all), within the
+       limits;
+    3. else Ruckig (time-synchronized, lasting at least the time left: exactly it when it
+       can): to a sample of that window on time, with its velocity and acceleration or its
+       velocity alone, never swinging back beyond the samples on the way; failing that, late,
+       as fast as the limits allow, to the sample it swings the least for.
+
+    Where the limits keep the motion behind a sample's time, the rest of the samples are aimed
+    for as much later (the motion keeps to the path and its pace, instead of chasing a schedule
+    it has fallen behind), and :attr:`Motion.sample_times` says when each sample is reached:
+    what a gripper event or a phase should follow. Samples within the limits whose spline is
+    too are followed exactly, on time.
+
+    Each segment is planned once and the motion is sampled afterwards at any rate
+    (:meth:`Motion.at`): re-planned at every setpoint with the time left, a motion through
+    samples at the pace of a timed reproduction (close to time-optimal) falls into one of
+    Ruckig's blocked intervals of duration and turns into a detour (0.2 rad off the samples,
+    measured on a coaster reproduction).
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        Strictly increasing sample times (s), T >= 2.
+    q : ndarray, shape (T, n)
+    limits : MotionLimits
+        Planned with as given (give them a margin: :data:`pbdkit.motion._limits.LIMIT_SAFETY`).
+    velocities, accelerations : ndarray, shape (T, n), optional
+        At the samples; None: the cubic spline's through them, at rest at the end and at the
+        start (or moving at ``start``'s velocity).
+    start : (ndarray (n,), ndarray (n,), ndarray (n,)), optional
+        The state at t[0].
+
+    Returns
+    -------
+    Motion
+        From t[0].
+    """
+    rk = _ruckig()
+    n = q.shape[1]
+    if start is None:
+        start = (q[0].copy(), np.zeros(n), np.zeros(n))
+    p0, v0, a0 = (np.asarray(x, dtype=np.float64) for x in start)
+    if velocities is None or accelerations is None:
+        v_spline, a_spline = spline_derivatives(t, q, v0 if np.any(v0) else None)
+        velocities = v_spline if velocities is None else velocities
+        accelerations = a_spline if accelerations is None else accelerations
+    # Where the quintic between two samples' states is within the limits and the motion is on
+    # it, it is the motion (with the spline's derivatives: the spline's piece, its jerk
+    # constant); elsewhere Ruckig.
+    on_spline = _KnotPieces(t, q, velocities, accelerations, limits)
+    knot_v, knot_a = valid_target(velocities, accelerations, limits)
+    otg = rk.Ruckig(n)
+    inp = rk.InputParameter(n)
+    inp.max_velocity = limits.velocity.tolist()
+    inp.max_acceleration = limits.acceleration.tolist()
+    inp.max_jerk = limits.jerk.tolist()
+    ok = (rk.Result.Working, rk.Result.Finished)
+    zeros = [0.0] * n
+    last = t.shape[0] - 1
+    motion = Motion(float(t[0]), (p0, v0, a0))
+
+    def plan_to(j: int, now: float, with_acceleration: bool = True) -> tuple[Any, float]:
+        """A trajectory from the current state (at ``now``) to sample j, never before its
+        time; and the time left."""
+        traj = rk.Trajectory(n)
+        inp.target_position = q[j].tolist()
+        inp.target_velocity = zeros if j == last else knot_v[j].tolist()
+        use_a = with_acceleration and j != last
+        inp.target_acceleration = knot_a[j].tolist() if use_a else zeros
+        left = float(t[j]) + delay - now
+        inp.minimum_duration = left if left > 0 else None
+        try:
+            result = otg.calculate(inp, traj)
+        except rk.RuckigError:
+            inp.target_acceleration = zeros
+            result = otg.calculate(inp, traj)
+        if result not in ok:
+            raise RuntimeError(f"Ruckig could not plan the motion to sample {j}: {result}")
+        return traj, left
+
+    def on_time(traj: Any, left: float) -> bool:
+        return float(traj.duration) <= left * (1.0 + 1e-9) + 1e-12
+
+    def beyond(traj: Any, i: int, j: int, p_now: Float, lenient: bool) -> float:
+        """How far (rad) the trajectory to sample j swings beyond the range of the samples on
+        the way from i and of where the motion is, give or take 1e-6 (``lenient``: and one
+        sample's step)."""
+        way = np.vstack([p_now, q[i : j + 1]])
+        tol = 1e-9 + 1e-6 * float(np.abs(way).max())
+        slack = tol + (np.abs(np.diff(way, axis=0)).max(axis=0) if lenient else 0.0)
+        lo, hi = way.min(axis=0) - slack, way.max(axis=0) + slack
+        over = [max(lo[k] - e.min, e.max - hi[k], 0.0) for k, e in enumerate(traj.position_extrema)]
+        return float(max(over))
+
+    # Where the limits kept the motion from a sample's time, the rest of the samples are aimed
+    # for as much later (``delay``): the motion keeps following the path and its timing
+    # instead of chasing a schedule it has fallen behind (which would leave the samples behind
+    # for good). ``reached``: when the motion reaches (or passes) each sample.
+    delay = 0.0
+    reached = np.empty(t.shape[0])
+    reached[0] = t[0]
+
+    def arrived(i: int, j: int, traj: Any) -> tuple[list[float], list[float], list[float]]:
+        """The segment ``traj`` to sample j appended (samples i..j reached); its end state."""
+        nonlocal delay
+        motion.append(traj)
+        end = motion.end
+        # Merged samples: reached in proportion to their times.
+        span = t[i - 1 : j + 1]
+        w = (span[1:] - span[0]) / (span[-1] - span[0]) if span[-1] > span[0] else 1.0
+        reached[i : j + 1] = reached[i - 1] + w * (end - reached[i - 1])
+        delay = max(delay, end - float(t[j]))
+        if isinstance(traj, _Quintic):
+            return traj.end_state()
+        end_p, end_v, end_a = traj.at_time(float(traj.duration))
+        return list(end_p), list(end_v), list(end_a)
+
+    state = (p0.tolist(), v0.tolist(), a0.tolist())
+    i = 1
+    while i <= last:
+        now = motion.end
+        # On the spline, on time, and its piece to the next sample within the limits (not
+        # the last piece: the motion ends at rest, acceleration included): that piece.
+        piece = on_spline.piece(i, now - delay, state) if i < last else None
+        if piece is not None:
+            state = arrived(i, i, piece)
+            i += 1
+            continue
+        inp.current_position, inp.current_velocity, inp.current_acceleration = state
+        window = range(i, min(i + MERGE_SAMPLES, last + 1))
+        p_now = np.asarray(state[0])
+        # Off the spline's pieces but on time: the quintic from here to a sample's state (the
+        # next, or one of the window's with the time of all), if it is within the limits.
+        bridge = on_spline.bridge(window, now - delay, state, limits) if window[-1] < last else None
+        if bridge is not None:
+            j, piece = bridge
+            state = arrived(i, j, piece)
+            i = j + 1
+            continue
+        found = None
+        # On time: with the sample's velocity and acceleration, else its velocity alone (an
+        # acceleration estimate the jerk limit cannot reach in time). Never swinging back
+        # beyond the samples on the way: a sample's velocity that the motion cannot reach in
+        # the distance left makes a time-optimal move back up for a run-up.
+        for with_acceleration in (True, False):
+            for j in window:
+                traj, left = plan_to(j, now, with_acceleration)
+                if on_time(traj, left) and beyond(traj, i, j, p_now, True) == 0.0:
+                    found = j, traj
+                    break
+            if found is not None:
+                break
+        if found is None:
+            # Late: as fast as the limits allow, to the sample of the window it swings the
+            # least beyond the samples on the way for (the first that does not at all).
+            best = math.inf
+            for j in window:
+                traj, _ = plan_to(j, now, False)
+                over = beyond(traj, i, j, p_now, False)
+                if over < best:
+                    best, found = over, (j, traj)
+                if over == 0.0:
+                    break
+        assert found is not None
+        j, traj = found
+        state = arrived(i, j, traj)
+        i = j + 1
+    motion.sample_times = reached
+    return motion
+
+
+class _Quintic:
+    """A motion segment from one state (position, velocity, acceleration) to another in a
+    given time: the quintic polynomial through both (``duration``, ``at_time``)."""
+
+    def __init__(
+        self,
+        start: tuple[Float, Float, Float] | None,
+        end: tuple[Float, Float, Float],
+        duration: float,
+        coefficients: Float | None = None,
+    ) -> None:
+        if coefficients is None:
+            assert start is not None
+            coefficients = _quintic_coefficients(start, end, np.full(1, duration))
+        self.c = coefficients  # (6, n)
+        self.duration = duration
+        self.end = end
+
+    def at_time(self, t: float) -> Float:
+        """Position, velocity and acceleration at ``t``: rows of a (3, n) array (one product
+        of the powers of t with the coefficients)."""
+        t2 = t * t
+        t3 = t2 * t
+        powers = np.array(
+            [
+                [1.0, t, t2, t3, t3 * t, t3 * t2],
+                [0.0, 1.0, 2.0 * t, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t],
+                [0.0, 0.0, 2.0, 6.0 * t, 12.0 * t2, 20.0 * t3],
+            ]
+        )
+        return np.asarray(powers.dot(self.c), dtype=np.float64)
+
+    def end_state(self) -> tuple[list[float], list[float], list[float]]:
+        """Exactly the state it was built to end in."""
+        p, v, a = self.end
+        return list(p.tolist()), list(v.tolist()), list(a.tolist())
+
+
+def _quintic_coefficients(
+    start: tuple[Float, Float, Float], end: tuple[Float, Float, Float], h: Float
+) -> Float:
+    """Coefficients c_0..c_5 (leading axis) of the quintics from ``start`` to ``end`` (each a
+    (position, velocity, acceleration)) in times ``h`` (broadcast against them)."""
+    p0, v0, a0 = start
+    p1, v1, a1 = end
+    d = p1 - (p0 + v0 * h + 0.5 * a0 * h * h)
+    e = v1 - (v0 + a0 * h)
+    f = a1 - a0
+    return np.stack(
+        [
+            p0 + 0.0 * h,
+            v0 + 0.0 * h,
+            0.5 * a0 + 0.0 * h,
+            (10.0 * d - 4.0 * e * h + 0.5 * f * h * h) / h**3,
+            (-15.0 * d + 7.0 * e * h - f * h * h) / h**4,
+            (6.0 * d - 3.0 * e * h + 0.5 * f * h * h) / h**5,
+        ]
+    )
+
+
+def _quintics_within(c: Float, h: Float, v1: Float, a1: Float, lim: MotionLimits) -> Float:
+    """Which quintics (coefficients ``c`` (6, m, n), durations ``h`` (m, 1), ending at velocity
+    ``v1`` and acceleration ``a1`` (m, n)) stay within ``lim``: (m,) bool.
+
+    Jerk and acceleration exactly (their extrema in closed form), velocity at 33 points of
+    each. And where each ends, the velocity reached if the acceleration were ramped down at the
+    jerk limit (what the next segment must be able to do, whatever it is): else a Ruckig
+    segment after it would overshoot the velocity limit.
+    """
+    c3, c4, c5 = c[3], c[4], c[5]
+    # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
+    # and at the jerk's roots inside the piece.
+    jerk = np.maximum(np.abs(6.0 * c3), np.abs(6.0 * c3 + 24.0 * c4 * h + 60.0 * c5 * h * h))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(c5 != 0.0, -24.0 * c4 / (120.0 * c5), -1.0)
+        inside = (vertex > 0.0) & (vertex < h)
+        sv = np.where(inside, vertex, 0.0)
+        jerk = np.maximum(jerk, np.abs(6.0 * c3 + 24.0 * c4 * sv + 60.0 * c5 * sv * sv))
+
+        def acc(s_: Float) -> Float:
+            return np.asarray(2.0 * c[2] + 6.0 * c3 * s_ + 12.0 * c4 * s_ * s_ + 20.0 * c5 * s_**3)
+
+        big = np.maximum(np.abs(acc(np.zeros_like(h))), np.abs(acc(h + 0.0 * c3)))
+        disc = (24.0 * c4) ** 2 - 4.0 * (60.0 * c5) * (6.0 * c3)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        for sign in (1.0, -1.0):
+            s_r = np.where(c5 != 0.0, (-24.0 * c4 + sign * root) / (120.0 * c5), -1.0)
+            ok = (disc >= 0.0) & (s_r > 0.0) & (s_r < h)
+            big = np.maximum(big, np.where(ok, np.abs(acc(np.where(ok, s_r, 0.0))), 0.0))
+        coast = np.where(np.isinf(lim.jerk), 0.0, a1 * np.abs(a1) / (2.0 * lim.jerk))
+    frac = np.linspace(0.0, 1.0, 33)[:, None, None]
+    s_v = frac * h
+    vel = (((5.0 * c5 * s_v + 4.0 * c4) * s_v + 3.0 * c3) * s_v + 2.0 * c[2]) * s_v + c[1]
+    within = (
+        (jerk <= lim.jerk)
+        & (big <= lim.acceleration)
+        & (np.abs(vel).max(axis=0) <= lim.velocity)
+        & (np.abs(v1 + coast) <= lim.velocity)
+        & np.isfinite(jerk)
+    )
+    return np.asarray(within.all(axis=1))
+
+
+class _KnotPieces:
+    """The quintics through consecutive samples' states (position, velocity, acceleration),
+    where they are within motion limits, joined from where the motion is.
+
+    With the cubic spline's velocities and accelerations at the samples, each quintic is the
+    spline's piece itself (the spline is C2). A piece within ``SPLINE_MARGIN`` of the limits is
+    followed when the motion is at its start (within rounding of the sample's state: Ruckig
+    ends a trajectory within about 1e-9 of its target): as the quintic from the motion's state
+    to the next sample's, which is the piece itself when the motion is exactly on it and lands
+    on the next sample exactly otherwise (a jump of 1e-9 rad would be a jerk of 6 rad/s^3 at
+    1 kHz). Jerk and acceleration are checked exactly (their extrema in closed form), velocity
+    at 33 points of each piece, inside the margin.
+    """
+
+    def __init__(self, t: Float, q: Float, v: Float, a: Float, limits: MotionLimits) -> None:
+        self.t = t
+        self.state = (q, v, a)
+        self.rows = [q.tolist(), v.tolist(), a.tolist()]  # exact, for comparing with a state
+        h = np.diff(t)[:, None]
+        c = _quintic_coefficients((q[:-1], v[:-1], a[:-1]), (q[1:], v[1:], a[1:]), h)
+        self.c = c  # (6, T - 1, n)
+        self.feasible = _quintics_within(c, h, v[1:], a[1:], limits.scaled(SPLINE_MARGIN))
+
+    def bridge(
+        self,
+        window: range,
+        now: float,
+        state: tuple[list[float], list[float], list[float]],
+        limits: MotionLimits,
+    ) -> tuple[int, _Quintic] | None:
+        """The first sample j of ``window`` the quintic from ``state`` (at ``now``) reaches on
+        time within ``limits``: (j, that quintic), or None."""
+        js = np.array([j for j in window if self.t[j] > now + 1e-9], dtype=np.intp)
+        if js.size == 0:
+            return None
+        p, v, a = (np.asarray(x, dtype=np.float64)[None] for x in state)
+        h = (self.t[js] - now)[:, None]
+        end = (self.state[0][js], self.state[1][js], self.state[2][js])
+        c = _quintic_coefficients((p, v, a), end, h)
+        ok = np.flatnonzero(_quintics_within(c, h, end[1], end[2], limits))
+        if ok.size == 0:
+            return None
+        k = int(ok[0])
+        j = int(js[k])
+        return j, _Quintic(None, (end[0][k], end[1][k], end[2][k]), float(h[k, 0]), c[:, k])
+
+    def piece(
+        self, i: int, now: float, state: tuple[list[float], list[float], list[float]]
+    ) -> _Quintic | None:
+        """The piece to sample i, if it is feasible and the motion is at its start, on time."""
+        k = i - 1
+        if not self.feasible[k] or abs(now - float(self.t[k])) > 1e-9:
+            return None
+        end = (self.state[0][i], self.state[1][i], self.state[2][i])
+        duration = float(self.t[i] - self.t[k])
+        rows = self.rows
+        if state[0] == rows[0][k] and state[1] == rows[1][k] and state[2] == rows[2][k]:
+            return _Quintic(None, end, duration, self.c[:, k])  # exactly on it: the piece
+        p, v, a = (np.asarray(x, dtype=np.float64) for x in state)
+        q0, v0, a0 = (x[k] for x in self.state)
+        scale = 1.0 + float(np.abs(q0).max())
+        if (
+            np.abs(p - q0).max() > 1e-8 * scale
+            or np.abs(v - v0).max() > 1e-7 * scale
+            or np.abs(a - a0).max() > 1e-6 * scale
+        ):
+            return None
+        return _Quintic((p, v, a), end, duration)
+
+
+def follow_samples(
+    t: Float,
+    q: Float,
+    limits: MotionLimits,
+    period: float,
+    *,
+    velocities: Float | None = None,
+    accelerations: Float | None = None,
+    start: tuple[Float, Float, Float] | None = None,
+    n_steps: int | None = None,
+) -> tuple[Float, Float, Float]:
+    """Setpoints every ``period`` of the motion :func:`follow` makes through timed samples.
+
+    Parameters
+    ----------
+    t, q, limits, velocities, accelerations, start
+        As :func:`follow`.
+    period : float
+        Seconds between setpoints.
+    n_steps : int, optional
+        Number of setpoints; default: until the motion is at rest at the last sample (the
+        first setpoint at or after its end). Beyond the motion, the last setpoint is held.
+
+    Returns
+    -------
+    positions, velocities, accelerations : ndarray, shape (K, n)
+        Row k at t[0] + k period; row 0 is the start state.
+    """
+    motion = follow(t, q, limits, velocities=velocities, accelerations=accelerations, start=start)
+    return motion.every(period, n_steps)

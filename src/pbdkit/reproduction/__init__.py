@@ -1,0 +1,12 @@
+"""Reproduction by probabilistic inverse kinematics (paper Table II): each constraint's GMR
+Gaussians mapped to joint space and fused step by step (:class:`ReproductionResult`), offline
+or online (:class:`Controller`, :class:`Command`).
+
+Above :mod:`pbdkit.data`; never imports the simulator, OpenCV or matplotlib."""
+
+from __future__ import annotations
+
+from ._controller import Command, CommandStream, Controller
+from ._probabilistic_ik import ReachWarning, ReproductionResult
+
+__all__ = ["Command", "CommandStream", "Controller", "ReachWarning", "ReproductionResult"]

@@ -1,0 +1,511 @@
+"""The steps of Table II's controllers for position constraints: theta_j from the posture
+theta_{j-1}, for the joint-space, fused and task-only controllers.
+
+A step is what the offline loop (:func:`pbdkit.reproduction._probabilistic_ik.solve`) and the online
+controller (:class:`pbdkit.reproduction.Controller`) share:
+:func:`pbdkit.reproduction._probabilistic_ik.make_step` builds the one a run asks for from the run's
+validated inputs (a :class:`RunSetup`), and both run that same step, so an online run fed its
+own targets is the offline reproduction. :class:`ControllerStep` is the interface;
+:class:`JointStep` follows theta_hat, :class:`FusedStep` is eq. (1) in information form and
+:class:`TaskStep` a task-only controller. Beside each step is its loop over the time grid, which
+also computes the covariances and the influence of the constraints, batched. The steps of
+oriented constraints are in :mod:`pbdkit.reproduction._pose_steps`.
+
+Every step is bounded alike: ``step_limit`` (per joint) and ``max_step`` (over the joints) scale
+it down uniformly, keeping its direction; the fused step is also line-searched on the fused
+energy of its step (at most ``MAX_HALVINGS`` halvings) and takes Newton's curvature term where
+it stiffens the step. Why, and the math of each controller, is in the docstring of
+:mod:`pbdkit.reproduction._probabilistic_ik` ("Step size", "Stability", "Influence of the
+constraints", "Performance").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
+
+from ..robots._kinematics import damped_pinv
+from ._constraints import JOINT, Constraints, KinematicModel
+
+__all__ = ["ControllerStep", "FusedStep", "JointStep", "RunSetup", "TaskStep"]
+
+Float = NDArray[np.float64]
+# skew(w)^T = _LEVI_CIVITA . w: the Levi-Civita symbol, entry (i, j) sum_k eps_ijk w_k.
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _LEVI_CIVITA[_i, _j, _k], _LEVI_CIVITA[_j, _i, _k] = 1.0, -1.0
+# Line search of the fused loop: at most this many halvings of a step
+# (_probabilistic_ik, "Stability").
+MAX_HALVINGS = 8
+
+
+@dataclass(frozen=True)
+class RunSetup:
+    """The validated inputs of one reproduction or controller run (see
+    :func:`~pbdkit.reproduction._probabilistic_ik.setup_run`)."""
+
+    constraints: Constraints
+    objects: dict[str, Float]
+    used: list[str]
+    tasks: list[str]
+    alpha: float
+    max_step: float  # inf: no trust region
+    step_limit: Float | None
+    lower: Float
+    upper: Float
+    theta0: Float
+    line_search: bool
+    newton: bool
+    reach: float | None
+    on_unreachable: str
+
+
+def _free_step2(max_step: float, step_limit: Float | None) -> float:
+    """Squared length below which no bound can bind (with a margin against rounding)."""
+    free = max_step if step_limit is None else min(max_step, float(step_limit.min()))
+    return free * free * (1.0 - 1e-9)
+
+
+def _bound_step(
+    step: Float, free2: float, step_limit: Float | None, max_step: float
+) -> tuple[Float, bool]:
+    """``step`` scaled down by :func:`_step_scale` when it is longer than ``free2`` allows
+    (squared, :func:`_free_step2`), and whether it was."""
+    step2 = float(step.dot(step))
+    if step2 > free2:
+        scale = _step_scale(step, step2, step_limit, max_step)
+        if scale < 1.0:
+            return step * scale, True
+    return step, False
+
+
+def _step_scale(step: Float, step2: float, step_limit: Float | None, max_step: float) -> float:
+    """Factor in (0, 1] that brings ``step`` within ``step_limit`` and then ``max_step``.
+
+    Both bounds scale the whole step (its direction is kept), so the factor is the smaller of
+    the two: max_i |step_i| / step_limit_i <= 1 and ||step|| <= max_step afterwards.
+    """
+    scale = 1.0
+    if step_limit is not None:
+        ratio = float((np.abs(step) / step_limit).max())
+        if ratio > 1.0:
+            scale = 1.0 / ratio
+    if step2 > max_step * max_step:
+        scale = min(scale, max_step / math.sqrt(step2))
+    return scale
+
+
+def _limited_mask(n_steps: int, steps: list[int]) -> NDArray[np.bool_]:
+    mask = np.zeros(n_steps, dtype=bool)
+    mask[steps] = True
+    return mask
+
+
+class ControllerStep:
+    """One step of a controller of Table II: theta_j from the posture theta_{j-1}.
+
+    The interface :func:`~pbdkit.reproduction._probabilistic_ik.solve`'s loops and
+    :class:`pbdkit.Controller` run every controller through
+    (:func:`~pbdkit.reproduction._probabilistic_ik.make_step` builds the one a run asks for):
+    :class:`FusedStep`, :class:`TaskStep` or :class:`JointStep`, and for oriented constraints
+    :class:`~pbdkit.reproduction._pose_steps.PoseFusedStep` or
+    :class:`~pbdkit.reproduction._pose_steps.PoseTaskStep` (whose ``jac`` is the 6-D Jacobian and
+    whose ``axes`` slot carries the hand's orientation).
+    """
+
+    #: "fused", "task" or "joint".
+    mode: str
+    #: Whether :meth:`advance` uses f(theta) and J(theta) (the joint-space controller does not).
+    needs_kinematics: bool = True
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        """f(theta), J(theta) and the joint axes (n, 3) where the step uses them (else None)."""
+        raise NotImplementedError
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x, jac and axes from :meth:`kinematics` at
+        it, None where :attr:`needs_kinematics` is False).
+
+        Returns theta_j, f(theta_j), J(theta_j) and its axes where the step computed them
+        (else None), and whether a bound scaled the step down.
+        """
+        raise NotImplementedError
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """The covariance of step j in joint space, (n, n), with the Jacobian ``jac`` used."""
+        raise NotImplementedError
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """The share of each constraint in use at step j (hand space), summing to 1."""
+        raise NotImplementedError
+
+
+class JointStep(ControllerStep):
+    """One step of the joint-space controller: theta_j = theta + (theta_hat_j - theta) within the
+    bounds (Table II); shared by :func:`~pbdkit.reproduction._probabilistic_ik.solve` and the online
+    controller."""
+
+    mode = "joint"
+    needs_kinematics = False
+
+    def __init__(self, run: RunSetup) -> None:
+        self.c = run.constraints
+        self.target = np.clip(self.c.joint_mean, run.lower, run.upper)
+        self.max_step, self.step_limit = run.max_step, run.step_limit
+        self.free2 = _free_step2(run.max_step, run.step_limit)
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        new, limited = self(j, theta)
+        return new, None, None, None, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        return np.array(self.c.joint_cov[j], dtype=np.float64)
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        return {JOINT: 1.0}
+
+    def __call__(self, j: int, theta: Float) -> tuple[Float, bool]:
+        """theta_j from theta_{j-1} = ``theta``, and whether a bound scaled the step down."""
+        step, limited = _bound_step(
+            self.target[j] - theta, self.free2, self.step_limit, self.max_step
+        )
+        return theta + step, limited  # stays in the box: between theta and target[j]
+
+
+def _joint_only(step: JointStep, theta0: Float, start: int = 0) -> tuple[Float, NDArray[np.bool_]]:
+    """Joint-space controller: :class:`JointStep` over every step (from step ``start``).
+
+    That is theta_hat itself (clipped to the limits), except where a step would exceed
+    ``step_limit`` or ``max_step`` (a q0 away from theta_hat_0, or a jump in theta_hat): those
+    steps are scaled. Returns the joints and the mask of the scaled steps.
+    """
+    max_step, step_limit = step.max_step, step.step_limit
+    joints = step.target[start:].copy()
+    joints[0] = theta0
+    n_steps = joints.shape[0]
+    d = np.diff(joints, axis=0)
+    # The same tests as _step_scale, for all steps at once: nothing binds -> theta_hat itself.
+    fits = np.einsum("ij,ij->i", d, d) <= max_step * max_step
+    if step_limit is not None:
+        fits &= (np.abs(d) / step_limit).max(axis=1) <= 1.0
+    if np.all(fits):
+        return joints, np.zeros(n_steps, dtype=bool)
+    limited: list[int] = []
+    theta = theta0
+    for j in range(1, n_steps):
+        theta, was_limited = step(start + j, theta)
+        if was_limited:
+            limited.append(j)
+        joints[j] = theta
+    return joints, _limited_mask(n_steps, limited)
+
+
+class FusedStep(ControllerStep):
+    """One step of the fused controller (Table II with eq. (1) in information form).
+
+    Everything that does not depend on the posture is prepared here for all steps at once;
+    :meth:`__call__` takes the posture theta_{j-1} (with f and J there) and returns theta_j.
+    :func:`~pbdkit.reproduction._probabilistic_ik.solve` and
+    :class:`pbdkit.reproduction.Controller` both run this one step, so an online run fed
+    its own targets is the offline reproduction.
+
+    Every task constraint shares J, so sum_n J^T P_n J = J^T (sum_n P_n) J and
+    sum_n J^T P_n dx^(n) = J^T (h - (sum_n P_n) x) with h = sum_n P_n (o(n) + x_hat^(n)): per step
+    the cost does not grow with the number of objects (P_n = (Sigma^x(n))^-1).
+    """
+
+    mode = "fused"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c, tasks = run.constraints, run.tasks
+        lower, upper, max_step, step_limit = run.lower, run.upper, run.max_step, run.step_limit
+        line_search, newton = run.line_search, run.newton
+        self.c, self.tasks, self.n = c, tasks, c.n_joints
+        self.lower, self.upper = lower, upper
+        self.max_step, self.step_limit, self.line_search = max_step, step_limit, line_search
+        # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
+        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        # The curvature term needs the joints' axes (_probabilistic_ik, "Stability").
+        axes = getattr(robot, "fk_jacobian_axes_unchecked", None) if newton else None
+        self.fk_axes = axes
+        self.newton = axes is not None
+        self._z, self._z_new = np.empty(self.n + 3), np.empty(self.n + 3)  # line search buffers
+        # A step shorter than this fits every bound: one comparison
+        # (pbdkit.reproduction._probabilistic_ik, "Performance").
+        self.free2 = _free_step2(max_step, step_limit)
+        # Lists of per-step views are cheaper to index in the loop than the arrays.
+        self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
+        self.set_objects(run.objects)
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+        c, n = self.c, self.n
+        self.prec, self.p_sum, h = _task_stack(c, objs, self.tasks)
+        # [sum_n P_n | h] so that one product gives J^T P and J^T h.
+        self.g = list(np.concatenate([self.p_sum, h[:, :, None]], axis=2))  # T x (3, 4)
+        self.p_sum_list, self.h_list = list(self.p_sum), list(h)
+        # The fused energy of step j in z = [theta | f(theta)]: E_j = 1/2 z^T Q_j z - z . b_j + c
+        # with Q_j = diag(Lambda_theta_j, sum_n P_n), b_j = [eta_j | h_j]; the line search
+        # compares E_j(z_new) - E_j(z) = d . (Q_j (z_new + z) / 2 - b_j), d = z_new - z (exact:
+        # quadratic).
+        half_q = np.zeros((c.n_steps, n + 3, n + 3))
+        half_q[:, :n, :n] = 0.5 * c.joint_prec
+        half_q[:, n:, n:] = 0.5 * self.p_sum
+        self.q_list, self.b_list = list(half_q), list(np.concatenate([c.joint_eta, h], axis=1))
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        """f(theta), J(theta) and the joint axes (n, 3) when the Newton term uses them."""
+        if self.fk_axes is not None:
+            return self.fk_axes(theta)  # type: ignore[no-any-return]
+        x, jac = self.fk_jac(theta)
+        return x, jac, None
+
+    def __call__(
+        self, j: int, theta: Float, x: Float, jac: Float, axes: Float | None = None
+    ) -> tuple[Float, Float, Float, Float | None, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x = f(theta), jac = J(theta), ``axes`` its
+        joint axes for the Newton term, see :meth:`kinematics`).
+
+        Returns theta_j, f(theta_j), J(theta_j), its axes (None without the Newton term), and
+        whether a bound scaled the step down.
+        """
+        # ndarray.dot rather than @: for these tiny operands it has half the call overhead
+        # (1 us against 2 us per product, measured).
+        m = jac.T.dot(self.g[j])  # (n, 4): [J^T P | J^T h]
+        a = m[:, :3]
+        lam_j = self.prec_list[j] + a.dot(jac)  # eq. (1) in information form: precisions add
+        # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
+        # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
+        rhs = self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x)
+        _, target, info = dposv(lam_j, rhs)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
+        step = target - theta
+        if axes is not None:
+            # Newton: the Hessian of E_j adds sum_i w_i d^2 f_i, w = P x - h, with
+            # d^2 x / d theta_a d theta_b = omega_min x J_max, so its (a, b) entry for a <= b is
+            # (w x omega_a) . J_b (_probabilistic_ik, "Stability"); rows
+            # w x omega_a = axes skew(w)^T, skew(w) = LEVI_CIVITA . w (np.cross costs 20x more on
+            # these sizes).
+            skew_t = _LEVI_CIVITA.dot(self.p_sum_list[j].dot(x) - self.h_list[j])
+            # Only its upper triangle is the Hessian's, and only it is read: LAPACK's dposv
+            # factors the upper triangle of the symmetric matrix it is given.
+            _, newton, info2 = dposv(lam_j + axes.dot(skew_t).dot(jac), lam_j.dot(step))
+            # Kept where the curvature stiffens the step (the directions where Gauss-Newton
+            # overshoots into a limit cycle); where it softens it, the Gauss-Newton step is the
+            # safer one.
+            step2 = step.dot(step)
+            newton2 = newton.dot(newton)
+            if info2 == 0 and newton2 < step2:
+                step, step2 = newton, newton2
+                target = theta + newton
+        else:
+            step2 = step.dot(step)
+        limited = False
+        if step2 > self.free2:  # velocity bound, trust region of the linearization
+            scale = _step_scale(step, step2, self.step_limit, self.max_step)
+            if scale < 1.0:
+                target = theta + step * scale
+                limited = True
+        new = np.minimum(np.maximum(target, self.lower), self.upper)
+        x_new, jac_new, axes_new = self.kinematics(new)
+        if self.line_search:
+            # The step must lower the fused energy of step j
+            # (_probabilistic_ik, "Stability").
+            n = self.n
+            z, z_new = self._z, self._z_new  # [theta | f(theta)], filled in place
+            z[:n], z[n:] = theta, x
+            z_new[:n], z_new[n:] = new, x_new
+            q_t, b_t = self.q_list[j], self.b_list[j]
+            halvings = 0
+            while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
+                halvings += 1
+                new = theta + 0.5 * (new - theta)
+                x_new, jac_new, axes_new = self.kinematics(new)
+                z_new[:n], z_new[n:] = new, x_new
+        return new, x_new, jac_new, axes_new, limited
+
+    # The step itself, under the interface's name: no wrapper, one call less per step.
+    advance = __call__  # type: ignore[assignment]
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used."""
+        lam = self.prec_list[j] + jac.T.dot(self.p_sum[j]).dot(jac)
+        inv = np.linalg.inv(lam)
+        return np.asarray(0.5 * (inv + inv.T))
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Hand space: share_n = tr(J Sigma J^T P_n) / 3, the joint constraint the rest."""
+        s_hand = jac @ cov @ jac.T
+        shares = {
+            k: float(np.trace(s_hand @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)
+        }
+        return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
+
+
+def _fused_loop(
+    c: Constraints,
+    tasks: list[str],
+    theta0: Float,
+    step: FusedStep,
+    start: int = 0,
+) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+    """Table II with eq. (1) in information form: :class:`FusedStep` over every step (from
+    step ``start``, at ``theta0``).
+
+    Returns joints, positions, covariances, influence (hand space), influence in joint space
+    and the mask of the steps scaled down, for steps ``start`` .. T - 1.
+    """
+    n_steps, n = c.n_steps, c.n_joints
+    limited: list[int] = []
+    theta = theta0
+    x, jac, axes = step.kinematics(theta)
+    # Python lists: appending costs less than writing rows into arrays, step by step.
+    joints_l, positions_l, jacs_l = [theta], [x], [jac]
+    for j in range(start + 1, n_steps):
+        # x, jac are f(theta_{j-1}) and J(theta_{j-1}): Table II linearizes at the current posture.
+        theta, x, jac, axes, was_limited = step(j, theta, x, jac, axes)
+        if was_limited:
+            limited.append(j - start)
+        # Entry j holds the state theta_j and the Jacobian that step j+1 will use.
+        joints_l.append(theta)
+        positions_l.append(x)
+        jacs_l.append(jac)
+    joints, positions, jacs = np.array(joints_l), np.array(positions_l), np.array(jacs_l)
+    # Step 0 reports the constraints at t_0 with J(theta_0); step j >= 1 used J(theta_{j-1}).
+    jac_used = np.concatenate([jacs[:1], jacs[:-1]])
+    jt = np.swapaxes(jac_used, -1, -2)
+    prec_j, prec, p_sum = c.joint_prec[start:], step.prec[start:], step.p_sum[start:]
+    lam = prec_j + jt @ p_sum @ jac_used
+    cov = _spd_inverse(lam)
+    # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
+    # share_n = tr(S P_n) / 3 and the joint constraint has the rest
+    # (pbdkit.reproduction._probabilistic_ik, "Influence of the constraints").
+    s_hand = jac_used @ cov @ jt  # (T, 3, 3)
+    traces = [np.einsum("tij,tji->t", s_hand, prec[:, i]) for i in range(len(tasks))]
+    influence = {k: tr / 3 for k, tr in zip(tasks, traces, strict=True)}
+    influence = {JOINT: np.clip(1.0 - sum(influence.values()), 0.0, 1.0), **influence}
+    # Joint space: tr(Sigma Lambda_c) / n, with tr(Sigma J^T P_n J) = tr(S P_n).
+    influence_js = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
+    influence_js.update({k: tr / n for k, tr in zip(tasks, traces, strict=True)})
+    return joints, positions, cov, influence, influence_js, _limited_mask(n_steps - start, limited)
+
+
+def _task_stack(
+    c: Constraints, objs: Mapping[str, Float], tasks: list[str]
+) -> tuple[Float, Float, Float]:
+    """The task constraints in use, for all steps at once: P_n (T, m, 3, 3), their sum
+    sum_n P_n (T, 3, 3) and h = sum_n P_n (o(n) + x_hat^(n)) (T, 3), P_n = (Sigma^x(n))^-1.
+
+    Their product in task space is N(x; (sum_n P_n)^-1 h, (sum_n P_n)^-1): the fused loop uses
+    the sums in joint space, the task-only loop the product's mean.
+    """
+    prec = np.stack([c.task_prec[k] for k in tasks], axis=1)
+    targets = np.stack([objs[k] + c.task_mean[k] for k in tasks], axis=1)  # (T, m, 3)
+    return prec, prec.sum(axis=1), np.einsum("tkij,tkj->ti", prec, targets)
+
+
+def _spd_inverse(a: Float) -> Float:
+    """Inverse of symmetric positive-definite matrices (..., d, d), symmetrized."""
+    inv = np.linalg.inv(a)
+    return np.asarray(0.5 * (inv + np.swapaxes(inv, -1, -2)))
+
+
+class TaskStep(ControllerStep):
+    """One step of a task-only controller (Table II): the task constraints in use fused in task
+    space, dtheta = J+ dx + alpha (I - J+ J)(theta_hat_j - theta), J+ the damped right inverse
+    at the current posture. Shared by :func:`~pbdkit.reproduction._probabilistic_ik.solve` and the
+    online controller."""
+
+    mode = "task"
+
+    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+        c = run.constraints
+        self.c, self.tasks, self.alpha = c, run.tasks, run.alpha
+        self.lower, self.upper = run.lower, run.upper
+        self.max_step, self.step_limit = run.max_step, run.step_limit
+        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        self.free2 = _free_step2(run.max_step, run.step_limit)
+        self.eye = np.eye(c.n_joints)
+        self.set_objects(run.objects)
+
+    def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
+        x, jac = self.fk_jac(theta)
+        return x, jac, None
+
+    def advance(
+        self, j: int, theta: Float, x: Float | None, jac: Float | None, axes: Float | None
+    ) -> tuple[Float, Float | None, Float | None, Float | None, bool]:
+        assert x is not None and jac is not None
+        new, x_new, jac_new, limited = self(j, theta, x, jac, damped_pinv(jac))
+        return new, x_new, jac_new, None, limited
+
+    def covariance(self, j: int, jac: Float) -> Float:
+        """The paper's J+ Sigma^x J+^T (rank 3), J+ at the Jacobian ``jac`` used."""
+        jp = damped_pinv(jac)
+        return np.asarray(jp @ self.s_fused[j] @ jp.T)
+
+    def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
+        """Already in hand space: share_n = tr(S_fused P_n) / 3."""
+        s = self.s_fused[j]
+        return {k: float(np.trace(s @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)}
+
+    def set_objects(self, objs: Mapping[str, Float]) -> None:
+        """New object positions (every object in use), for every step from now on."""
+        self.prec, prec_sum, h = _task_stack(self.c, objs, self.tasks)
+        self.s_fused = _spd_inverse(prec_sum)  # (T, 3, 3)
+        # Product of the task-space Gaussians: target = S (sum_n P_n (o_n + x_hat_n)).
+        self.target = np.einsum("tij,tj->ti", self.s_fused, h)
+
+    def __call__(
+        self, j: int, theta: Float, x: Float, jac: Float, jp: Float
+    ) -> tuple[Float, Float, Float, bool]:
+        """theta_j from theta_{j-1} = ``theta`` (x, jac at it; jp = damped_pinv(jac))."""
+        d_hat = self.c.joint_mean[j] - theta
+        # Table II: dtheta = J+ dx + alpha (I - J+ J)(theta_hat_{j+1} - theta_j)
+        step = jp @ (self.target[j] - x) + self.alpha * ((self.eye - jp @ jac) @ d_hat)
+        step, limited = _bound_step(step, self.free2, self.step_limit, self.max_step)
+        new = np.minimum(np.maximum(theta + step, self.lower), self.upper)
+        x_new, jac_new = self.fk_jac(new)
+        return new, x_new, jac_new, limited
+
+
+def _task_loop(
+    step: TaskStep, theta0: Float, start: int = 0
+) -> tuple[Float, Float, Float, dict[str, Float], NDArray[np.bool_]]:
+    """Task-only controller of Table II: :class:`TaskStep` over every step (from ``start``)."""
+    c, tasks = step.c, step.tasks
+    n_steps, n = c.n_steps - start, c.n_joints
+    joints = np.empty((n_steps, n))
+    positions = np.empty((n_steps, 3))
+    pinvs = np.empty((n_steps, n, 3))
+    limited: list[int] = []
+    theta = theta0
+    x, jac = step.fk_jac(theta)
+    jp = damped_pinv(jac)
+    joints[0], positions[0], pinvs[0] = theta, x, jp
+    for j in range(1, n_steps):
+        theta, x, jac_new, was_limited = step(start + j, theta, x, jac, jp)
+        if was_limited:
+            limited.append(j)
+        pinvs[j] = jp
+        jac = jac_new
+        jp = damped_pinv(jac)
+        joints[j], positions[j] = theta, x
+    s_fused, prec = step.s_fused[start:], step.prec[start:]
+    covs = pinvs @ s_fused @ np.swapaxes(pinvs, -1, -2)
+    # Already in hand space: share_n = tr(S_fused P_n) / 3, S_fused = (sum_n P_n)^-1.
+    influence = {k: np.einsum("tij,tji->t", s_fused, prec[:, i]) / 3 for i, k in enumerate(tasks)}
+    return joints, positions, covs, influence, _limited_mask(n_steps, limited)

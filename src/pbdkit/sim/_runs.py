@@ -1,0 +1,199 @@
+"""One controller's run for a placement, in a fresh simulation: offline (reproduce once, play the
+trajectory, :func:`run_controller`) or online (the controller in the physics loop,
+:func:`run_online`)."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..reproduction._probabilistic_ik import ReachWarning, ReproductionResult
+from ..skill._skill import Skill
+from ._execute import ExecutionResult, execute
+from ._metrics import run_summary
+from ._online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
+from ._perturb import Disturbance
+from ._scene import Simulation
+from ._task_skill import TaskSkill, velocity_limit
+from ._tracking import SimTracker
+
+__all__ = ["ControllerRun", "OnlineControllerRun", "run_controller", "run_online"]
+
+Float = NDArray[np.float64]
+
+
+@dataclass
+class ControllerRun:
+    """One controller's reproduction and its execution under physics.
+
+    ``objects`` holds the positions the skill was told (its own objects only).
+    """
+
+    controller: str
+    objects: dict[str, Float]
+    reproduction: ReproductionResult
+    execution: ExecutionResult
+    reproduce_seconds: float
+    warnings: list[str] = field(default_factory=list)
+    velocity_limit: Float | None = None
+    force_window: tuple[float, float] | None = None
+
+    @property
+    def success(self) -> bool:
+        return bool(self.execution.outcome.success)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: success, the task's metrics, ``peak_speed_ratio`` and
+        ``following_error_rad`` (:func:`pbdkit.sim._metrics.peak_speed_ratio`,
+        :func:`pbdkit.sim._metrics.following_error`), and the peaks of the servo targets over
+        the arm's limits, ``peak_velocity_ratio``, ``peak_acceleration_ratio``,
+        ``peak_jerk_ratio`` (<= 1: within the limits) with the absolute ``peak_velocity``,
+        ``peak_acceleration``, ``peak_jerk`` (rad/s, rad/s^2, rad/s^3;
+        :func:`pbdkit.sim._metrics.servo_peaks`); all outside a push."""
+        return run_summary(self.execution, self.velocity_limit, self.force_window)
+
+
+@dataclass
+class OnlineControllerRun:
+    """One controller run online, in the physics loop (:func:`pbdkit.sim.execute_online`).
+
+    ``objects`` holds the positions the skill was told at the start (its own objects only).
+    """
+
+    controller: str
+    objects: dict[str, Float]
+    online: OnlineRun
+    velocity_limit: Float
+    warnings: list[str] = field(default_factory=list)
+    force_window: tuple[float, float] | None = None
+
+    @property
+    def execution(self) -> ExecutionResult:
+        return self.online.execution
+
+    @property
+    def success(self) -> bool:
+        return bool(self.execution.outcome.success)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: as :meth:`ControllerRun.summary`, plus ``phase_held_steps`` (commands
+        that re-targeted the previous step) and, with vision, ``tracking`` (frames per status
+        of the :class:`pbdkit.vision.TrackFilter`, per object)."""
+        out = run_summary(self.execution, self.velocity_limit, self.force_window)
+        out["phase_held_steps"] = self.online.held_steps
+        if self.online.tracking is not None:
+            out["tracking"] = self.online.tracking["frames"]
+        return out
+
+
+def _prepare_run(
+    ts: TaskSkill,
+    objects: dict[str, Float],
+    controller: str,
+    sim_objects: dict[str, Float] | None,
+) -> tuple[Skill, list[str] | None, dict[str, Float], dict[str, Float]]:
+    """The controller's skill (:meth:`TaskSkill.skill_for`) and ``use``, the placements the
+    skill is told (its own objects) and the world's (every object), for
+    :func:`run_controller` and :func:`run_online`."""
+    skill, use = ts.skill_for(controller)
+    known = ts.task.full_placement(objects)
+    world = ts.task.full_placement(sim_objects) if sim_objects is not None else known
+    return skill, use, {k: known[k] for k in skill.object_names}, world
+
+
+def run_controller(
+    ts: TaskSkill,
+    objects: dict[str, Float],
+    controller: str,
+    *,
+    camera: str | None = None,
+    fps: float = 15.0,
+    sim_objects: dict[str, Float] | None = None,
+    disturbance: Disturbance | None = None,
+) -> ControllerRun:
+    """Reproduce with one controller for ``objects`` and execute it in a fresh simulation.
+
+    The reproduction is computed once, from ``objects``, and played open loop (offline); a
+    ``disturbance`` (:mod:`pbdkit.sim._perturb`) acts on the world while it plays.
+
+    ``objects`` are the positions the robot knows (e.g. from the tracker); ``sim_objects``,
+    the true positions in the simulated world (default: the same). Either may leave out the
+    fixed objects (they are added from the task's ranges) and may hold
+    objects the skill has no constraint on: the skill is told only its own objects, the
+    simulation and the success judge get every object.
+
+    Raises
+    ------
+    ValueError
+        An unknown controller or object, or a moving object without a position.
+    """
+    skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ReachWarning)
+        res = skill.reproduce(told, use=use, on_unreachable="warn")
+    rep_s = time.perf_counter() - start
+    sim = Simulation.from_task(ts.task, world)
+    try:
+        ex = execute(
+            sim,
+            skill.times(res),
+            res.joints,
+            res.gripper,
+            camera=camera,
+            fps=fps,
+            disturbance=disturbance,
+            velocities=res.velocities,
+            accelerations=res.accelerations,
+        )
+    finally:
+        sim.close()
+    messages = [str(w.message) for w in caught]
+    limit = velocity_limit(ts)
+    window = None if disturbance is None else disturbance.force_window()
+    return ControllerRun(
+        controller, told, res, ex, rep_s, messages, velocity_limit=limit, force_window=window
+    )
+
+
+def run_online(
+    ts: TaskSkill,
+    objects: dict[str, Float],
+    controller: str,
+    *,
+    tracker: SimTracker | None = None,
+    camera: str | None = None,
+    fps: float = 15.0,
+    sim_objects: dict[str, Float] | None = None,
+    disturbance: Disturbance | None = None,
+) -> OnlineControllerRun:
+    """Run one controller online (in the physics loop) from ``objects``, in a fresh simulation.
+
+    The controller (:meth:`pbdkit.Skill.controller`) starts from the positions ``objects``
+    (what the cameras saw before the run, or the truth) and is then told new positions at
+    15 Hz: the tracker's (filtered, :class:`pbdkit.sim._online.VisionObserver`) with a
+    ``tracker``, else the true ones (:class:`pbdkit.sim._online.TruthObserver`). Arguments as
+    :func:`run_controller`.
+    """
+    skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
+    names = skill.object_names
+    observer: Observer = TruthObserver(names) if tracker is None else VisionObserver(tracker, names)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ReachWarning)
+        ctrl = skill.controller(told, use=use, on_unreachable="warn")
+        sim = Simulation.from_task(ts.task, world)
+        try:
+            run = execute_online(
+                sim, ctrl, observer=observer, disturbance=disturbance, camera=camera, fps=fps
+            )
+        finally:
+            sim.close()
+    messages = [str(w.message) for w in caught]
+    window = None if disturbance is None else disturbance.force_window()
+    limit = velocity_limit(ts)
+    return OnlineControllerRun(controller, told, run, limit, messages, force_window=window)

@@ -1,0 +1,819 @@
+"""Tasks as data: a :class:`TaskSpec` per task, a registry, and the geometry every task shares.
+
+A task is one :class:`TaskSpec`: where its objects may be placed, how they are built in the
+simulated world, how the simulated teacher demonstrates it and how a run is judged. The functions
+along ``pbdkit demo``'s path take a spec, or a registered name that they resolve once with
+:func:`get_task`; nothing else knows a task by name. The paper's two tasks (Sec. III) are
+:mod:`pbdkit.sim._taskdefs.coaster` and :mod:`pbdkit.sim._taskdefs.basin`, registered when
+:mod:`pbdkit.sim` is imported.
+
+Frames and reference points
+---------------------------
+All positions are in the robot's base frame (the frame of the URDF root, ``base_link``), in metres:
+x points away from the robot across the table, z up, and the table top is the plane z = 0 (the arm's
+base column stands on it). An object's position ``o`` is the point a camera measures; each task
+says which point that is for its objects. Every task has one object the gripper holds, its
+:attr:`TaskSpec.grasped` (``"glass"`` unless the task names another): a glass built by
+:func:`pbdkit.sim._world.add_glass` under that name, on which the simulation, the execution record,
+the disturbances and the teacher's grasp rely, whose point is on its axis at the height of the
+centre of its red band.
+
+The Katana holds the glass from the side with its long wrist (0.30 m from the wrist pitch joint to
+the tool point) nearly horizontal, which folds the elbow beyond its limit closer than about 0.45 m
+from the base axis: placements lie 0.45-0.58 m from it.
+
+Ranges are boxes ``(low, high)`` of shape (3,) each (:class:`PlacementRange`); a range whose low and
+high are equal is a fixed object. Demonstrations sample inside them (:func:`sample_objects`) and so
+can evaluation trials, which then stay inside the demonstrated range.
+
+Fixed and tracked objects (paper Sec. III): the ranges are the one place that says which objects
+move. Those that move (:func:`tracked_objects`) are located by the cameras and get a task-space
+constraint; a fixed one (the basin) is at a known place (:func:`fixed_objects`), carries no
+patch, and gets no constraint in the paper's configuration: its position is the same in every
+demonstration, so the hand's path relative to it is the joint-space constraint seen through the
+forward kinematics. Demonstrations still record it, as a user's recording would.
+
+How to add a task
+-----------------
+Write one module that builds a :class:`TaskSpec` and calls :func:`register_task`; import it
+before use (the built-in tasks are imported by :mod:`pbdkit.sim._taskdefs`). A spec needs:
+
+- ``name`` and ``description`` (the report's one-line text);
+- ``ranges``: object name -> :class:`PlacementRange`, with the grasped object (``grasped``,
+  default ``"glass"``); z is the height at which the object rests on its support (scenes refuse
+  other heights);
+- ``add_objects(world, objects, rng)``: adds the task's bodies to the MuJoCo world
+  (``world`` is the ``MjSpec``'s worldbody, ``objects`` a full placement name -> (3,)), the glass
+  included (:func:`pbdkit.sim._world.add_glass`, and :func:`pbdkit.sim._world.add_liquid` for a
+  glass that holds ``n_liquid`` spheres); objects other than the glass are static bodies, or
+  mocap bodies (``add_body(..., mocap=True)``) for one that a disturbance slides;
+- ``via_points(objects, rng, speed) -> list[ViaPoint]``: the teacher's hand path for a placement
+  (building blocks in :mod:`pbdkit.sim._teacher`: :class:`~pbdkit.sim._teacher.Person`,
+  :func:`~pbdkit.sim._teacher.grasp_via_points`);
+- ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
+  what was measured during the run (:class:`RunStats`);
+- ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
+  patch (default: the grasped glass's red band only), or for an object placed as a pose the
+  pair of its two end patches' prefixes (a, b: the yaw points from a to b); ``cameras``: where
+  the stereo pair stands (:class:`CameraRig`; default: the paper's rig); ``n_liquid``: spheres
+  in the glass (default 0); ``move``: the object that ``--perturb move`` slides
+  (:class:`ObjectMove`, optional); ``grasped``: the name of the glass the gripper holds
+  (default ``"glass"``; its bodies and geoms are named after it,
+  :func:`pbdkit.sim._world.add_glass`).
+
+For example, a third task, "put the glass from the table on a green mark on the table"
+(``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
+
+    def add_objects(world, objects, rng):
+        m, g = objects["mark"], objects["glass"]
+        world.add_geom(name="mark", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                       size=[0.03, 0.0005, 0.0], pos=[m[0], m[1], 0.0005],
+                       rgba=[0.1, 0.7, 0.2, 1.0], contype=0, conaffinity=0)
+        add_glass(world, np.array([g[0], g[1], 0.0]))  # bottom face on the table
+
+    def via_points(objects, rng, speed):
+        p = Person(rng, speed)
+        g, m = objects["glass"], objects["mark"]
+        place = m + UP * (GLASS_PATCH_CENTER + 0.001) + GRASP_OFFSET  # tool point on release
+        carry = between(g + GRASP_OFFSET, place) + UP * 0.08 + p.jitter(0.01)
+        return [
+            *grasp_via_points(p, g, 0.08, 2.6),  # swing, approach, close, lift 8 cm
+            ViaPoint(p.duration(1.8), carry, p.holding_pitch(), p.roll(), True),
+            ViaPoint(p.duration(1.5), place + UP * 0.05, p.holding_pitch(), 0.0, True),
+            ViaPoint(p.duration(1.0), place, p.hold_pitch, 0.0, True),
+            ViaPoint(p.duration(0.6), place, p.hold_pitch, 0.0, False),  # open
+            ...,  # retreat: back along the radius, then up (free pitch, joint space)
+        ]
+
+    def judge(sim, run):
+        bottom, _ = sim.glass_pose()
+        err = float(np.linalg.norm(bottom[:2] - sim.info.objects["mark"][:2]))
+        tilt = math.degrees(sim.glass_tilt())
+        ok = err <= 0.02 and tilt < 10.0 and sim.glass_released()
+        return Outcome(ok, {"placement_error_mm": 1e3 * err, "tilt_deg": tilt})
+
+    z = GLASS_PATCH_CENTER  # the glass stands on the table
+    register_task(TaskSpec(
+        name="mark", description="Put the glass from the table on the green mark.",
+        ranges={"glass": PlacementRange.box((0.47, 0.08, z), (0.54, 0.22, z)),
+                "mark": PlacementRange.box((0.47, -0.22, 0.001), (0.52, -0.10, 0.001))},
+        add_objects=add_objects, via_points=via_points, judge=judge,
+        patches={"glass": GLASS_PATCH_PREFIX, "mark": "mark"}))
+
+After that, ``teach("mark", 5)``, ``learn_task("mark")``, ``evaluate("mark", ...)`` and
+``run_robot_demo("mark", ...)`` work as for the paper's tasks, and so does ``--task mark`` of the
+command's ``demo``, ``teach`` and ``evaluate`` in a process that registered it (the ``pbdkit``
+script itself knows the built-in tasks only: a module of :mod:`pbdkit.sim._taskdefs` is one).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from .._validation import check_positions
+from ..data._placement import check_placements, is_pose, position_of
+from ._registry import Registry
+
+__all__ = [
+    "GLASS_PATCH_PREFIX",
+    "GRASP_OFFSET",
+    "CameraRig",
+    "ObjectMove",
+    "ObjectTurn",
+    "Outcome",
+    "PlacementRange",
+    "RunStats",
+    "TaskSpec",
+    "ViaPoint",
+    "fixed_objects",
+    "full_placement",
+    "get_task",
+    "nominal_objects",
+    "patch_prefix",
+    "register_task",
+    "sample_objects",
+    "task_names",
+    "tracked_objects",
+    "unregister_task",
+    "yaw_of",
+    "yaw_pose",
+]
+
+Float = NDArray[np.float64]
+
+# Glass: an open cylinder (thin boxes around a disk bottom) that can hold the liquid spheres.
+GLASS_RADIUS = 0.025  # outer radius (m)
+GLASS_WALL = 0.003  # wall thickness (m)
+GLASS_HEIGHT = 0.10  # (m)
+GLASS_BOTTOM = 0.006  # thickness of the bottom disk (m)
+GLASS_PATCH_LOW = 0.065  # red band, height above the glass's bottom face (m)
+GLASS_PATCH_HIGH = 0.085
+GLASS_PATCH_CENTER = 0.5 * (GLASS_PATCH_LOW + GLASS_PATCH_HIGH)
+
+
+def patch_prefix(name: str) -> str:
+    """Name prefix of the geoms of the red band of the glass ``name`` (``NAME_patch0..11``,
+    :func:`pbdkit.sim._world.add_glass`), for the cameras."""
+    return f"{name}_patch"
+
+
+#: Name prefix of the geoms of the glass's red band (``glass_patch0..11``), for the cameras.
+GLASS_PATCH_PREFIX = patch_prefix("glass")
+# Height above the glass's bottom face at which the fingers hold it (centre of the finger pads).
+GLASS_GRASP_HEIGHT = 0.045
+# Tool point minus glass position when the glass is held upright with the tool on its axis.
+GRASP_OFFSET: Float = np.array([0.0, 0.0, GLASS_GRASP_HEIGHT - GLASS_PATCH_CENTER])
+
+LIQUID_RADIUS = 0.0055
+
+
+@dataclass(frozen=True)
+class PlacementRange:
+    """Range of placements of one object: a box of positions, and for an object that turns a
+    range of yaws; uniform sampling.
+
+    Attributes
+    ----------
+    low, high : ndarray, shape (3,)
+        Corners of the box (equal for a fixed object).
+    yaw : tuple of float, optional
+        (low, high) yaw about the vertical (rad) for an object placed as a pose: its placements
+        are then 4x4 transforms (:mod:`pbdkit.data._placement`); None (default): positions.
+    """
+
+    low: Float
+    high: Float
+    yaw: tuple[float, float] | None = None
+
+    @classmethod
+    def box(
+        cls,
+        low: tuple[float, float, float],
+        high: tuple[float, float, float],
+        yaw: tuple[float, float] | None = None,
+    ) -> PlacementRange:
+        """The box between two corners given as tuples (and a yaw range, rad, for a pose)."""
+        return cls(
+            np.array(low, dtype=np.float64),
+            np.array(high, dtype=np.float64),
+            None if yaw is None else (float(yaw[0]), float(yaw[1])),
+        )
+
+    @property
+    def posed(self) -> bool:
+        """True if the object is placed as a pose (it has a yaw range)."""
+        return self.yaw is not None
+
+    def sample(self, rng: np.random.Generator, yaw_stratum: tuple[int, int] | None = None) -> Float:
+        """A placement drawn uniformly: a position (3,), or a 4x4 pose for a posed range
+        (position first, then yaw, from ``rng``). ``yaw_stratum`` (i, n): the yaw is drawn in
+        the i-th of n equal parts of the yaw range (so that n draws span it)."""
+        p = rng.uniform(self.low, self.high)
+        if self.yaw is None:
+            return p
+        u = float(rng.uniform())
+        if yaw_stratum is not None:
+            u = (yaw_stratum[0] + u) / yaw_stratum[1]
+        return yaw_pose(p, self.yaw[0] + (self.yaw[1] - self.yaw[0]) * u)
+
+    def nominal(self) -> Float:
+        """The centre: a position (3,), or the pose at the centre of the yaw range."""
+        if self.yaw is None:
+            return self.center.copy()
+        return yaw_pose(self.center, 0.5 * (self.yaw[0] + self.yaw[1]))
+
+    @property
+    def fixed(self) -> bool:
+        """True if the object never moves."""
+        return bool(np.array_equal(self.low, self.high))
+
+    @property
+    def center(self) -> Float:
+        """Centre of the box, shape (3,)."""
+        return 0.5 * (self.low + self.high)
+
+    def contains(self, position: Float, tol: float = 1e-9) -> bool:
+        """True if ``position`` (3,) lies in the box (up to ``tol``); for a pose (4, 4), its
+        position in the box and its yaw in the yaw range."""
+        p = np.asarray(position, dtype=np.float64)
+        if p.shape == (4, 4):
+            yaw = math.atan2(float(p[1, 0]), float(p[0, 0]))
+            if self.yaw is None or not self.yaw[0] - tol <= yaw <= self.yaw[1] + tol:
+                return False
+            p = p[:3, 3]
+        return bool(np.all(p >= self.low - tol) and np.all(p <= self.high + tol))
+
+
+def yaw_pose(position: npt.ArrayLike, yaw: float) -> Float:
+    """The 4x4 pose at ``position`` turned by ``yaw`` (rad) about the vertical."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.eye(4)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:3, 3] = np.asarray(position, dtype=np.float64)
+    return out
+
+
+def yaw_of(pose: Float) -> float:
+    """The yaw (rad) of a pose's x axis about the vertical, in (-pi, pi]."""
+    return math.atan2(float(pose[1, 0]), float(pose[0, 0]))
+
+
+@dataclass(frozen=True)
+class ViaPoint:
+    """A waypoint of the teacher's hand (what a task's ``via_points`` returns).
+
+    Attributes
+    ----------
+    duration : float
+        Time (s) to reach it from the previous via point (minimum-jerk profile).
+    x : ndarray, shape (3,)
+        Tool point.
+    pitch, roll : float
+        Tool pitch and wrist roll (rad).
+    gripper : bool
+        Gripper state (closed if True) during the motion to this via point.
+    free_pitch : bool
+        The pitch is a preference only: if the arm cannot reach ``x`` with it, the nearest
+        reachable pitch is used (a person adapts the posture; the glass is not held then).
+    joint_space : bool
+        Interpolate the segment to this via point in joint space (a free gesture) instead of
+        in task space (a controlled hand path).
+    """
+
+    duration: float
+    x: Float
+    pitch: float
+    roll: float
+    gripper: bool
+    free_pitch: bool = False
+    joint_space: bool = False
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Success of a run and its measurements (what a task's ``judge`` returns).
+
+    Attributes
+    ----------
+    success : bool
+    metrics : dict str -> float
+        The task's measurements, named with their unit (e.g. ``placement_error_mm``,
+        ``tilt_deg``); see the task's judge.
+    """
+
+    success: bool
+    metrics: dict[str, float]
+
+
+@dataclass(frozen=True)
+class RunStats:
+    """What a judge may need beyond the final state: measured while the trajectory played.
+
+    Attributes
+    ----------
+    held_at_end : bool
+        Both fingers touched the grasped object at the end of the trajectory (before the
+        settling time).
+    max_tilt : float
+        Largest tilt of the grasped object's axis from the vertical during the run (rad).
+    """
+
+    held_at_end: bool
+    max_tilt: float
+
+
+#: ``add_objects(world, objects, rng)``: add the task's bodies to the MjSpec worldbody.
+AddObjects = Callable[[Any, Mapping[str, Float], np.random.Generator], None]
+#: ``via_points(objects, rng, speed)``: the teacher's via points for a placement.
+ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], list[ViaPoint]]
+#: ``judge(sim, run)``: the outcome of a run, from the final state of the simulation
+#: (a :class:`pbdkit.sim.Simulation`, which builds on this module) and the run's
+#: measurements.
+Judge = Callable[[Any, RunStats], Outcome]
+
+
+@dataclass(frozen=True)
+class CameraRig:
+    """Where a task's stereo pair stands (:attr:`TaskSpec.cameras`): two 320x240 cameras
+    ``cam_left`` and ``cam_right`` looking at one point.
+
+    Attributes
+    ----------
+    left, right : tuple of float
+        Positions (x, y, z) of the cameras ``cam_left`` and ``cam_right``, base frame (m).
+    target : tuple of float
+        The point both look at (the image centres' rays meet there; the horizon stays level).
+    fovy : float
+        Vertical field of view (degrees).
+    """
+
+    left: tuple[float, float, float]
+    right: tuple[float, float, float]
+    target: tuple[float, float, float]
+    fovy: float
+
+    def __post_init__(self) -> None:
+        pts = {}
+        for what in ("left", "right", "target"):
+            p = tuple(float(v) for v in getattr(self, what))
+            if len(p) != 3 or not all(math.isfinite(v) for v in p):
+                raise ValueError(f"CameraRig.{what} must be 3 finite numbers, got {p!r}")
+            object.__setattr__(self, what, p)
+            pts[what] = np.array(p)
+        if not (0.0 < float(self.fovy) < 180.0):
+            raise ValueError(f"CameraRig.fovy must be in (0, 180) degrees, got {self.fovy!r}")
+        object.__setattr__(self, "fovy", float(self.fovy))
+        if np.array_equal(pts["left"], pts["right"]):
+            raise ValueError("CameraRig.left and right must be different positions")
+        for what in ("left", "right"):
+            d = pts["target"] - pts[what]
+            if np.linalg.norm(d[:2]) < 1e-6:
+                raise ValueError(
+                    f"CameraRig.{what} must not look straight up or down (its horizon is level)"
+                )
+
+    def position(self, camera: str) -> tuple[float, float, float]:
+        """Position of ``camera`` ("cam_left" or "cam_right")."""
+        if camera == "cam_left":
+            return self.left
+        if camera == "cam_right":
+            return self.right
+        raise ValueError(f"camera must be 'cam_left' or 'cam_right', got {camera!r}")
+
+
+class _GraspedPatch(dict[str, str]):
+    """``TaskSpec.patches`` left out: filled in with the grasped glass's red band only."""
+
+
+def _check_patch(
+    task: str, obj: str, prefix: object, posed: bool, moves: bool
+) -> str | tuple[str, str]:
+    """``TaskSpec.patches[obj]`` checked: a non-empty prefix, or for an object placed as a
+    pose a pair of two different ones (required when it moves: the cameras track it; a fixed
+    one may name one prefix for all its patches' geoms)."""
+    if posed and (moves or not isinstance(prefix, str)):
+        if (
+            not isinstance(prefix, (tuple, list))
+            or len(prefix) != 2
+            or not all(isinstance(p, str) and p for p in prefix)
+            or prefix[0] == prefix[1]
+        ):
+            raise ValueError(
+                f"patches[{obj!r}] of task {task!r}: {obj!r} is placed as a pose (its range has "
+                "a yaw), so the cameras need two patches, one at each end: a pair (prefix_a, "
+                f"prefix_b) of different geom name prefixes, the yaw pointing from a to b; got "
+                f"{prefix!r}"
+            )
+        return (prefix[0], prefix[1])
+    if not isinstance(prefix, str) or not prefix:
+        raise ValueError(
+            f"patches[{obj!r}] of task {task!r} must be the name prefix of its patch's geoms (a "
+            f"non-empty string; a pair is for an object placed as a pose), got {prefix!r}"
+        )
+    return prefix
+
+
+@dataclass(frozen=True)
+class ObjectMove:
+    """A task's ``move`` disturbance (``pbdkit evaluate --perturb move``): an object slides.
+
+    Attributes
+    ----------
+    obj : str
+        The object that slides on its support (the glass, a free body; or an object the task
+        builds as a MuJoCo mocap body, such as the coaster).
+    distance : float
+        Horizontal length of the slide (m).
+    when : str
+        ``"before_grasp"``: the slide ends before the hand reaches the glass;
+        ``"while_carried"``: it happens while the glass is held (see
+        :func:`pbdkit.sim._perturb.make_disturbance` for the timing).
+    """
+
+    obj: str
+    distance: float
+    when: str
+
+    def __post_init__(self) -> None:
+        if self.when not in ("before_grasp", "while_carried"):
+            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+        if not (self.distance > 0):
+            raise ValueError(f"distance must be > 0 (m), got {self.distance!r}")
+
+
+@dataclass(frozen=True)
+class ObjectTurn:
+    """A task's ``rotate`` disturbance (``pbdkit evaluate --perturb rotate``): an object turns
+    about the vertical through its reference point (its centre), staying in its yaw range.
+
+    Attributes
+    ----------
+    obj : str
+        The object that turns: one placed as a pose (its range has a yaw,
+        :attr:`PlacementRange.yaw`), built as a MuJoCo mocap body (the slot task's tray).
+    degrees : tuple of float
+        (min, max): the size of the turn is drawn uniformly in it (degrees, 0 < min <= max);
+        the direction is one that keeps the object's yaw inside its range (see
+        :func:`pbdkit.sim._perturb.make_disturbance`).
+    when : str
+        ``"before_grasp"``: the turn ends before the hand reaches the grasped object;
+        ``"while_carried"``: it happens while the grasped object is held (timed as
+        :class:`ObjectMove`).
+    """
+
+    obj: str
+    degrees: tuple[float, float]
+    when: str = "while_carried"
+
+    def __post_init__(self) -> None:
+        if self.when not in ("before_grasp", "while_carried"):
+            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+        try:
+            lo, hi = (float(v) for v in self.degrees)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"degrees must be (min, max) in degrees, got {self.degrees!r}"
+            ) from None
+        if not (math.isfinite(hi) and 0.0 < lo <= hi):
+            raise ValueError(
+                f"degrees must be (min, max) with 0 < min <= max, got {self.degrees!r}"
+            )
+        object.__setattr__(self, "degrees", (lo, hi))
+
+
+@dataclass(frozen=True, eq=False)
+class TaskSpec:
+    """Everything that makes a task (see the module docstring for how to write one).
+
+    Attributes
+    ----------
+    name : str
+        Registry key (``--task`` on the command line).
+    description : str
+        What the task is, in a few sentences (the report's first paragraph).
+    ranges : dict str -> PlacementRange
+        Object name -> placement range, in a fixed order (the order of every placement dict);
+        must contain the grasped object. A range with ``low == high`` is a fixed object.
+    add_objects : callable
+        ``add_objects(world, objects, rng)``: adds the task's bodies, the grasped glass
+        included (:func:`pbdkit.sim._world.add_glass` with ``name=grasped``), to
+        the worldbody of the MuJoCo ``MjSpec``; ``objects`` holds every object's position
+        (3,), ``rng`` seeds any jitter (the liquid's).
+    via_points : callable
+        ``via_points(objects, rng, speed) -> list[ViaPoint]``: the simulated teacher's hand path
+        for a placement (durations scaled by 1 / speed).
+    judge : callable
+        ``judge(sim, run) -> Outcome``: success and metrics of a run, from the simulation after
+        it and its :class:`RunStats`.
+    patches : dict str -> str or (str, str)
+        For each object the cameras can track, the name prefix of its patch's geoms; default:
+        the grasped glass's red band only (``{grasped: patch_prefix(grasped)}``). An object
+        placed as a pose (its range has a yaw) that moves has two patches, one at each end:
+        the pair ``(prefix_a, prefix_b)``, whose midpoint the cameras locate and whose heading
+        from a to b is its yaw (:mod:`pbdkit.sim._tracking`); the other objects have one.
+    cameras : CameraRig, optional
+        Where the two cameras stand for this task; None (default): the paper's rig
+        (:data:`pbdkit.sim._world.CAMERA_POSITIONS`, looking across the table from in front
+        of the robot).
+    n_liquid : int
+        Number of liquid spheres ``add_objects`` puts in the glass (bodies ``liquid0..``).
+    move : ObjectMove, optional
+        The task's ``move`` disturbance (``--perturb move``); None: the task has none.
+    rotate : ObjectTurn, optional
+        The task's ``rotate`` disturbance (``--perturb rotate``): an object placed as a pose
+        turns; None (default): the task has none. Its largest turn must fit in half the
+        object's yaw range (so that one direction always keeps the yaw inside it).
+    grasped : str
+        The object the gripper holds, a glass built with ``add_glass(..., name=grasped)``: the
+        simulation's grasp, tilt and release checks, the record of a run, the online loop's
+        held object and the push's direction are about it.
+    """
+
+    name: str
+    description: str
+    ranges: Mapping[str, PlacementRange]
+    add_objects: AddObjects
+    via_points: ViaPoints
+    judge: Judge
+    patches: Mapping[str, str | tuple[str, str]] = field(default_factory=_GraspedPatch)
+    cameras: CameraRig | None = None
+    n_liquid: int = 0
+    move: ObjectMove | None = None
+    grasped: str = "glass"
+    rotate: ObjectTurn | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        ranges = dict(self.ranges)
+        if not isinstance(self.grasped, str) or self.grasped not in ranges:
+            raise ValueError(
+                f"ranges of task {self.name!r} must include {self.grasped!r} (the object the "
+                f"gripper holds, TaskSpec.grasped), got {list(ranges)}"
+            )
+        if isinstance(self.patches, _GraspedPatch):
+            object.__setattr__(self, "patches", {self.grasped: patch_prefix(self.grasped)})
+        for obj, r in ranges.items():
+            if not isinstance(r, PlacementRange):
+                raise ValueError(f"ranges[{obj!r}] must be a PlacementRange, got {r!r}")
+            if r.low.shape != (3,) or r.high.shape != (3,) or np.any(r.low > r.high):
+                raise ValueError(f"ranges[{obj!r}] must be a box with low <= high, shape (3,)")
+        unknown = sorted(set(self.patches) - set(ranges))
+        if unknown:
+            raise ValueError(
+                f"patches of task {self.name!r} name object(s) {unknown} without a range; "
+                f"expected some of {list(ranges)}"
+            )
+        patches: dict[str, str | tuple[str, str]] = {}
+        for obj, prefix in self.patches.items():
+            r = ranges[obj]
+            patches[obj] = _check_patch(self.name, obj, prefix, r.posed, not r.fixed)
+        if self.cameras is not None and not isinstance(self.cameras, CameraRig):
+            raise ValueError(
+                f"cameras of task {self.name!r} must be a CameraRig or None (the paper's rig), "
+                f"got {self.cameras!r}"
+            )
+        if self.n_liquid < 0:
+            raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
+        if self.move is not None and (
+            not isinstance(self.move, ObjectMove) or self.move.obj not in ranges
+        ):
+            raise ValueError(
+                f"move of task {self.name!r} must be an ObjectMove of one of its objects "
+                f"{list(ranges)}, got {self.move!r}"
+            )
+        if self.rotate is not None:
+            _check_turn(self.name, self.rotate, ranges)
+        for what in ("add_objects", "via_points", "judge"):
+            if not callable(getattr(self, what)):
+                raise ValueError(f"{what} of task {self.name!r} must be callable")
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "patches", patches)
+
+    def __repr__(self) -> str:
+        return f"TaskSpec(name={self.name!r}, objects={list(self.ranges)})"
+
+    @property
+    def tracked_objects(self) -> tuple[str, ...]:
+        """Objects that move between placements, in range order (the cameras track them)."""
+        return tuple(name for name, r in self.ranges.items() if not r.fixed)
+
+    @property
+    def fixed_objects(self) -> tuple[str, ...]:
+        """Objects that never move, in range order; known without vision."""
+        return tuple(name for name, r in self.ranges.items() if r.fixed)
+
+    def patch_ends(self, name: str) -> tuple[str, str] | None:
+        """The two patches' prefixes (end a, end b) of a posed object ``name``, or None for an
+        object with one patch (ValueError for one without a patch)."""
+        if name not in self.patches:
+            raise ValueError(
+                f"objects: no colored patch is known for {name!r} in the {self.name!r} task; "
+                f"expected one of {sorted(self.patches)}"
+            )
+        prefix = self.patches[name]
+        return None if isinstance(prefix, str) else prefix
+
+    @property
+    def posed_objects(self) -> tuple[str, ...]:
+        """Objects placed as poses (with a yaw range), in range order."""
+        return tuple(name for name, r in self.ranges.items() if r.posed)
+
+    def nominal_objects(self) -> dict[str, Float]:
+        """Centre of every placement range: name -> position (3,), or pose (4, 4) at the
+        centre of its yaw range."""
+        return {name: r.nominal() for name, r in self.ranges.items()}
+
+    def sample_objects(
+        self, rng: np.random.Generator, yaw_strata: Mapping[str, tuple[int, int]] | None = None
+    ) -> dict[str, Float]:
+        """Placements drawn uniformly inside the ranges, name -> (3,) or (4, 4) (see the
+        function); ``yaw_strata``: for some posed objects, the part (i, n) of the yaw range
+        to draw from (:meth:`PlacementRange.sample`)."""
+        strata = yaw_strata or {}
+        return {name: r.sample(rng, strata.get(name)) for name, r in self.ranges.items()}
+
+    def check_placement(
+        self, objects: Mapping[str, npt.ArrayLike], *, fill_moving: bool = False
+    ) -> dict[str, Float]:
+        """The one validator of a task's object positions: every object, in range order.
+
+        Positions are checked by :func:`pbdkit._validation.check_positions` (names, (3,),
+        finite); an object the task does not have is an error; a fixed object must be at its
+        fixed place (within 1e-6 m) and is filled in when left out; a moving object left out
+        is an error, or its range's centre with ``fill_moving``.
+        """
+        if self.posed_objects:
+            given = check_placements(objects, "objects")
+            for k, v in given.items():
+                r = self.ranges.get(k)
+                if r is not None and r.posed != is_pose(v):
+                    want = "a pose (4x4 or x, y, z, qw, qx, qy, qz)" if r.posed else "a position"
+                    raise ValueError(
+                        f"objects[{k!r}] must be {want} for task {self.name!r}, got "
+                        f"{'a pose' if is_pose(v) else 'a position'}"
+                    )
+        else:
+            given = check_positions(objects, "objects")
+        unknown = [k for k in given if k not in self.ranges]
+        if unknown:
+            raise ValueError(
+                f"objects: unknown object(s) {unknown} for task {self.name!r}; expected "
+                f"{list(self.ranges)}"
+            )
+        missing = [k for k in self.tracked_objects if k not in given]
+        if missing and not fill_moving:
+            raise ValueError(
+                f"objects: missing position(s) for {missing}: they move between placements, so "
+                f"the {self.name!r} task needs them (only fixed objects "
+                f"{list(self.fixed_objects)} are known)"
+            )
+        out: dict[str, Float] = {}
+        for name, r in self.ranges.items():
+            if name not in given:
+                out[name] = r.nominal()  # a fixed range's centre is its place
+                continue
+            if r.fixed and not np.allclose(position_of(given[name]), r.low, rtol=0.0, atol=1e-6):
+                raise ValueError(
+                    f"objects[{name!r}]: the {name} is fixed at {r.low.tolist()}, "
+                    f"got {given[name].tolist()}"
+                )
+            out[name] = given[name]
+        return out
+
+    def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+        """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
+        return self.check_placement(objects)
+
+
+def _check_turn(task: str, turn: object, ranges: Mapping[str, PlacementRange]) -> None:
+    """Refuse a ``rotate`` that is not an :class:`ObjectTurn` of an object placed as a pose,
+    or a turn larger than half its yaw range."""
+    if not isinstance(turn, ObjectTurn) or turn.obj not in ranges:
+        raise ValueError(
+            f"rotate of task {task!r} must be an ObjectTurn of one of its objects "
+            f"{list(ranges)}, got {turn!r}"
+        )
+    yaw = ranges[turn.obj].yaw
+    if yaw is None:
+        raise ValueError(
+            f"rotate of task {task!r} turns {turn.obj!r}, which is placed as a position: it "
+            "needs a yaw range (PlacementRange.yaw)"
+        )
+    half = 0.5 * math.degrees(yaw[1] - yaw[0])
+    if turn.degrees[1] > half + 1e-9:
+        raise ValueError(
+            f"rotate of task {task!r}: a turn of up to {turn.degrees[1]:g} degrees does not fit "
+            f"in {turn.obj!r}'s yaw range from everywhere in it (at most half its width, "
+            f"{half:g} degrees)"
+        )
+
+
+_REGISTRY: Registry[TaskSpec] = Registry(
+    "task",
+    TaskSpec,
+    "spec",
+    "task",
+    " (a new task is registered with pbdkit.sim.register_task)",
+)
+
+
+def register_task(spec: TaskSpec) -> TaskSpec:
+    """Make ``spec`` known by its name (:func:`get_task`, ``--task``); returns it.
+
+    Raises
+    ------
+    ValueError
+        If ``spec`` is not a TaskSpec, or another spec has the same name.
+    """
+    return _REGISTRY.register(spec)
+
+
+def unregister_task(name: str) -> TaskSpec:
+    """Forget the task ``name`` and return its spec; ValueError if it is not registered."""
+    return _REGISTRY.unregister(name)
+
+
+def task_names() -> tuple[str, ...]:
+    """Names of the registered tasks, in registration order (the paper's first)."""
+    return _REGISTRY.names()
+
+
+def get_task(task: str | TaskSpec) -> TaskSpec:
+    """The spec of ``task``: a registered name, or a spec (returned as it is).
+
+    Raises
+    ------
+    ValueError
+        If ``task`` is not the name of a registered task.
+    """
+    if isinstance(task, TaskSpec):
+        return task
+    return _REGISTRY.get(task)
+
+
+def tracked_objects(task: str | TaskSpec) -> tuple[str, ...]:
+    """Objects of ``task`` that move between placements, in range order (the cameras track them)."""
+    return get_task(task).tracked_objects
+
+
+def fixed_objects(task: str | TaskSpec) -> tuple[str, ...]:
+    """Objects of ``task`` that never move (the basin), in range order; known without vision."""
+    return get_task(task).fixed_objects
+
+
+def full_placement(task: str | TaskSpec, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+    """Every object's position for a placement: ``objects`` plus the fixed objects' positions.
+
+    Use it where a subset of the objects is known (e.g. those of a skill that has no constraint
+    on the fixed ones) and the whole scene is needed (the simulation, the success judge).
+
+    Parameters
+    ----------
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
+    objects : dict str -> array-like, shape (3,)
+        Positions of at least every moving object (:func:`tracked_objects`); fixed objects may
+        be given too (they are then kept as given, for :func:`pbdkit.sim.build_scene` to check).
+
+    Returns
+    -------
+    placement : dict str -> ndarray, shape (3,)
+        One position per object of the task, in range order.
+
+    Raises
+    ------
+    ValueError
+        An object that is not one of the task's, or a moving object without a position.
+    """
+    return get_task(task).full_placement(objects)
+
+
+def nominal_objects(task: str | TaskSpec) -> dict[str, Float]:
+    """Centre of every placement range of ``task``: name -> position (3,)."""
+    return get_task(task).nominal_objects()
+
+
+def sample_objects(task: str | TaskSpec, rng: np.random.Generator) -> dict[str, Float]:
+    """Draw object positions uniformly inside the placement ranges of ``task``.
+
+    Parameters
+    ----------
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    dict str -> ndarray, shape (3,)
+        One position per object of the task (fixed objects at their fixed position; they still
+        take their draws from ``rng``).
+    """
+    return get_task(task).sample_objects(rng)
