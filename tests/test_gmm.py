@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -148,11 +147,7 @@ def test_set_params_round_trip_and_repr() -> None:
 def test_scikit_learn_estimator_checks(check: str) -> None:
     if not hasattr(estimator_checks, check):  # added in later scikit-learn versions
         pytest.skip(f"{check} is not in scikit-learn {sklearn.__version__}")
-    with warnings.catch_warnings():
-        # Some checks pass class labels as the positional y: this release still reads integer
-        # labels there as groups, with the deprecation warning tested below.
-        warnings.filterwarnings("ignore", r"GMM\.fit\(X, groups\) is deprecated", FutureWarning)
-        getattr(estimator_checks, check)("GMM", GMM())
+    getattr(estimator_checks, check)("GMM", GMM())
 
 
 _UNFITTED_CALLS: dict[str, Callable[[GMM], Any]] = {
@@ -742,22 +737,16 @@ def test_max_components_default_is_the_module_cap() -> None:
     assert max(capped.selection_.candidates) == 5
 
 
-def test_fit_has_scikit_learns_signature_and_warns_on_positional_groups() -> None:
+def test_fit_has_scikit_learns_signature_and_ignores_y() -> None:
     fit = inspect.signature(GMM.fit).parameters
     assert list(fit)[:3] == ["self", "X", "y"] and fit["y"].default is None
     assert fit["groups"].kind is inspect.Parameter.KEYWORD_ONLY
-    two = _piecewise_demos(np.random.default_rng(31), n_demos=2)
-    g = np.tile([0, 1], len(two) // 2)  # interleaved: only explicit groups find them
-    ref = GMM("auto", max_components=4).fit(two, groups=g)
-    # pbdkit 0.1.0's fit(X, groups): still read as groups for one release, with a warning.
-    with pytest.warns(FutureWarning, match=r"GMM\.fit\(X, groups\) is deprecated.*groups="):
-        old = GMM("auto", max_components=4).fit(two, g)
-    assert old.selection_.n_folds == 2
-    np.testing.assert_array_equal(old.means_, ref.means_)
-    # A Pipeline's y (targets, not one integer label per row) is ignored, without a warning.
+    # A Pipeline's y (targets, or integer labels) is ignored, without a warning: groups are
+    # keyword-only.
     x = _trajectories(np.random.default_rng(32), n_demos=2, n_steps=50)
     plain = GMM(3).fit(x)
-    for y in (np.linspace(0.0, 1.0, len(x)), np.arange(len(x) - 1), [[1, 2]], "labels"):
+    labels = np.arange(len(x))
+    for y in (np.linspace(0.0, 1.0, len(x)), labels, np.arange(len(x) - 1), [[1, 2]], "labels"):
         np.testing.assert_array_equal(GMM(3).fit(x, y).means_, plain.means_)
     both = GMM(3).fit(x, np.arange(len(x)), groups=np.repeat([0, 1], 50))
     np.testing.assert_array_equal(both.means_, plain.means_)

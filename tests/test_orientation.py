@@ -13,9 +13,8 @@ from scipy.spatial.transform import Rotation
 
 import pbdkit
 from pbdkit._rotations import exp_map, left_jacobian_inverse, log3, log_map
+from pbdkit.reproduction._pose_steps import PoseFusedStep, PoseTaskStep
 from pbdkit.reproduction._probabilistic_ik import (
-    PoseFusedStep,
-    PoseTaskStep,
     RunOptions,
     make_step,
     setup_run,

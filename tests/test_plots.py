@@ -18,7 +18,6 @@ from pbdkit.apps._plots import (
     plot_demonstrations_3d,
     plot_motion_limits,
     plot_reproductions,
-    space_data,
 )
 from pbdkit.motion._limits import MotionLimits, divided_differences
 from pbdkit.robots import katana
@@ -91,9 +90,6 @@ def test_basin_pouring_gesture_is_tight_in_joint_space_with_enough_components(
 def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, list]) -> None:
     skill, demos = coaster
     data = skill.training_data(demos)
-    with pytest.warns(DeprecationWarning, match="is now skill.training_data"):
-        old = space_data(skill, demos)
-    assert all(np.array_equal(old[k], data[k]) for k in data)
     assert data["joint"].shape == (5, N_STEPS, 1 + 5 + 1)
     assert data["glass"].shape == (5, N_STEPS, 4)
     fig = plot_constraints(skill, demos)

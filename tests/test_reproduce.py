@@ -14,19 +14,13 @@ import numpy.typing as npt
 import pytest
 from numpy.typing import NDArray
 
-from pbdkit.reproduction import _constraints as constraints
-from pbdkit.reproduction import _pose_steps as pose_steps
-from pbdkit.reproduction import _probabilistic_ik as probabilistic_ik
-from pbdkit.reproduction import _steps as steps
+from pbdkit.reproduction._constraints import Constraints, KinematicModel
 from pbdkit.reproduction._probabilistic_ik import (
     VELOCITY_SAFETY,
-    Constraints,
-    KinematicModel,
     ReachWarning,
     RunOptions,
     check_objects,
     reach_from_samples,
-    reproduce,
     solve,
     step_limit_from_velocity,
 )
@@ -603,27 +597,6 @@ def test_reproduce_rejects_bad_input(kwargs: dict[str, object], match: str) -> N
     step_limit = args.pop("step_limit", None)
     with pytest.raises(ValueError, match=match):
         solve(arm, c, objects, RunOptions(**args), step_limit=step_limit)  # type: ignore[arg-type]
-
-
-def test_the_old_spelling_of_solve_warns_and_gives_the_same_result() -> None:
-    rng = np.random.default_rng(13)
-    arm = ToyArm()
-    c = make_constraints(rng, n_steps=20)
-    objs = objects_near_path(c, arm)
-    with pytest.warns(DeprecationWarning, match="probabilistic_ik.reproduce is now solve"):
-        old = reproduce(arm, c, objs, use=["joint", "a"], max_step=None)
-    new = solve(arm, c, objs, RunOptions(use=["joint", "a"], max_step=None))
-    np.testing.assert_array_equal(old.joints, new.joints)
-
-
-def test_the_names_split_out_of_probabilistic_ik_are_still_its_own() -> None:
-    # Constraints, the controllers' steps and the oriented steps moved to modules of their own;
-    # probabilistic_ik still exports each of them, the same object (isinstance keeps working).
-    for module in (constraints, steps, pose_steps):
-        for name in module.__all__:
-            assert name in probabilistic_ik.__all__
-            assert getattr(probabilistic_ik, name) is getattr(module, name)
-    assert probabilistic_ik.JOINT == constraints.JOINT
 
 
 def test_reproduce_rejects_mismatched_robot_and_constraints() -> None:

@@ -940,13 +940,10 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
     json.dumps(d)
 
 
-def test_the_teachers_start_posture_has_its_own_name() -> None:
-    # `start_posture` meant both the teacher's random start and a skill's own (task_skill).
-    from pbdkit.sim._teacher import random_start_posture, start_posture
+def test_the_teachers_start_posture_is_within_the_limits() -> None:
+    from pbdkit.sim._teacher import random_start_posture
 
     robot = katana()
     new = random_start_posture(robot, np.random.default_rng(3))
-    with pytest.warns(DeprecationWarning, match="is now random_start_posture"):
-        old = start_posture(robot, np.random.default_rng(3))
-    np.testing.assert_array_equal(old, new)
+    np.testing.assert_array_equal(new, random_start_posture(robot, np.random.default_rng(3)))
     assert np.all(new >= robot.lower) and np.all(new <= robot.upper)

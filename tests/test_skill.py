@@ -660,12 +660,6 @@ def test_learn_task_objects_selects_the_task_space_constraints(
         Skill.learn(two, robot, task_objects=["cup"])
     with pytest.raises(ValueError, match=r"task_objects must be distinct names"):
         Skill.learn(two, robot, task_objects=["glass", "glass"])
-    # The keyword of before: `objects` means positions everywhere else.
-    with pytest.warns(DeprecationWarning, match=r"is now Skill.learn\(task_objects=\[names\]\)"):
-        old = Skill.learn(two, robot, n_steps=60, n_components=2, objects=["glass"])
-    np.testing.assert_array_equal(old.gmms["glass"].means_, only_glass.gmms["glass"].means_)
-    with pytest.raises(ValueError, match="pass task_objects only"):
-        Skill.learn(two, robot, task_objects=["glass"], objects=["glass"])
 
 
 def test_selection_is_reported_per_space_and_survives_save_load(

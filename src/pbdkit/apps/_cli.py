@@ -1123,4 +1123,3 @@ def main() -> None:
         # the command loaded (0.3-0.5 s after a simulation; benchmarks/README.md), only for the
         # operating system to free them. Frozen objects are left out of it.
         gc.freeze()
-

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import os
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -47,7 +46,6 @@ __all__ = [
     "plot_reproductions",
     "plot_selection",
     "save_figure",
-    "space_data",
 ]
 
 # Line styles of the paper's Fig. 6: fused solid, object 1 dash-dot, object 2 dotted, joint dashed.
@@ -213,18 +211,6 @@ def _space_color(skill: Skill, name: str) -> str:
     if name == "joint":
         return JOINT_COLOR
     return SPACE_COLORS[skill.object_names.index(name) % len(SPACE_COLORS)]
-
-
-def space_data(skill: Skill, demos: Sequence[Demonstration]) -> dict[str, Float]:
-    """Deprecated spelling of :meth:`pbdkit.Skill.training_data` (it shared its name with
-    :func:`pbdkit.skill._skill.space_data`, of another signature); goes in pbdkit 0.3."""
-    warnings.warn(
-        "pbdkit.apps._plots.space_data(skill, demos) is now skill.training_data(demos); the "
-        "old name goes in pbdkit 0.3",
-        DeprecationWarning,
-        stacklevel=2,
-    )
-    return skill.training_data(demos)
 
 
 def _dim_labels(skill: Skill, name: str) -> list[str]:

@@ -97,7 +97,6 @@ BIC of a subsample of n_eff points (``bic_samples_per_sequence`` per sequence, d
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -588,15 +587,6 @@ def _check_time_floor(x: Float, floor: Float, time_dim: int | None) -> None:
         )
 
 
-def _one_label_per_row(y: object, n_rows: int) -> bool:
-    """Whether fit's positional y looks like pbdkit 0.1.0's groups: integers, shape (N,)."""
-    try:
-        a = np.asarray(y)
-    except (ValueError, TypeError):
-        return False
-    return a.ndim == 1 and a.shape[0] == n_rows and a.dtype.kind in "iu"
-
-
 def _select_by_cv(
     candidates: Sequence[int], cv: Callable[[int], Float], n_folds: int
 ) -> ModelSelection:
@@ -890,10 +880,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             Samples in rows; column ``time_dim`` (0 by default) holds time.
         y : ignored
             Ignored, present for API consistency by convention (scikit-learn's
-            ``fit(X, y)``: a Pipeline passes its targets here). Deprecated: pbdkit 0.1.0 took
-            ``groups`` as the second positional argument, so an integer array of one label per
-            row given here (and no ``groups=``) is still read as ``groups``, with a
-            FutureWarning, for this release.
+            ``fit(X, y)``: a Pipeline passes its targets here).
         groups : array-like, shape (N,), optional
             Keyword-only. Sequence (demonstration) of every row. Default: a new sequence
             wherever the time column decreases (stacked demonstrations), or one sequence
@@ -905,14 +892,6 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         """
         x_raw = check_array(X, "X", ndim=2, min_rows=2)
         n, d = x_raw.shape
-        if y is not None and groups is None and _one_label_per_row(y, n):
-            warnings.warn(
-                "GMM.fit(X, groups) is deprecated: the second argument is y, ignored as in "
-                "scikit-learn; it is read as groups for this release only: pass groups=...",
-                FutureWarning,
-                stacklevel=2,
-            )
-            groups = np.asarray(y)
         method, candidates, diag = self._check_params(x_raw)
         spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
         # A constant column with no floor gives every component a zero variance there.

@@ -209,7 +209,7 @@ from ..motion._limits import (
     times_from_durations,
 )
 from ..motion._otg import point_to_point, spline_derivatives
-from ._constraints import JOINT, Constraints, KinematicModel, WorldTask
+from ._constraints import JOINT, Constraints, KinematicModel
 from ._pose_steps import PoseFusedStep, PoseTaskStep, _pose_loop
 from ._steps import (
     ControllerStep,
@@ -223,25 +223,15 @@ from ._steps import (
 )
 
 __all__ = [
-    "Constraints",
-    "ControllerStep",
-    "FusedStep",
-    "JointStep",
-    "KinematicModel",
-    "PoseFusedStep",
-    "PoseTaskStep",
     "ReachWarning",
     "ReproductionResult",
     "RunOptions",
     "RunSetup",
-    "TaskStep",
-    "WorldTask",
     "check_objects",
     "check_timing",
     "first_posture",
     "make_step",
     "reach_from_samples",
-    "reproduce",
     "setup_run",
     "solve",
     "step_limit_from_velocity",
@@ -634,44 +624,6 @@ def solve(
         return timed_path(robot, run, limits, dt)
     path = _table_ii(robot, run, run.theta0)
     return _result(robot, run, run.constraints.t.copy(), path, None, None, None, None, float("nan"))
-
-
-def reproduce(
-    robot: KinematicModel,
-    constraints: Constraints,
-    objects: Mapping[str, npt.ArrayLike],
-    *,
-    q0: npt.ArrayLike | None = None,
-    use: Sequence[str] | str | None = None,
-    alpha: float = 0.5,
-    max_step: float | None = 0.1,
-    step_limit: npt.ArrayLike | None = None,
-    reach: float | None = None,
-    on_unreachable: Literal["raise", "warn"] = "raise",
-    line_search: bool = True,
-    newton: bool = True,
-    limits: MotionLimits | None = None,
-    dt: float | None = None,
-) -> ReproductionResult:
-    """Deprecated spelling of :func:`solve` (its options as keywords); goes in pbdkit 0.3."""
-    warnings.warn(
-        "pbdkit.reproduction._probabilistic_ik.reproduce is now solve(robot, constraints, objects, "
-        "RunOptions(...), step_limit=..., reach=..., limits=..., dt=...); the old name goes "
-        "in pbdkit 0.3",
-        DeprecationWarning,
-        stacklevel=2,
-    )
-    options = RunOptions(q0, use, alpha, max_step, on_unreachable, line_search, newton)
-    return solve(
-        robot,
-        constraints,
-        objects,
-        options,
-        step_limit=step_limit,
-        reach=reach,
-        limits=limits,
-        dt=dt,
-    )
 
 
 def timed_path(

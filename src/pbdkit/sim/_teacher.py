@@ -36,7 +36,6 @@ choice the teacher varies between demonstrations.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -274,18 +273,6 @@ def between(a: Float, b: Float) -> Float:
     angle = 0.5 * (math.atan2(a[1], a[0]) + math.atan2(b[1], b[0]))
     r = 0.5 * (ra + rb)
     return np.array([r * math.cos(angle), r * math.sin(angle), 0.5 * (a[2] + b[2])])
-
-
-def start_posture(robot: Robot, rng: np.random.Generator) -> Float:
-    """Deprecated spelling of :func:`random_start_posture` (it shared its name with
-    :func:`pbdkit.sim._task_skill.start_posture`, a skill's own); goes in pbdkit 0.3."""
-    warnings.warn(
-        "pbdkit.sim._teacher.start_posture is now random_start_posture; the old name goes in "
-        "pbdkit 0.3",
-        DeprecationWarning,
-        stacklevel=2,
-    )
-    return random_start_posture(robot, rng)
 
 
 def random_start_posture(robot: Robot, rng: np.random.Generator) -> Float:

@@ -236,6 +236,7 @@ class Skill:
         cls,
         demos: Sequence[Demonstration],
         robot: KinematicModel,
+        *,
         n_steps: int = 1000,
         n_components: int | Literal["auto", "bic"] = "auto",
         max_components: int = MAX_COMPONENTS,
@@ -244,9 +245,7 @@ class Skill:
         fit_samples: int | None = 100,
         bic_samples_per_sequence: float = 20.0,
         task_objects: Sequence[str] | None = None,
-        *,
         orientation: bool = True,
-        objects: Sequence[str] | None = None,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
 
@@ -300,10 +299,6 @@ class Skill:
             False learns the paper's x - p (frames translate only; the objects' orientations
             are ignored), for comparison. Objects given as positions are the paper's either
             way.
-        objects : sequence of str, optional
-            Deprecated spelling of ``task_objects`` (goes in pbdkit 0.3): elsewhere
-            ``objects`` means the objects' positions (:meth:`reproduce`,
-            ``Demonstration.objects``).
         fit_samples : int or None
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
@@ -340,18 +335,6 @@ class Skill:
         _warn_outside_limits(items, robot)
         floors = _variability_floor(reg_covar)
         recorded = list(items[0].object_names)
-        if objects is not None:
-            if task_objects is not None:
-                raise ValueError(
-                    "pass task_objects only (objects is its deprecated spelling), got both"
-                )
-            warnings.warn(
-                "Skill.learn(objects=[names]) is now Skill.learn(task_objects=[names]) "
-                "(objects means positions elsewhere); the old keyword goes in pbdkit 0.3",
-                DeprecationWarning,
-                stacklevel=2,
-            )
-            task_objects = objects
         if task_objects is None:
             names = recorded
         else:
@@ -487,13 +470,13 @@ class Skill:
     def reproduce(
         self,
         objects: Mapping[str, npt.ArrayLike],
+        *,
         q0: npt.ArrayLike | None = None,
         use: Sequence[str] | str | None = None,
         alpha: float = 0.5,
         covariance: CovarianceMode = "exact",
         max_step: float | None = 0.1,
         on_unreachable: Literal["raise", "warn"] = "raise",
-        *,
         velocity_limit: LimitSpec = "robot",
         acceleration_limit: LimitSpec = "robot",
         jerk_limit: LimitSpec = "robot",
@@ -617,13 +600,13 @@ class Skill:
     def controller(
         self,
         objects: Mapping[str, npt.ArrayLike],
+        *,
         q0: npt.ArrayLike | None = None,
         use: Sequence[str] | str | None = None,
         alpha: float = 0.5,
         covariance: CovarianceMode = "exact",
         max_step: float | None = 0.1,
         on_unreachable: Literal["raise", "warn"] = "raise",
-        *,
         velocity_limit: LimitSpec = "robot",
         acceleration_limit: LimitSpec = "robot",
         jerk_limit: LimitSpec = "robot",
