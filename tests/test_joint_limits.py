@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from arms import KinematicOnly, no_limits
 from numpy.typing import NDArray
 from typer.testing import CliRunner
 
@@ -380,17 +381,15 @@ def test_bad_stored_limits_are_refused(
 def test_a_robot_without_a_urdf_stores_its_limits_with_zero_as_inf(
     custom_katana: Robot, tmp_path: Path
 ) -> None:
-    class Arm:  # a KinematicModel that is not a pbdkit.Robot; velocity 0 = not limited
-        n_joints = 5
-        lower, upper = custom_katana.lower, custom_katana.upper
-        fk, fk_jacobian = custom_katana.fk, custom_katana.fk_jacobian
-        velocity_limit = np.array([1.0, 0.0, 1.0, 1.0, 1.0])
+    def Arm() -> KinematicOnly:  # a KinematicModel, not a Robot; 0 = not limited
+        limits = {**no_limits(5), "velocity_limit": np.array([1.0, 0.0, 1.0, 1.0, 1.0])}
+        return KinematicOnly(custom_katana, **limits)
 
     skill = Skill.learn(tiny_demos(custom_katana), Arm(), n_steps=100, n_components=2)
     skill.save(tmp_path / "arm.npz")
     with np.load(tmp_path / "arm.npz", allow_pickle=False) as data:
         np.testing.assert_array_equal(data["robot_velocity_limit"], [1.0, INF, 1.0, 1.0, 1.0])
-        assert "robot_acceleration_limit" not in data.files
+        np.testing.assert_array_equal(data["robot_acceleration_limit"], np.full(5, INF))
     Skill.load(tmp_path / "arm.npz", robot=Arm())  # valid
 
 

@@ -36,8 +36,11 @@ class ToyArm:
         self.lengths = np.array([0.3, 0.25, 0.15])
         self.height = 0.1
         self.n_joints = 4
+        self.joint_names = ["yaw", "pitch1", "pitch2", "pitch3"]
         self.lower = np.full(4, lower)
         self.upper = np.full(4, upper)
+        self.revolute = np.ones(4, dtype=bool)
+        self.velocity_limit = self.acceleration_limit = self.jerk_limit = np.full(4, np.inf)
 
     def fk_jacobian(self, q: npt.ArrayLike) -> tuple[Float, Float]:
         q = np.asarray(q, dtype=np.float64)
@@ -58,6 +61,15 @@ class ToyArm:
 
     def fk(self, q: npt.ArrayLike) -> Float:
         return self.fk_jacobian(q)[0]
+
+    def fk_jacobian_unchecked(self, q: Float) -> tuple[Float, Float]:
+        return self.fk_jacobian(q)
+
+    def fk_jacobian_axes_unchecked(self, q: Float) -> tuple[Float, Float, Float]:
+        # The yaw axis is vertical; every pitch axis is horizontal, across the arm's plane.
+        x, jac = self.fk_jacobian(q)
+        pitch = [np.sin(q[0]), -np.cos(q[0]), 0.0]
+        return x, jac, np.array([[0.0, 0.0, 1.0], pitch, pitch, pitch])
 
 
 def random_spd(rng: np.random.Generator, n: int, scale: float, batch: int) -> Float:
@@ -176,6 +188,13 @@ def test_toy_arm_is_a_kinematic_model_with_a_correct_jacobian() -> None:
     xb, jb = arm.fk_jacobian(np.stack([q, q]))
     np.testing.assert_allclose(xb[1], x, atol=1e-15)
     np.testing.assert_allclose(jb[1], jac, atol=1e-15)
+    # The axes give the second derivatives of a serial chain: d J_b / d q_a = w_a x J_b, a <= b.
+    _, _, axes = arm.fk_jacobian_axes_unchecked(q)
+    for a in range(4):
+        e = h * np.eye(4)[a]
+        djac = (arm.fk_jacobian(q + e)[1] - arm.fk_jacobian(q - e)[1]) / (2 * h)
+        for b in range(a, 4):
+            np.testing.assert_allclose(djac[:, b], np.cross(axes[a], jac[:, b]), atol=1e-7)
 
 
 # ----------------------------------------------------------------------------- fusion
@@ -185,7 +204,7 @@ def test_fused_step_is_eq1_with_a_regularized_inverse_in_the_limit() -> None:
     c = make_constraints(rng, n_steps=2)
     objs = objects_near_path(c, arm)
     q0 = c.joint_mean[0] + 0.05 * rng.normal(size=4)
-    res = solve(arm, c, objs, RunOptions(q0=q0, max_step=None))
+    res = solve(arm, c, objs, RunOptions(q0=q0, max_step=None, newton=False))
     step, cov = res.joints[1] - q0, res.covariances[1]
 
     x, jac = arm.fk_jacobian(q0)
@@ -232,7 +251,7 @@ def test_null_space_term_has_no_effect_on_the_fused_controller() -> None:
     np.testing.assert_allclose(ref5, ref0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(cov5, cov0, rtol=0, atol=1e-12 * np.abs(cov0).max())
     for alpha in (0.0, 0.5):
-        res = solve(arm, c, objs, RunOptions(alpha=alpha, max_step=None))
+        res = solve(arm, c, objs, RunOptions(alpha=alpha, max_step=None, newton=False))
         np.testing.assert_allclose(res.joints, ref5, rtol=0, atol=1e-10)
         np.testing.assert_allclose(
             res.covariances[1:], cov5, rtol=0, atol=1e-9 * np.abs(cov5).max()
@@ -414,7 +433,8 @@ def test_step_limit_scales_steps_uniformly_exactly_where_a_bound_binds(
     objs = objects_near_path(c, arm)
     q0 = c.joint_mean[0] + np.array([0.4, -0.3, 0.3, 0.25])  # far from theta_hat_0
     limit, max_step = np.array([0.02, 0.03, 0.025, 0.04]), 0.045
-    res = solve(arm, c, objs, RunOptions(q0=q0, use=use, max_step=max_step), step_limit=limit)
+    options = RunOptions(q0=q0, use=use, max_step=max_step, newton=False)
+    res = solve(arm, c, objs, options, step_limit=limit)
     steps = np.diff(res.joints, axis=0)
     assert np.all(np.abs(steps) <= limit * (1 + 1e-12))
     assert np.linalg.norm(steps, axis=1).max() <= max_step * (1 + 1e-12)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from arms import KinematicOnly
 from numpy.typing import NDArray
 from synthetic_teacher import (
     COASTER_OFFSET,
@@ -402,10 +403,8 @@ def test_save_load_reproduces_bit_identical_results(
 def test_save_load_with_a_robot_without_urdf(
     robot: Robot, demos: list[Demonstration], tmp_path: Path
 ) -> None:
-    class Arm:  # a KinematicModel that is not built from a URDF
-        n_joints = robot.n_joints
-        lower, upper = robot.lower, robot.upper
-        fk, fk_jacobian = robot.fk, robot.fk_jacobian
+    def Arm() -> KinematicOnly:  # a KinematicModel that is not built from a URDF
+        return KinematicOnly(robot)
 
     skill = Skill.learn(demos[:3], Arm(), n_steps=60, n_components=2)
     skill.save(tmp_path / "s.npz")

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -27,44 +26,13 @@ from .._rotations import check_rotation, exp_map, left_jacobian
 from .._validation import check_array
 from ..prob._frames import precision_to_world
 from ..prob.gaussian import inverse_cholesky_factor
+from ..robots._protocols import KinematicModel
 
 __all__ = ["Constraints", "KinematicModel", "WorldTask"]
 
 Float = NDArray[np.float64]
 #: The name of the joint-space constraint, beside the objects' (``use=["joint"]``).
 JOINT = "joint"
-
-
-@runtime_checkable
-class KinematicModel(Protocol):
-    """What reproduction needs from an arm (:class:`pbdkit.Robot` satisfies it).
-
-    Attributes
-    ----------
-    n_joints : int
-    lower, upper : ndarray, shape (n,)
-        Joint limits.
-    """
-
-    @property
-    def n_joints(self) -> int: ...
-
-    @property
-    def lower(self) -> Float: ...
-
-    @property
-    def upper(self) -> Float: ...
-
-    def fk(self, q: npt.ArrayLike) -> Float:
-        """Tip position: q (n,) -> (3,), Q (M, n) -> (M, 3)."""
-        ...
-
-    def fk_jacobian(self, q: npt.ArrayLike) -> tuple[Float, Float]:
-        """Tip position (3,) and position Jacobian (3, n) for q (n,); batched for Q (M, n).
-
-        Must return new arrays at each call (reproduction keeps them), not a reused buffer.
-        """
-        ...
 
 
 def _not_positive_definite_at(name: str) -> Callable[[Float], str]:

@@ -16,6 +16,7 @@ panda      7       Franka Emika Panda, from its published modified-DH parameters
 from __future__ import annotations
 
 from ._kinematics import damped_pinv, nullspace_projector
+from ._protocols import KinematicModel, PoseKinematicModel, RobotDescription
 from ._robot import Robot, urdf_from_dh
 from ._shipped import (
     available,
@@ -28,7 +29,10 @@ from ._shipped import (
 )
 
 __all__ = [
+    "KinematicModel",
+    "PoseKinematicModel",
     "Robot",
+    "RobotDescription",
     "available",
     "damped_pinv",
     "katana",
