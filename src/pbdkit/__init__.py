@@ -26,6 +26,29 @@ T, D, K, M     number of time steps, of dimensions, of components, batch size
 =============  ==============================================================================
 
 Arrays have rows = samples and are float64: a trajectory is (T, D), a batch leads: (M, ...).
+
+Glossary (one word, one meaning, in names and docstrings)
+---------------------------------------------------------
+====================  ==========================================================================
+word                  meaning
+====================  ==========================================================================
+step                  an index into a skill's time grid, 0 .. n_steps - 1 (``cmd.index``;
+                      ``res.t`` is a step index too: its name is the public API's)
+t, time, seconds      time in seconds (``Demonstration.t``, ``skill.times(res)``, ``ctrl.dt``)
+space                 where a GMM lives: joint space ``"joint"``, or an object's task space
+task space            the hand relative to one object: x - o(n), or in its frame with a pose
+constraint            one space's GMR Gaussians along the steps, named like the space
+controller            which constraints are fused (``use=``): ``"fused"``, ``"fused-position"``
+                      (poses given, orientation ignored), ``"joint"``, ``"task:OBJECT"``
+task                  a scenario of the experiment (:class:`pbdkit.sim.TaskSpec`: coaster,
+                      basin, slot), never the task space
+placement             where an object is: a position (3,) or a pose (4x4, or position and
+                      quaternion w first); ``objects`` maps names to placements
+oriented              of an object placed by a pose, whose constraint includes orientation
+grasped object        the object the gripper holds in a task (a glass, or the slot's block)
+``_unchecked``        a method that skips input validation, for control loops
+``as_dict()``         a JSON-ready dict of a record (the one verb for serialising to JSON)
+====================  ==========================================================================
 """
 
 from __future__ import annotations
