@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from ._kinematics import damped_pinv, nullspace_projector
 from ._protocols import KinematicModel, PoseKinematicModel, RobotDescription
-from ._robot import Robot, urdf_from_dh
+from ._robot import Robot
 from ._shipped import (
     available,
     katana,
@@ -27,6 +27,7 @@ from ._shipped import (
     panda,
     panda_joint_limits_path,
 )
+from ._urdf import urdf_from_dh
 
 __all__ = [
     "KinematicModel",
