@@ -1,6 +1,7 @@
-"""Robots: a URDF's kinematics and limits (:class:`Robot`), the arms shipped with pbdkit
-(:func:`katana`, :func:`panda`, by name: :func:`load`) and the pseudo-inverse the reproduction
-uses (:func:`damped_pinv`, :func:`nullspace_projector`).
+"""Robots: a URDF's kinematics, limits and inverse kinematics (:class:`Robot`,
+:meth:`Robot.ik`), the arms shipped with pbdkit (:func:`katana`, :func:`panda`, by name:
+:func:`load`) and the pseudo-inverse the reproduction uses (:func:`damped_pinv`,
+:func:`nullspace_projector`).
 
 =========  ======  ==============================================================================
 name       joints  source
