@@ -17,7 +17,8 @@ from typer.testing import CliRunner
 from pbdkit import robots
 from pbdkit.apps._cli import app
 from pbdkit.data._demonstration import Demonstration, save_demonstrations
-from pbdkit.robots._robot import Robot, urdf_from_dh
+from pbdkit.robots._robot import Robot
+from pbdkit.robots._urdf import urdf_from_dh
 from pbdkit.skill._skill import Skill
 
 INF = np.inf

@@ -167,11 +167,24 @@ def test_motion_limits_leave_the_callers_arrays_writable() -> None:
     assert lim.velocity[0] == 1.0
 
 
-def test_from_robot_stub_unlimited_values_missing_attributes_and_overrides() -> None:
+def _declaring(
+    n: int, velocity: object = None, acceleration: object = None, jerk: object = None
+) -> types.SimpleNamespace:
+    """A stub declaring the three limits of a KinematicModel (inf where not given)."""
+    inf = np.full(n, INF)
+    return types.SimpleNamespace(
+        velocity_limit=inf if velocity is None else velocity,
+        acceleration_limit=inf if acceleration is None else acceleration,
+        jerk_limit=inf if jerk is None else jerk,
+    )
+
+
+def test_from_robot_stub_unlimited_values_and_overrides() -> None:
     robot = types.SimpleNamespace(
         velocity_limit=np.array([1.5, 0.0, -2.0, INF, math.nan]),
         acceleration_limit=[4.0, 5.0, 6.0, 7.0, 8.0],
-    )  # no jerk_limit: not limited
+        jerk_limit=np.full(5, INF),
+    )
     lim = MotionLimits.from_robot(robot, 5)
     np.testing.assert_array_equal(lim.velocity, [1.5, INF, INF, INF, INF])
     np.testing.assert_array_equal(lim.acceleration, [4.0, 5.0, 6.0, 7.0, 8.0])
@@ -183,8 +196,8 @@ def test_from_robot_stub_unlimited_values_missing_attributes_and_overrides() -> 
     np.testing.assert_array_equal(lim.velocity, np.full(5, 0.5))
     np.testing.assert_array_equal(lim.acceleration, np.full(5, INF))
     np.testing.assert_array_equal(lim.jerk, [10.0, 20.0, 30.0, INF, 50.0])
-    # an object without any limit
-    assert not MotionLimits.from_robot(object(), 2).any
+    # a robot without any limit
+    assert not MotionLimits.from_robot(_declaring(2), 2).any
 
 
 @pytest.mark.parametrize(
@@ -200,13 +213,13 @@ def test_from_robot_stub_unlimited_values_missing_attributes_and_overrides() -> 
 def test_from_robot_override_errors_name_the_argument(
     kwargs: dict[str, object], pattern: str
 ) -> None:
-    robot = types.SimpleNamespace(velocity_limit=np.ones(3))
+    robot = _declaring(3, velocity=np.ones(3))
     with pytest.raises(ValueError, match=pattern):
         MotionLimits.from_robot(robot, 3, **kwargs)  # type: ignore[arg-type]
 
 
 def test_from_robot_declared_limits_of_the_wrong_shape_are_refused() -> None:
-    robot = types.SimpleNamespace(jerk_limit=np.ones(4))
+    robot = _declaring(3, jerk=np.ones(4))
     with pytest.raises(ValueError, match=r"robot\.jerk_limit must have shape \(3,\)"):
         MotionLimits.from_robot(robot, 3)
 

@@ -1,4 +1,4 @@
-"""Tests of pbdkit.robots._robot, pbdkit.robots and pbdkit.robots._kinematics."""
+"""Tests of pbdkit.robots (_robot, _urdf, _chain, _ik) and pbdkit.robots._kinematics."""
 
 from __future__ import annotations
 
@@ -10,11 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from arms import KinematicOnly
 from numpy.typing import NDArray
 
 from pbdkit import robots
+from pbdkit._rotations import log_map
+from pbdkit.robots._ik import damped_least_squares, ik
 from pbdkit.robots._kinematics import damped_pinv, damping_schedule, nullspace_projector
-from pbdkit.robots._robot import Robot, _rpy_from_matrix, urdf_from_dh
+from pbdkit.robots._robot import Robot
+from pbdkit.robots._urdf import _rpy_from_matrix, urdf_from_dh
 
 PI = math.pi
 
@@ -837,3 +841,132 @@ def test_a_pickled_robot_computes_what_the_original_does() -> None:
             x2, jac2 = copy.fk_jacobian_unchecked(q)
             assert np.array_equal(x, x2) and np.array_equal(jac, jac2)
             assert np.array_equal(robot.fk(q), copy.fk(q))
+
+
+# ------------------------------------------------------------------------------------------
+# inverse kinematics (Robot.ik, pbdkit.robots._ik)
+# ------------------------------------------------------------------------------------------
+
+
+def pose_residual(robot: Robot, q: NDArray[np.float64], tf: NDArray[np.float64]) -> float:
+    """Norm of [position error (m); rotation vector of R* R^T (rad)]: what ik's tol bounds."""
+    reached = robot.fk_pose(q)
+    rot_err = log_map(tf[:3, :3] @ reached[:3, :3].T)
+    return float(np.linalg.norm(np.r_[tf[:3, 3] - reached[:3, 3], rot_err]))
+
+
+def regular_postures(robot: Robot, rng: np.random.Generator, m: int) -> NDArray[np.float64]:
+    """``m`` random postures 0.2 inside the limits where the 6-D Jacobian is well conditioned
+    (its smallest singular value above 0.05): targets a local IK reaches in few steps."""
+    q_batch = rng.uniform(robot.lower + 0.2, robot.upper - 0.2, size=(8 * m, robot.n_joints))
+    sigma_min = np.linalg.svd(robot.jacobian6(q_batch), compute_uv=False)[:, -1]
+    out = q_batch[sigma_min > 0.05][:m]
+    assert out.shape[0] == m
+    return out
+
+
+def nearby_start(
+    robot: Robot, q: NDArray[np.float64], rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """A start posture 0.3 rad (sd per joint) from ``q``, within the limits."""
+    return np.clip(q + rng.normal(0.0, 0.3, robot.n_joints), robot.lower, robot.upper)
+
+
+@pytest.mark.parametrize("name", ["katana", "panda"])
+@pytest.mark.parametrize("with_orientation", [False, True])
+def test_ik_reaches_targets_from_random_postures(name: str, with_orientation: bool) -> None:
+    robot = robots.load(name)
+    rng = np.random.default_rng(11)
+    # Reachable targets: the poses of random postures.
+    for q_true in regular_postures(robot, rng, 20):
+        tf = robot.fk_pose(q_true)
+        q0 = nearby_start(robot, q_true, rng)
+        rot = tf[:3, :3] if with_orientation else None
+        q = robot.ik(tf[:3, 3], q0, orientation=rot)
+        assert q.shape == (robot.n_joints,)
+        assert np.all(q >= robot.lower) and np.all(q <= robot.upper)
+        if with_orientation:
+            assert pose_residual(robot, q, tf) < 1e-4
+        else:
+            assert np.linalg.norm(robot.fk(q) - tf[:3, 3]) < 1e-4
+
+
+def test_ik_default_start_is_the_middle_of_the_limits_and_tol_is_kept(panda: Robot) -> None:
+    rng = np.random.default_rng(12)
+    middle = 0.5 * (panda.lower + panda.upper)
+    for q_true in regular_postures(panda, rng, 10):
+        x = panda.fk(q_true)
+        q = panda.ik(x, tol=1e-9)
+        assert np.linalg.norm(panda.fk(q) - x) < 1e-9
+        np.testing.assert_array_equal(panda.ik(x, middle, tol=1e-9), q)
+
+
+def test_ik_accepts_a_kinematic_model_that_is_not_a_robot(katana: Robot) -> None:
+    arm = KinematicOnly(katana)
+    rng = np.random.default_rng(13)
+    q_true = rng.uniform(katana.lower + 0.2, katana.upper - 0.2)
+    q0 = nearby_start(katana, q_true, rng)
+    q = ik(arm, katana.fk(q_true), q0)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(q, katana.ik(katana.fk(q_true), q0))
+    with pytest.raises(ValueError, match=r"robot must be a PoseKinematicModel.*lacks fk_pose"):
+        ik(arm, katana.fk(q_true), q0, orientation=np.eye(3))  # type: ignore[arg-type]
+
+
+def test_ik_refuses_unreachable_targets_naming_the_residual(katana: Robot) -> None:
+    with pytest.raises(
+        ValueError,
+        match=r"ik did not converge to the position \[2\.0, 0\.0, 0\.2\]: residual 1\.\d+ "
+        r">= tol=0\.0001 after max_iter=200 iterations",
+    ):
+        katana.ik([2.0, 0.0, 0.2])
+    # A reachable position with an orientation the 5 joints cannot give it.
+    tf = katana.fk_pose(np.array([0.1, 1.0, -1.0, 0.5, 0.2]))
+    with pytest.raises(ValueError, match=r"to the pose .*residual 0\.\d+ >= tol=1e-06 after "):
+        katana.ik(tf[:3, 3], orientation=rot_z(0.7) @ tf[:3, :3], tol=1e-6, max_iter=50)
+
+
+def test_ik_bad_input(katana: Robot) -> None:
+    x = katana.fk(np.zeros(5))
+    cases: list[tuple[dict[str, object], str]] = [
+        ({"target": [0.1, 0.2]}, r"target must have shape \(3,\), got \(2,\)"),
+        ({"target": [0.1, np.nan, 0.2]}, "target must be finite"),
+        ({"target": [True, False, True]}, "target must be an array of numbers"),
+        ({"q0": np.zeros(4)}, r"q0 must have shape \(5,\), got \(4,\)"),
+        ({"q0": [0.0, 0.0, np.inf, 0.0, 0.0]}, "q0 must be finite"),
+        (
+            {"q0": [0.0, -1.0, 0.0, 0.0, 0.0]},
+            r"q0\[1\] \(joint 'lift1'\) must be within the joint limits \[-0\.135228, 2\.16857\]"
+            r", got -1",
+        ),
+        ({"orientation": np.eye(2)}, r"orientation must be a rotation matrix \(3, 3\)"),
+        ({"orientation": 2.0 * np.eye(3)}, "orientation.*must be a rotation matrix"),
+        ({"orientation": np.diag([1.0, 1.0, -1.0])}, "orientation.*determinant"),
+        ({"tol": 0.0}, "tol must be finite and > 0, got 0.0"),
+        ({"tol": np.nan}, "tol must be finite and > 0"),
+        ({"max_iter": 0}, "max_iter must be >= 1, got 0"),
+        ({"max_iter": 2.5}, "max_iter must be an integer, got 2.5"),
+    ]
+    for kwargs, pattern in cases:
+        args: dict[str, object] = {"target": x, **kwargs}
+        with pytest.raises(ValueError, match=pattern):
+            katana.ik(**args)  # type: ignore[arg-type]
+
+
+def test_damped_least_squares_bounds_the_step_and_reports_the_last_evaluated_error(
+    katana: Robot,
+) -> None:
+    q_true = np.array([0.5, 1.0, -1.2, 0.3, 0.1])
+    q0 = q_true + 0.1
+    x = katana.fk(q_true)
+    common = {"lower": katana.lower, "upper": katana.upper, "tol": 1e-9, "damping": 1e-2}
+    q1, err = damped_least_squares(katana, x, q0, max_iter=1, max_step=0.05, **common)
+    assert np.linalg.norm(q1 - q0) == pytest.approx(0.05, rel=1e-12)
+    assert err == pytest.approx(np.linalg.norm(x - katana.fk(q0)), rel=0, abs=0)
+    # Constant rows (the teacher's tool pitch) are met with the position.
+    pitch = np.array([[0.0, 1.0, 1.0, -1.0, 0.0]])
+    q, err = damped_least_squares(
+        katana, x, q0, max_iter=200, rows=pitch, row_targets=(-0.3,), **common
+    )
+    assert err < 1e-9
+    assert float(pitch[0] @ q) == pytest.approx(-0.3, abs=1e-9)
+    np.testing.assert_allclose(katana.fk(q), x, rtol=0, atol=1e-9)

@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 
 from ._validation import check_array, check_int, check_positive_float
 from .data._demonstration import Demonstration
-from .reproduction._constraints import KinematicModel
+from .robots._ik import damped_least_squares
+from .robots._protocols import KinematicModel, check_robot
 
 __all__ = ["LasaDemo", "ReachGraspReturn", "lasa", "lasa_names", "reach_grasp_return"]
 
@@ -135,22 +136,13 @@ _UP = np.array([0.0, 0.0, 1.0])
 _LIMIT_MARGIN = 0.02  # rad: the generated postures keep this far from the joint limits
 
 
-def _position_ik(robot: KinematicModel, x: Float, q0: Float, lower: Float, upper: Float) -> Float:
-    """Joint angles putting the tip at ``x`` from ``q0`` (damped least squares, steps of at most
-    0.2 rad, within [lower, upper]); ValueError if it does not get within 10 um."""
-    q = q0.copy()
-    err = np.inf
-    for _ in range(400):
-        p, jac = robot.fk_jacobian(q)
-        e = x - np.asarray(p, dtype=np.float64)
-        err = float(np.linalg.norm(e))
-        if err < 1e-7:
-            return q
-        dq = jac.T @ np.linalg.solve(jac @ jac.T + 1e-4 * np.eye(3), e)
-        norm = float(np.linalg.norm(dq))
-        if norm > 0.2:
-            dq *= 0.2 / norm
-        q = np.clip(q + dq, lower, upper)
+def _via(robot: KinematicModel, x: Float, q0: Float, lower: Float, upper: Float) -> Float:
+    """The posture putting the tip at ``x`` from ``q0``, within [lower, upper]: position-only
+    damped least squares (:func:`pbdkit.robots._ik.damped_least_squares`, steps of at most
+    0.2 rad, stopping within 0.1 um); ValueError if it does not get within 10 um."""
+    q, err = damped_least_squares(
+        robot, x, q0, lower=lower, upper=upper, tol=1e-7, max_iter=400, damping=1e-2, max_step=0.2
+    )
     if err < 1e-5:
         return q
     raise ValueError(f"no posture puts the tip at {np.round(x, 4).tolist()} (error {err:.3g} m)")
@@ -186,9 +178,8 @@ def reach_grasp_return(
     via posture is the position-only inverse kinematics (damped least squares) from the one
     before, so a redundant arm's null space drifts as a person's would. Segment durations vary
     by up to 40 %; where a joint would exceed 90 % of the robot's velocity limit
-    (``robot.velocity_limit``, if it has one) the whole demonstration is slower, so that its
-    phases keep their place in time. The demonstrations agree only at the grasp: the phase a
-    skill must keep.
+    (``robot.velocity_limit``) the whole demonstration is slower, so that its phases keep their
+    place in time. The demonstrations agree only at the grasp: the phase a skill must keep.
 
     Parameters
     ----------
@@ -220,6 +211,7 @@ def reach_grasp_return(
         If a via point is out of reach: 20 draws of a demonstration failed (the message names
         the point); choose ``center`` and ``home`` where the arm reaches the whole square.
     """
+    check_robot(robot)
     c = check_array(center, "center", shape=(3,))
     n = int(robot.n_joints)
     lower = np.asarray(robot.lower, dtype=np.float64) + _LIMIT_MARGIN
@@ -230,7 +222,7 @@ def reach_grasp_return(
     home_sd = check_positive_float(home_sd, "home_sd", allow_zero=True)
     detour_sd = check_positive_float(detour_sd, "detour_sd", allow_zero=True)
     rate = check_positive_float(rate, "rate")
-    vlim = np.asarray(getattr(robot, "velocity_limit", np.full(n, np.inf)), dtype=np.float64)
+    vlim = np.asarray(robot.velocity_limit, dtype=np.float64)
     rng = np.random.default_rng(seed)
     demos: list[Demonstration] = []
     boxes: list[Float] = []
@@ -254,9 +246,7 @@ def reach_grasp_return(
                 vias = [start]
                 for target, _seconds, _closed in plan:
                     vias.append(
-                        start
-                        if target is None
-                        else _position_ik(robot, target, vias[-1], lower, upper)
+                        start if target is None else _via(robot, target, vias[-1], lower, upper)
                     )
             except ValueError as exc:
                 error = exc

@@ -48,7 +48,7 @@ given less than dt: the skill keeps the demonstrations' pace wherever the arm ca
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -83,6 +83,21 @@ _TAPER_SIGMA = 4.0
 _MAX_ROUNDS = 200
 
 LimitSpec = float | npt.ArrayLike | Literal["robot"] | None
+
+
+class RobotLimits(Protocol):
+    """What :meth:`MotionLimits.from_robot` reads from a robot: the three limits a
+    :class:`pbdkit.robots.KinematicModel` declares, shape (n,) each, ``inf`` where there is
+    none."""
+
+    @property
+    def velocity_limit(self) -> npt.ArrayLike: ...
+
+    @property
+    def acceleration_limit(self) -> npt.ArrayLike: ...
+
+    @property
+    def jerk_limit(self) -> npt.ArrayLike: ...
 
 
 @dataclass(frozen=True)
@@ -155,7 +170,7 @@ class MotionLimits:
     @classmethod
     def from_robot(
         cls,
-        robot: object,
+        robot: RobotLimits,
         n: int,
         *,
         velocity: LimitSpec = "robot",
@@ -166,11 +181,11 @@ class MotionLimits:
 
         Parameters
         ----------
-        robot : object
-            Its ``velocity_limit``, ``acceleration_limit`` and ``jerk_limit`` attributes (a
-            :class:`pbdkit.Robot` has them) are used where a kind is ``"robot"``; a missing
-            attribute means no limit. A value of 0, negative, NaN or inf in them means the joint
-            is not limited (URDF writes 0 for that).
+        robot : KinematicModel
+            Its ``velocity_limit``, ``acceleration_limit`` and ``jerk_limit`` (shape (n,) each,
+            declared by every :class:`pbdkit.robots.KinematicModel`) are used where a kind is
+            ``"robot"``. A value of 0, negative, NaN or inf in them means the joint is not
+            limited (URDF writes 0 for that).
         n : int
             Number of joints.
         velocity, acceleration, jerk : "robot", float, array-like of shape (n,), or None
@@ -183,6 +198,11 @@ class MotionLimits:
         """
         specs = {"velocity": velocity, "acceleration": acceleration, "jerk": jerk}
         units = {"velocity": "rad/s", "acceleration": "rad/s^2", "jerk": "rad/s^3"}
+        declared = {
+            "velocity": robot.velocity_limit,
+            "acceleration": robot.acceleration_limit,
+            "jerk": robot.jerk_limit,
+        }
         out: dict[str, Float] = {}
         for kind, spec in specs.items():
             name = f"{kind}_limit"
@@ -194,12 +214,8 @@ class MotionLimits:
                         f"{name} must be 'robot', a number or an array of shape ({n},) in "
                         f"{units[kind]}, or None, got {spec!r}"
                     )
-                declared = getattr(robot, name, None)
-                if declared is None:
-                    out[kind] = np.full(n, np.inf)
-                else:
-                    arr = check_array(declared, f"robot.{name}", shape=(n,), finite=False)
-                    out[kind] = np.where(np.isfinite(arr) & (arr > 0), arr, np.inf)
+                arr = check_array(declared[kind], f"robot.{name}", shape=(n,), finite=False)
+                out[kind] = np.where(np.isfinite(arr) & (arr > 0), arr, np.inf)
             else:
                 out[kind] = positive_bounds(spec, n, name, units[kind])
         return cls(out["velocity"], out["acceleration"], out["jerk"])

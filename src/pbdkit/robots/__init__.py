@@ -1,6 +1,7 @@
-"""Robots: a URDF's kinematics and limits (:class:`Robot`), the arms shipped with pbdkit
-(:func:`katana`, :func:`panda`, by name: :func:`load`) and the pseudo-inverse the reproduction
-uses (:func:`damped_pinv`, :func:`nullspace_projector`).
+"""Robots: a URDF's kinematics, limits and inverse kinematics (:class:`Robot`,
+:meth:`Robot.ik`), the arms shipped with pbdkit (:func:`katana`, :func:`panda`, by name:
+:func:`load`) and the pseudo-inverse the reproduction uses (:func:`damped_pinv`,
+:func:`nullspace_projector`).
 
 =========  ======  ==============================================================================
 name       joints  source
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 from ._kinematics import damped_pinv, nullspace_projector
 from ._protocols import KinematicModel, PoseKinematicModel, RobotDescription
-from ._robot import Robot, urdf_from_dh
+from ._robot import Robot
 from ._shipped import (
     available,
     katana,
@@ -27,6 +28,7 @@ from ._shipped import (
     panda,
     panda_joint_limits_path,
 )
+from ._urdf import urdf_from_dh
 
 __all__ = [
     "KinematicModel",

@@ -1,22 +1,20 @@
-"""Robot kinematics from URDF: tool position, position Jacobian and joint limits of a serial arm.
+"""The Robot class: the kinematics and limits of a serial arm from a URDF, to one tip frame.
 
 A :class:`Robot` is built from a URDF (file or XML text) with pinocchio and exposes the forward
 kinematics of one *tip* frame, x = f(theta), and its position Jacobian J = dx/dtheta, both in the
-frame of the URDF's root link (the base).
+frame of the URDF's root link (the base); the tip's pose and 6-D Jacobian; and inverse
+kinematics (:meth:`Robot.ik`, :mod:`pbdkit.robots._ik`).
 
 Two evaluation paths give the same numbers (tested to 1e-12):
 
 - one configuration ``q`` of shape (n,): pinocchio (``computeFrameJacobian``, about 1 us);
 - a batch ``Q`` of shape (M, n): a vectorized numpy chain built once from the pinocchio model
-  (joint placements, joint axes, tip placement), one pass over the joints for the whole batch.
+  (joint placements, joint axes, tip placement), one pass over the joints for the whole batch
+  (:mod:`pbdkit.robots._chain`).
 
-Only revolute and prismatic joints are supported. A ``continuous`` joint is turned into a revolute
-joint limited to [-pi, pi] (pinocchio would otherwise give it two configuration variables, cos and
-sin). ``floating`` and ``planar`` joints are rejected. In a URDF tree with branches only the joints
-on the path from the root to the tip are actuated; the other joints cannot move the tip and are
-locked. A ``<mimic>`` joint (one that follows another joint) on that path is refused: it would
-become an independent actuated joint; off the path it is locked like any other. Meshes are never
-loaded: only kinematics is built.
+The URDF's joints are read and checked by :mod:`pbdkit.robots._urdf` (revolute and prismatic
+joints; continuous ones become revolute on [-pi, pi]; the joints off the root-to-tip path are
+locked).
 
 Limits. Position and velocity limits come from the URDF's ``<limit>`` tags; a velocity of 0
 (URDF's "not limited", also what a continuous joint without ``<limit>`` gets) reads inf. URDF has
@@ -26,8 +24,8 @@ MoveIt and ros2_control (``Robot.from_urdf(..., joint_limits=...)``, see
 (as in MoveIt) and, with ``has_position_limits: true``, its position limits. A joint without a
 declared limit has inf.
 
-:func:`urdf_from_dh` writes a URDF from a Denavit-Hartenberg table (modified/Craig or standard),
-and :meth:`Robot.from_dh` loads it.
+:meth:`Robot.from_dh` loads the URDF that :func:`pbdkit.robots.urdf_from_dh` writes from a
+Denavit-Hartenberg table.
 """
 
 from __future__ import annotations
@@ -36,10 +34,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from copy import deepcopy
-from pathlib import Path
 from typing import Any, Literal
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import numpy.typing as npt
@@ -47,338 +42,40 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from .._validation import check_array, shape_str
+from ._chain import _chain_constants, _chain_fk_jacobian
+from ._ik import ik
 from ._joint_limits import JointLimits, JointLimitsSource, joint_limits_mapping, read_joint_limits
+from ._urdf import (
+    _choose_tip,
+    _normalize_joints,
+    _parse_urdf,
+    _pinocchio_xml,
+    _read_urdf_text,
+    _refuse_mimic_joints,
+    _write_position_limits,
+    urdf_from_dh,
+)
 
-__all__ = ["Robot", "urdf_from_dh"]
-
-_SUPPORTED_JOINTS = ("revolute", "prismatic", "continuous", "fixed")
-
-
-# --------------------------------------------------------------------------------------------
-# URDF text: loading, checking, tree analysis
-# --------------------------------------------------------------------------------------------
-
-
-def _read_urdf_text(path_or_xml: str | os.PathLike[str]) -> str:
-    """Return the URDF XML text from a path or from the text itself."""
-    if isinstance(path_or_xml, os.PathLike):
-        path = Path(path_or_xml)
-    elif isinstance(path_or_xml, str):
-        if path_or_xml.lstrip("\ufeff \t\r\n").startswith("<"):
-            return path_or_xml
-        path = Path(path_or_xml)
-    else:
-        raise ValueError(
-            "path_or_xml must be a path to a URDF file or the URDF XML text, "
-            f"got {type(path_or_xml).__name__}"
-        )
-    if not path.is_file():
-        what = "is a directory" if path.is_dir() else "does not exist"
-        raise ValueError(
-            f"path_or_xml: URDF file '{path}' {what}; pass an existing file path "
-            "or the URDF XML text (starting with '<')"
-        )
-    try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"path_or_xml: '{path}' is not a UTF-8 text URDF (byte {exc.start} cannot be "
-            f"decoded: {exc.reason}); pass a URDF XML file"
-        ) from exc
+__all__ = ["Robot"]
 
 
-def _parse_urdf(xml: str) -> ET.Element:
-    try:
-        root = ET.fromstring(xml)
-    except ET.ParseError as exc:
-        raise ValueError(f"path_or_xml is not valid XML ({exc}); expected a URDF <robot>") from exc
-    if root.tag != "robot":
-        raise ValueError(
-            f"path_or_xml must be a URDF with a <robot> root element, got <{root.tag}>"
-        )
-    return root
-
-
-def _normalize_joints(root: ET.Element) -> bool:
-    """Check joint types; turn continuous joints into revolute ones limited to [-pi, pi].
-
-    Returns True if the tree was modified.
-    """
-    changed = False
-    for joint in root.iter("joint"):
-        if joint.find("parent") is None:  # <joint> elements inside e.g. <transmission>
-            continue
-        jtype = joint.get("type", "")
-        name = joint.get("name", "?")
-        if jtype not in _SUPPORTED_JOINTS:
-            raise ValueError(
-                f"joint '{name}' has type '{jtype}'; supported types are "
-                f"{', '.join(_SUPPORTED_JOINTS)} (a fixed base is the URDF root)"
-            )
-        axis = joint.find("axis")
-        if jtype != "fixed" and axis is not None:
-            try:
-                values = [float(v) for v in axis.get("xyz", "1 0 0").split()]
-            except ValueError:
-                values = []
-            if len(values) != 3 or not all(map(math.isfinite, values)) or not any(values):
-                raise ValueError(
-                    f"joint '{name}' has axis xyz='{axis.get('xyz')}'; give 3 finite numbers, "
-                    "not all zero"
-                )
-        if jtype in ("revolute", "prismatic") and joint.find("limit") is None:
-            raise ValueError(
-                f"{jtype} joint '{name}' has no <limit>; add "
-                '<limit lower="..." upper="..." effort="..." velocity="..."/>'
-            )
-        if jtype == "continuous":
-            joint.set("type", "revolute")
-            limit = joint.find("limit")
-            if limit is None:
-                limit = ET.SubElement(joint, "limit")
-                limit.set("effort", "0")
-                limit.set("velocity", "0")
-            limit.set("lower", repr(-math.pi))
-            limit.set("upper", repr(math.pi))
-            changed = True
-    return changed
-
-
-def _pinocchio_xml(root: ET.Element, urdf: str) -> tuple[str, dict[str, str]]:
-    """The URDF text given to pinocchio (``urdf``, the text of ``root``, unless a joint is
-    renamed), and its joint names -> the URDF's.
-
-    A joint may share its name with a link (SO-100's ``gripper``); pinocchio then finds two
-    frames of that name and fails to lock the joint off the tip's chain. Such joints are renamed
-    in pinocchio's copy only: the names users see are the URDF's.
-    """
-    links = {link.get("name", "") for link in root.iter("link")}
-    joints = [j for j in root.iter("joint") if j.find("parent") is not None]
-    taken = links | {j.get("name", "") for j in joints}
-    renamed: dict[str, str] = {}
-    for joint in joints:
-        name = joint.get("name", "")
-        if name in links:
-            alias = f"{name}_joint"
-            while alias in taken:
-                alias += "_"
-            taken.add(alias)
-            renamed[name] = alias
-    if not renamed:
-        return urdf, {}
-    copy = deepcopy(root)
-    for joint in copy.iter("joint"):
-        if joint.find("parent") is not None and joint.get("name", "") in renamed:
-            joint.set("name", renamed[joint.get("name", "")])
-        mimic = joint.find("mimic")
-        if mimic is not None and mimic.get("joint", "") in renamed:
-            mimic.set("joint", renamed[mimic.get("joint", "")])
-    return ET.tostring(copy, encoding="unicode"), {v: k for k, v in renamed.items()}
-
-
-def _refuse_mimic_joints(root: ET.Element, actuated: Sequence[str]) -> None:
-    """Refuse ``<mimic>`` joints among the actuated ones (pbdkit would move them freely)."""
-    for joint in root.iter("joint"):
-        mimic = joint.find("mimic")
-        name = joint.get("name", "?")
-        if mimic is not None and joint.find("parent") is not None and name in actuated:
-            raise ValueError(
-                f"joint '{name}' is a <mimic> joint (it follows '{mimic.get('joint', '?')}'), "
-                "which pbdkit would treat as an independent actuated joint; remove the <mimic> "
-                'tag to control it independently, or lock it (type="fixed")'
-            )
-
-
-def _choose_tip(root: ET.Element, tip: str | None) -> tuple[str, str]:
-    """Check that the kinematic tree has one root; choose the tip link if none is given.
-
-    Returns (root link, tip).
-    """
-    links = [link.get("name", "") for link in root.findall("link")]
-    children: dict[str, list[str]] = {name: [] for name in links}
-    child_links = set()
-    for joint in root.findall("joint"):
-        parent = joint.find("parent")
-        child = joint.find("child")
-        if parent is None or child is None:
-            continue
-        p, c = parent.get("link", ""), child.get("link", "")
-        children.setdefault(p, []).append(c)
-        child_links.add(c)
-    if not links:
-        raise ValueError("path_or_xml: the URDF has no <link>; expected a kinematic chain")
-    known = set(links)
-    for joint in root.findall("joint"):
-        for tag in ("parent", "child"):
-            elem = joint.find(tag)
-            link = None if elem is None else elem.get("link")
-            if link not in known:
-                raise ValueError(
-                    f"joint '{joint.get('name', '?')}' has {tag} link {link!r}, which is not a "
-                    f"<link> of the URDF; links are {links}"
-                )
-    roots = [name for name in links if name not in child_links]
-    if len(roots) != 1:
-        raise ValueError(
-            f"path_or_xml: a URDF must have exactly one root link, got {len(roots)}: {roots}"
-        )
-    if tip is not None:
-        return roots[0], tip
-    leaves = [name for name in links if not children.get(name)]
-    if any(len(c) > 1 for c in children.values()):
-        raise ValueError(
-            "tip is None but the URDF tree branches; pass tip= one of the leaf links "
-            f"{leaves} (or any other frame name)"
-        )
-    return roots[0], leaves[0]
-
-
-def _write_position_limits(root: ET.Element, declared: dict[str, JointLimits]) -> bool:
-    """Write declared position limits into the ``<limit>`` tags of the chain's joints.
-
-    Returns True if the tree was modified.
-    """
-    changed = False
-    for joint in root.iter("joint"):
-        lim = declared.get(joint.get("name", ""))
-        limit = joint.find("limit")
-        if lim is None or lim.position is None or limit is None or joint.find("parent") is None:
-            continue
-        limit.set("lower", repr(lim.position[0]))
-        limit.set("upper", repr(lim.position[1]))
-        changed = True
-    return changed
-
-
-# --------------------------------------------------------------------------------------------
-# The numpy chain (batch path)
-# --------------------------------------------------------------------------------------------
-
-
-def _skew(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
-def _chain_constants(
-    model: Any, data: Any, frame_id: int
-) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
-    """Constant matrices of the serial chain, one (3, 11) block per joint.
-
-    For joint i with placement (R_p, p_p) in its parent joint frame and unit axis a (its own frame),
-    C_i = [R_p, R_p K, R_p K^2, p_p, R_p a] with K = skew(a): then, with B = R_parent C_i,
-    R_i = B0 + sin(q) B1 + (1 - cos q) B2 (Rodrigues), the joint origin is p_parent + B[:, 9] and
-    the world axis is B[:, 10].
-
-    Returns
-    -------
-    consts : ndarray, shape (n, 3, 11)
-    revolute : ndarray of bool, shape (n,)
-    tip_rotation : ndarray, shape (3, 3)
-        Rotation of the tip frame in the last joint frame.
-    tip_translation : ndarray, shape (3,)
-        Position of the tip in the last joint frame.
-    """
-    n = model.nq
-    consts = np.zeros((n, 3, 11))
-    revolute = np.zeros(n, dtype=bool)
-    q0 = pin.neutral(model)
-    for i in range(1, model.njoints):
-        if model.parents[i] != i - 1:
-            raise ValueError(  # cannot happen after reduction to the root->tip path
-                f"joint '{model.names[i]}' is not in a serial chain"
-            )
-        # The joint's motion subspace in its own frame = its column of the LOCAL joint Jacobian.
-        # (pinocchio returns a 1-D array when nv == 1: reshape)
-        local = np.asarray(pin.computeJointJacobian(model, data, q0, i)).reshape(6, -1)
-        s = local[:, model.joints[i].idx_v]
-        lin, ang = s[:3], s[3:]
-        placement = model.jointPlacements[i]
-        rot, trans = placement.rotation, placement.translation
-        if np.linalg.norm(lin) < 1e-12 and abs(np.linalg.norm(ang) - 1.0) < 1e-12:
-            k = _skew(ang)
-            consts[i - 1, :, 0:3] = rot
-            consts[i - 1, :, 3:6] = rot @ k
-            consts[i - 1, :, 6:9] = rot @ k @ k
-            consts[i - 1, :, 10] = rot @ ang
-            revolute[i - 1] = True
-        elif np.linalg.norm(ang) < 1e-12 and abs(np.linalg.norm(lin) - 1.0) < 1e-12:
-            consts[i - 1, :, 0:3] = rot
-            consts[i - 1, :, 10] = rot @ lin
-        else:  # pragma: no cover - URDF has no helical joint
-            raise ValueError(f"joint '{model.names[i]}' is neither revolute nor prismatic")
-        consts[i - 1, :, 9] = trans
-    frame = model.frames[frame_id]
-    return (
-        consts,
-        revolute,
-        np.array(frame.placement.rotation),
-        np.array(frame.placement.translation),
-    )
-
-
-def _chain_fk_jacobian(
-    q: NDArray[np.float64],
-    consts: NDArray[np.float64],
-    revolute: NDArray[np.bool_],
-    tip_rotation: NDArray[np.float64],
-    tip_translation: NDArray[np.float64],
-    *,
-    jacobian: bool,
-    pose: bool = False,
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Tip positions (M, 3) and position Jacobians (M, 3, n) for a batch q (M, n).
-
-    With ``pose``: tip transforms (M, 4, 4) instead of positions, and 6-D Jacobians (M, 6, n)
-    (linear rows, then angular rows, in the base frame) instead of position Jacobians.
-    """
-    m, n = q.shape
-    s, c1 = np.sin(q), 1.0 - np.cos(q)
-    rot = np.broadcast_to(np.eye(3), (m, 3, 3))
-    pos = np.zeros((m, 3))
-    axes = np.empty((m, n, 3))
-    origins = np.empty((m, n, 3))
-    for i in range(n):
-        # (M*3, 3) @ (3, 11): one BLAS call for the whole batch
-        b = (rot.reshape(m * 3, 3) @ consts[i]).reshape(m, 3, 11)
-        axes[:, i] = b[:, :, 10]
-        if revolute[i]:
-            pos = pos + b[:, :, 9]
-            rot = (
-                b[:, :, 0:3]
-                + s[:, i, None, None] * b[:, :, 3:6]
-                + c1[:, i, None, None] * b[:, :, 6:9]
-            )
-        else:
-            pos = pos + b[:, :, 9] + q[:, i, None] * b[:, :, 10]
-            rot = np.ascontiguousarray(b[:, :, 0:3])
-        origins[:, i] = pos
-    x = pos + rot @ tip_translation
-    if pose:
-        tf = np.zeros((m, 4, 4))
-        tf[:, :3, :3] = rot @ tip_rotation
-        tf[:, :3, 3] = x
-        tf[:, 3, 3] = 1.0
-    if not jacobian:
-        return (tf, None) if pose else (x, None)
-    d = x[:, None, :] - origins  # (M, n, 3): from each joint origin to the tip
-    # revolute column: w x (x_tip - p_i); prismatic column: w
-    cols = np.empty((m, n, 3))
-    cols[..., 0] = axes[..., 1] * d[..., 2] - axes[..., 2] * d[..., 1]
-    cols[..., 1] = axes[..., 2] * d[..., 0] - axes[..., 0] * d[..., 2]
-    cols[..., 2] = axes[..., 0] * d[..., 1] - axes[..., 1] * d[..., 0]
-    if not revolute.all():
-        cols[:, ~revolute] = axes[:, ~revolute]
-    if pose:
-        j6 = np.zeros((m, 6, n))
-        j6[:, :3] = cols.transpose(0, 2, 1)
-        j6[:, 3:] = np.where(revolute[None, :, None], axes, 0.0).transpose(0, 2, 1)
-        return tf, j6
-    return x, np.ascontiguousarray(cols.transpose(0, 2, 1))
-
-
-# --------------------------------------------------------------------------------------------
-# Robot
-# --------------------------------------------------------------------------------------------
+def _positive_per_joint(
+    value: npt.ArrayLike | None, name: str, n: int, unit: str
+) -> NDArray[np.float64] | None:
+    """None, or a number or (n,) values, each > 0 or inf (no limit) -> ndarray (n,)."""
+    if value is None:
+        return None
+    arr = check_array(value, name, ndim=(0, 1), finite=False)
+    if np.ndim(value) == 0:
+        arr = np.full(n, arr.item())
+    elif arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
+    bad = np.flatnonzero(~(arr > 0))  # zero, negative or NaN
+    if bad.size:
+        i = int(bad[0])
+        got = float(arr[i])
+        raise ValueError(f"{name}[{i}] must be > 0 ({unit}; inf for no limit), got {got!r}")
+    return arr
 
 
 class Robot:
@@ -880,6 +577,50 @@ link_prefix, tip, velocity, effort
         assert j6 is not None
         return j6
 
+    def ik(
+        self,
+        target: npt.ArrayLike,
+        q0: npt.ArrayLike | None = None,
+        *,
+        orientation: npt.ArrayLike | None = None,
+        tol: float = 1e-4,
+        max_iter: int = 200,
+    ) -> NDArray[np.float64]:
+        """Joint angles that put the tip at ``target`` (and ``orientation``), within the limits.
+
+        Damped least squares from ``q0`` (:mod:`pbdkit.robots._ik`): position only, or with
+        ``orientation`` the 6-D Jacobian (:meth:`jacobian6`).
+
+        Parameters
+        ----------
+        target : array-like, shape (3,)
+            Tip position in the base frame.
+        q0 : array-like, shape (n,), optional
+            Initial posture, within the joint limits; it picks the solution (elbow up or down,
+            a redundant arm's null space). Default: the middle of the limits,
+            (lower + upper) / 2.
+        orientation : array-like, shape (3, 3), optional
+            The tip frame's axes in the base frame (as in :meth:`fk_pose`); None: position only.
+        tol : float
+            Largest residual accepted: the norm of the position error (m) stacked with the
+            orientation error (rotation vector, rad).
+        max_iter : int
+            Iterations at most.
+
+        Returns
+        -------
+        q : ndarray, shape (n,)
+            Within [lower, upper], with a residual below ``tol``.
+
+        Raises
+        ------
+        ValueError
+            Bad input (the message names the argument), or no convergence (the message gives
+            the residual, ``tol`` and ``max_iter``): the target is out of reach, beyond a joint
+            limit, or needs another ``q0``.
+        """
+        return ik(self, target, q0, orientation=orientation, tol=tol, max_iter=max_iter)
+
     def fk_pose_jacobian_unchecked(
         self, q: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -935,239 +676,3 @@ link_prefix, tip, velocity, effort
         # contiguous); copies would cost a third of the call.
         full = np.asarray(jac).reshape(6, self.n_joints)
         return x, full[:3], full[3:].T
-
-
-# --------------------------------------------------------------------------------------------
-# Denavit-Hartenberg -> URDF
-# --------------------------------------------------------------------------------------------
-
-
-def _rot_x(a: float) -> NDArray[np.float64]:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_z(a: float) -> NDArray[np.float64]:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _transform(rot: NDArray[np.float64], trans: Sequence[float]) -> NDArray[np.float64]:
-    t = np.eye(4)
-    t[:3, :3] = rot
-    t[:3, 3] = trans
-    return t
-
-
-def _rpy_from_matrix(rot: NDArray[np.float64]) -> tuple[float, float, float]:
-    """URDF roll, pitch, yaw of a rotation matrix: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cp = math.hypot(rot[0, 0], rot[1, 0])
-    pitch = math.atan2(-rot[2, 0], cp)
-    if cp > 1e-9:
-        roll = math.atan2(rot[2, 1], rot[2, 2])
-        yaw = math.atan2(rot[1, 0], rot[0, 0])
-    else:  # gimbal lock (pitch = +-pi/2): only roll -+ yaw is defined; take yaw = 0
-        roll = math.atan2(-rot[1, 2], rot[1, 1])
-        yaw = 0.0
-    return roll, pitch, yaw
-
-
-def _origin_xml(t: NDArray[np.float64], indent: str) -> str:
-    xyz = " ".join(repr(float(v)) for v in t[:3, 3])
-    rpy = " ".join(repr(float(v)) for v in _rpy_from_matrix(t[:3, :3]))
-    return f'{indent}<origin xyz="{xyz}" rpy="{rpy}"/>\n'
-
-
-def _per_joint(
-    value: npt.ArrayLike | None, name: str, n: int, default: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    if value is None:
-        return default
-    arr = check_array(value, name, ndim=(0, 1))
-    if np.ndim(value) == 0:  # check_array makes a scalar (1,)
-        return np.full(n, arr.item())
-    if arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
-    return arr
-
-
-def _positive_per_joint(
-    value: npt.ArrayLike | None, name: str, n: int, unit: str
-) -> NDArray[np.float64] | None:
-    """None, or a number or (n,) values, each > 0 or inf (no limit) -> ndarray (n,)."""
-    if value is None:
-        return None
-    arr = check_array(value, name, ndim=(0, 1), finite=False)
-    if np.ndim(value) == 0:
-        arr = np.full(n, arr.item())
-    elif arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
-    bad = np.flatnonzero(~(arr > 0))  # zero, negative or NaN
-    if bad.size:
-        i = int(bad[0])
-        got = float(arr[i])
-        raise ValueError(f"{name}[{i}] must be > 0 ({unit}; inf for no limit), got {got!r}")
-    return arr
-
-
-def urdf_from_dh(
-    table: npt.ArrayLike,
-    joint_types: str | Sequence[str] | None = None,
-    *,
-    lower: npt.ArrayLike | None = None,
-    upper: npt.ArrayLike | None = None,
-    tip_offset: npt.ArrayLike | None = None,
-    convention: Literal["modified", "standard"] = "modified",
-    name: str = "dh_robot",
-    joint_names: Sequence[str] | None = None,
-    link_prefix: str = "link",
-    tip: str = "tip",
-    velocity: npt.ArrayLike | None = None,
-    effort: npt.ArrayLike | None = None,
-) -> str:
-    """Write a kinematics-only URDF from a Denavit-Hartenberg table.
-
-    Row i of ``table`` is ``(a, alpha, d, theta_offset)`` for joint i:
-
-    - ``convention="modified"`` (Craig): the row holds a_{i-1}, alpha_{i-1}, d_i, theta_i and
-      T_{i-1,i} = RotX(alpha_{i-1}) TransX(a_{i-1}) RotZ(theta_i) TransZ(d_i);
-    - ``convention="standard"``: the row holds a_i, alpha_i, d_i, theta_i and
-      T_{i-1,i} = RotZ(theta_i) TransZ(d_i) TransX(a_i) RotX(alpha_i).
-
-    A revolute joint adds q_i to theta_i; a prismatic joint adds q_i to d_i. Every joint moves
-    about (along) a local z axis. The links are ``{link_prefix}0`` (the base) to
-    ``{link_prefix}n``, followed by the fixed frame ``tip`` placed at ``tip_offset`` in the last
-    link frame (after the last row's constant part for the standard convention).
-
-    Parameters
-    ----------
-    table : array-like, shape (n, 4)
-        DH parameters, metres and radians.
-    joint_types : str or sequence of str, optional
-        Per joint "revolute"/"prismatic" (or a string of "R"/"P" such as ``"RRPRRR"``).
-        Default: all revolute.
-    lower, upper : array-like, shape (n,) or scalar, optional
-        Joint limits. Default [-pi, pi] for revolute joints; required for prismatic joints.
-    tip_offset : array-like, shape (3,) or (4, 4), optional
-        Position (or homogeneous transform) of the tip frame in the last link frame.
-        Default: no offset.
-    convention : {"modified", "standard"}
-    name : str
-        Robot name. This and every other name are escaped in the XML (any text is safe).
-    joint_names : sequence of str, length n, optional
-        Default ``joint1`` ... ``jointn``.
-    link_prefix : str
-        Prefix of the link names.
-    tip : str
-        Name of the tip link.
-    velocity, effort : array-like, shape (n,) or scalar, optional
-        Values for the ``<limit>`` tags. Default 0 (unknown).
-
-    Returns
-    -------
-    urdf : str
-        The URDF XML text (no geometry, no inertia: kinematics only).
-    """
-    dh = check_array(table, "table", ndim=2)
-    if dh.shape[1] != 4 or dh.shape[0] < 1:
-        raise ValueError(
-            "table must have shape (n, 4) with rows (a, alpha, d, theta_offset), "
-            f"got {shape_str(dh.shape)}"
-        )
-    n = dh.shape[0]
-    if convention not in ("modified", "standard"):
-        raise ValueError(f"convention must be 'modified' or 'standard', got {convention!r}")
-    if joint_types is None:
-        types = ["revolute"] * n
-    else:
-        alias = {
-            "r": "revolute",
-            "p": "prismatic",
-            "revolute": "revolute",
-            "prismatic": "prismatic",
-        }
-        raw = list(joint_types)
-        if len(raw) != n or any(str(t).lower() not in alias for t in raw):
-            raise ValueError(
-                f"joint_types must give {n} entries among 'revolute'/'prismatic' (or 'R'/'P'), "
-                f"got {joint_types!r}"
-            )
-        types = [alias[str(t).lower()] for t in raw]
-    prismatic = np.array([t == "prismatic" for t in types])
-    if prismatic.any() and (lower is None or upper is None):
-        raise ValueError("lower and upper are required when a joint is prismatic (metres)")
-    lo = _per_joint(lower, "lower", n, np.full(n, -math.pi))
-    hi = _per_joint(upper, "upper", n, np.full(n, math.pi))
-    if np.any(lo > hi):
-        raise ValueError(f"lower must be <= upper, got lower={lo.tolist()}, upper={hi.tolist()}")
-    vel = _per_joint(velocity, "velocity", n, np.zeros(n))
-    eff = _per_joint(effort, "effort", n, np.zeros(n))
-    if joint_names is None:
-        jnames = [f"joint{i + 1}" for i in range(n)]
-    else:
-        jnames = [str(s) for s in joint_names]
-        if len(jnames) != n or len(set(jnames)) != n:
-            raise ValueError(f"joint_names must hold {n} distinct names, got {joint_names!r}")
-    if tip_offset is None:
-        t_tip = np.eye(4)
-    else:
-        off = check_array(tip_offset, "tip_offset")
-        if off.shape == (3,):
-            t_tip = _transform(np.eye(3), off.tolist())
-        elif off.shape == (4, 4):
-            t_tip = off
-        else:
-            raise ValueError(
-                f"tip_offset must have shape (3,) or (4, 4), got {shape_str(off.shape)}"
-            )
-
-    def constant(row: NDArray[np.float64]) -> NDArray[np.float64]:
-        a, alpha, d, theta = (float(v) for v in row)
-        if convention == "modified":
-            # RotX(alpha) TransX(a) RotZ(theta) TransZ(d)
-            return (
-                _transform(_rot_x(alpha), (0.0, 0.0, 0.0))
-                @ _transform(np.eye(3), (a, 0.0, 0.0))
-                @ _transform(_rot_z(theta), (0.0, 0.0, 0.0))
-                @ _transform(np.eye(3), (0.0, 0.0, d))
-            )
-        # RotZ(theta) TransZ(d) TransX(a) RotX(alpha)
-        return (
-            _transform(_rot_z(theta), (0.0, 0.0, d))
-            @ _transform(np.eye(3), (a, 0.0, 0.0))
-            @ _transform(_rot_x(alpha), (0.0, 0.0, 0.0))
-        )
-
-    if convention == "modified":
-        origins = [constant(dh[i]) for i in range(n)]
-        tip_origin = t_tip
-    else:
-        origins = [np.eye(4)] + [constant(dh[i]) for i in range(n - 1)]
-        tip_origin = constant(dh[n - 1]) @ t_tip
-
-    links = [f"{link_prefix}{i}" for i in range(n + 1)]
-    if tip in links or tip in jnames:
-        raise ValueError(f"tip must differ from the link and joint names, got {tip!r}")
-    # Names are user text: quoteattr escapes them (&, <, >, quotes) into attribute values.
-    q = quoteattr
-    out = [
-        '<?xml version="1.0"?>\n',
-        f"<!-- Generated by pbdkit.robots.urdf_from_dh ({convention} DH). Kinematics only. -->\n",
-        f"<robot name={q(str(name))}>\n",
-    ]
-    out += [f"  <link name={q(link)}/>\n" for link in [*links, tip]]
-    for i in range(n):
-        out.append(f'  <joint name={q(jnames[i])} type="{types[i]}">\n')
-        out.append(f"    <parent link={q(links[i])}/>\n    <child link={q(links[i + 1])}/>\n")
-        out.append(_origin_xml(origins[i], "    "))
-        out.append('    <axis xyz="0 0 1"/>\n')
-        out.append(
-            f'    <limit lower="{float(lo[i])!r}" upper="{float(hi[i])!r}" '
-            f'effort="{float(eff[i])!r}" velocity="{float(vel[i])!r}"/>\n'
-        )
-        out.append("  </joint>\n")
-    out.append(f'  <joint name={q(tip + "_joint")} type="fixed">\n')
-    out.append(f"    <parent link={q(links[n])}/>\n    <child link={q(tip)}/>\n")
-    out.append(_origin_xml(tip_origin, "    "))
-    out.append("  </joint>\n</robot>\n")
-    return "".join(out)

@@ -32,7 +32,8 @@ from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 
-from ._robot import Robot, urdf_from_dh
+from ._robot import Robot
+from ._urdf import urdf_from_dh
 
 __all__ = [
     "PANDA_DH",

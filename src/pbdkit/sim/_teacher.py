@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from ..data._demonstration import Demonstration
 from ..robots import katana
+from ..robots._ik import damped_least_squares
 from ..robots._robot import Robot
 from . import _tasks as T
 from ._tasks import TaskSpec, ViaPoint
@@ -54,6 +55,7 @@ RATE = 100.0  # Hz, encoder sampling rate
 # Row of d(pitch)/d(theta) for the Katana (see the module docstring).
 PITCH_ROW: Float = np.array([0.0, 1.0, 1.0, -1.0, 0.0])
 ROLL_ROW: Float = np.array([0.0, 0.0, 0.0, 0.0, 1.0])
+_TOOL_ROWS: Float = np.array([PITCH_ROW, ROLL_ROW])  # the IK's rows after the position's
 APPROACH = 0.07  # m, pre-grasp distance along the tool axis (fingertips clear the glass)
 # Pitch at which the glass is held (tool axis 8.6 deg below the horizontal): reachable over the
 # whole placement ranges with the elbow-up branch (horizontal needs more than ~0.46 m of reach).
@@ -81,11 +83,12 @@ def solve_ik(
     max_iter: int = 100,
     damping: float = 1e-3,
 ) -> Float:
-    """Joint angles putting the tool at ``x`` with a given pitch and roll (damped least squares).
+    """Joint angles putting the tool at ``x`` with a given pitch and roll.
 
-    Iterates ``q += A^T (A A^T + lambda^2 I)^-1 e`` with A the position Jacobian stacked with the
-    pitch and roll rows and e the error, clipped to the joint limits, from ``q0`` (which picks
-    the elbow branch: consecutive samples stay on the same one).
+    The one damped least-squares IK (:func:`pbdkit.robots._ik.damped_least_squares`) on the
+    position Jacobian stacked with the pitch and roll rows (:data:`PITCH_ROW`,
+    :data:`ROLL_ROW`), clipped to the joint limits, from ``q0`` (which picks the elbow branch:
+    consecutive samples stay on the same one).
 
     Parameters
     ----------
@@ -112,19 +115,18 @@ def solve_ik(
     ValueError
         If the target is not reached within 1e-4 (out of reach or against a joint limit).
     """
-    q = np.array(q0, dtype=np.float64)
-    lam2 = damping**2
-    err = np.inf
-    for _ in range(max_iter):
-        xq, jac = robot.fk_jacobian(q)
-        e = np.concatenate([x - xq, [pitch - q @ PITCH_ROW, roll - q @ ROLL_ROW]])
-        err = float(np.linalg.norm(e))
-        if err < tol:
-            return q
-        a = np.vstack([jac, PITCH_ROW, ROLL_ROW])
-        q = np.clip(
-            q + a.T @ np.linalg.solve(a @ a.T + lam2 * np.eye(5), e), robot.lower, robot.upper
-        )
+    q, err = damped_least_squares(
+        robot,
+        x,
+        q0,
+        lower=robot.lower,
+        upper=robot.upper,
+        tol=tol,
+        max_iter=max_iter,
+        damping=damping,
+        rows=_TOOL_ROWS,
+        row_targets=(pitch, roll),
+    )
     if err > 1e-4:
         raise ValueError(
             f"x: IK did not reach {np.round(x, 4).tolist()} with pitch {pitch:.3f} "
