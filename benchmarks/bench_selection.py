@@ -52,14 +52,14 @@ from _common import print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.datasets import lasa, lasa_names
-from pbdkit.prob._gmm import (
+from pbdkit.prob import GMM
+from pbdkit.prob._em import MIN_TIME_SPREAD
+from pbdkit.prob._selection import (
     CV_TOLERANCE,
-    GMM,
     LOCAL_SPREAD_FLOOR,
-    MAX_COMPONENTS,
-    MIN_TIME_SPREAD,
     local_spread,
     pooled_spread,
     sequences_from_time,
