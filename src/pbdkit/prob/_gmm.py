@@ -46,8 +46,8 @@ from ._selection import (
     ModelSelection,
     _cv_errors,
     _cv_scale,
+    _select_by_bic,
     _select_by_cv,
-    effective_bic,
     n_parameters,
     sequences_from_time,
 )
@@ -341,19 +341,18 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     return _cv_errors(x, x2, fit_k(k).resp, grp, floor, td, score_dims, scale)
 
                 self.selection_ = _select_by_cv(candidates, cv, n_seq)
+            elif method == "bic":
+                n_eff = self._n_eff(n, n_seq)
+
+                def log_likelihood(k: int) -> float:
+                    return fit_k(k).log_likelihood
+
+                self.selection_ = _select_by_bic(candidates, log_likelihood, n, n_eff, d)
             else:
-                if method == "bic":
-                    n_eff = self._n_eff(n, n_seq)
-                    scores = [
-                        effective_bic(fit_k(k).log_likelihood, n, n_eff, n_parameters(k, d))
-                        for k in candidates
-                    ]
-                    best = candidates[int(np.argmin(scores))]
-                else:
-                    fit_k(candidates[0])
-                    scores, best = [float("nan")], candidates[0]
+                k = candidates[0]
+                fit_k(k)
                 self.selection_ = ModelSelection(
-                    method, tuple(candidates), np.asarray(scores), np.zeros((0, 0)), best, best, 0
+                    method, (k,), np.asarray([float("nan")]), np.zeros((0, 0)), k, k, 0
                 )
         chosen = self.selection_.chosen
         fit = fits[chosen]

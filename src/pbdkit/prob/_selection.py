@@ -249,6 +249,25 @@ def _select_by_cv(
     )
 
 
+def _select_by_bic(
+    candidates: Sequence[int],
+    log_likelihood: Callable[[int], float],
+    n_samples: int,
+    n_eff: float,
+    n_dims: int,
+) -> ModelSelection:
+    """The K of lowest :func:`effective_bic`; ``log_likelihood(k)`` is the K-component fit's
+    log-likelihood summed over the ``n_samples`` rows."""
+    scores = [
+        effective_bic(log_likelihood(k), n_samples, n_eff, n_parameters(k, n_dims))
+        for k in candidates
+    ]
+    best = candidates[int(np.argmin(scores))]
+    return ModelSelection(
+        "bic", tuple(candidates), np.asarray(scores), np.zeros((0, 0)), best, best, 0
+    )
+
+
 def _drop_empty(params: Params, min_weight: float) -> Params:
     w, m, c = params
     keep = w > min_weight
