@@ -14,7 +14,7 @@ from sklearn.mixture import GaussianMixture
 from threadpoolctl import threadpool_limits
 
 from pbdkit import GMM
-from pbdkit.prob._gmm import time_based_init
+from pbdkit.prob._em import time_based_init
 
 
 def random_time_gmm(rng: np.random.Generator, k: int, d: int) -> GMM:

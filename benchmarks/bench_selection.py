@@ -1,6 +1,6 @@
 """Benchmark: how K is chosen, measured on the simulated teacher's tasks and on LASA.
 
-The evidence behind ``n_components="auto"`` (pbdkit.prob._gmm, "Choosing K"). For both tasks and
+The evidence behind ``n_components="auto"`` (docs/math.md, "Choosing K"). For both tasks and
 teach seeds 0-9 (5 demonstrations each, the paper's configuration: the basin task has no
 basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
 
@@ -13,7 +13,7 @@ basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
   largest over the joints; task spaces in mm, the norm of the 3-D step), and its ratio to the
   demonstrations' own largest one-step change (rescaled to the same grid; for a task space the
   hand position f(theta) minus the object's): a ratio well above 1 is a jump of the
-  generalized trajectory (pbdkit.prob._gmm, "Time floor");
+  generalized trajectory (docs/math.md, "Time floor");
 - the fused reproduction's peak joint speed over the URDF limit, played over ``skill.times()``,
   from q0 = None and from every demonstration's first posture (worst);
 - learning time.
@@ -52,14 +52,14 @@ from _common import print_table
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.datasets import lasa, lasa_names
-from pbdkit.prob._gmm import (
+from pbdkit.prob import GMM
+from pbdkit.prob._em import MIN_TIME_SPREAD
+from pbdkit.prob._selection import (
     CV_TOLERANCE,
-    GMM,
     LOCAL_SPREAD_FLOOR,
-    MAX_COMPONENTS,
-    MIN_TIME_SPREAD,
     local_spread,
     pooled_spread,
     sequences_from_time,

@@ -38,7 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from arm_zoo import ARMS, grasp_errors
 
 from pbdkit import Skill
-from pbdkit.prob._gmm import CV_TOLERANCE, GMM
+from pbdkit.prob import GMM
+from pbdkit.prob._selection import CV_TOLERANCE
 
 METHODS = ("auto", "auto-pooled", "bic")
 

@@ -17,7 +17,7 @@ from typer.testing import CliRunner, Result
 
 from pbdkit.apps._cli import app
 from pbdkit.data._demonstration import Demonstration, save_demonstrations
-from pbdkit.prob._gmm import CV_TOLERANCE
+from pbdkit.prob._selection import CV_TOLERANCE
 from pbdkit.robots import katana
 from pbdkit.skill._skill import Skill
 

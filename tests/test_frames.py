@@ -17,6 +17,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from pbdkit.prob import GMM
 from pbdkit.prob._frames import (
     FrameModel,
     covariance_to_world,
@@ -25,7 +26,6 @@ from pbdkit.prob._frames import (
     to_local,
     to_world,
 )
-from pbdkit.prob._gmm import GMM
 
 Float = NDArray[np.float64]
 Frames = list[tuple[Float, Float]]

@@ -7,17 +7,19 @@ Conventions (used everywhere in pbdkit):
 - Quaternions are **(qw, qx, qy, qz), w first**: pytransform3d's convention. ROS messages
   (``geometry_msgs/Quaternion``) and scipy's ``Rotation.from_quat`` use (x, y, z, w).
 - A pose is a 4x4 homogeneous transform [[R, p], [0, 0, 0, 1]], or (x, y, z, qw, qx, qy, qz).
-- Orientation errors are on the **left**, in the frame whose axes the rotation is expressed in:
-  R = exp([e]x) R_ref, e = log(R R_ref^T). For a hand orientation in the world, e is a world
-  vector; for a hand orientation relative to an object (R_rel = R_o^T R_hand), e is in the
-  object's axes, and in the world it is R_o e: its covariance S maps to R_o S R_o^T, as the
-  position part does. That is why pbdkit expresses them on the left.
-- Derivatives: if R moves with angular velocity omega (world axes, dR = [omega]x R dt), then
-  e = log(R R_ref^T) moves with de = J_l(e)^-1 omega (:func:`left_jacobian_inverse`). With
-  omega = J_w(q) dq (the angular rows of the 6-D Jacobian, :meth:`pbdkit.Robot.jacobian6`),
-  de/dq = J_l(e)^-1 J_w(q).
+- Orientation errors are on the **left**, in the axes the rotation is expressed in:
+  R = exp([e]x) R_ref, e = log(R R_ref^T).
 
-Everything is batched over leading dimensions and pure NumPy.
+The maps (t = |r|; Barfoot, *State Estimation for Robotics*, 2017, ch. 7):
+
+    exp([r]x) = I + (sin t / t) [r]x + ((1 - cos t) / t^2) [r]x^2              (Rodrigues)
+    J_l(r)    = I + ((1 - cos t) / t^2) [r]x + ((t - sin t) / t^3) [r]x^2
+    J_l(r)^-1 = I - [r]x / 2 + (1 / t^2 - (1 + cos t) / (2 t sin t)) [r]x^2
+    de/dq     = J_l(e)^-1 J_w(q)          (e = log(R R_ref^T), omega = J_w(q) dq)
+
+Why errors on the left, the derivatives, the Karcher mean and the product of pose Gaussians:
+``docs/math.md``, "Rotations and tangent spaces". Everything is batched over leading dimensions
+and pure NumPy.
 """
 
 from __future__ import annotations

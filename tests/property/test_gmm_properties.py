@@ -8,6 +8,8 @@ from hypothesis import strategies as st
 
 from pbdkit import GMM
 
+from .strategies import DETERMINISTIC
+
 
 def _stacked_trajectories(seed: int, n_dims: int) -> np.ndarray:
     """Three noisy demonstrations of a smooth motion, time in [0, 1] first: (150, 1 + n_dims)."""
@@ -22,7 +24,7 @@ def _stacked_trajectories(seed: int, n_dims: int) -> np.ndarray:
     return np.vstack(rows)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(DETERMINISTIC, max_examples=25)
 @given(
     seed=st.integers(0, 2**32 - 1),
     n_dims=st.integers(1, 3),

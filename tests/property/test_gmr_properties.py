@@ -8,10 +8,10 @@ from hypothesis import strategies as st
 
 from pbdkit import GMM
 
-from .strategies import gmm_params
+from .strategies import DETERMINISTIC, gmm_params
 
 
-@settings(max_examples=60, deadline=None)
+@settings(DETERMINISTIC, max_examples=60)
 @given(params=gmm_params(), n_in=st.integers(1, 2), covariance=st.sampled_from(["exact", "paper"]))
 def test_regress_shapes_symmetry_and_positive_definiteness(
     params: tuple[np.ndarray, ...], n_in: int, covariance: str
@@ -33,7 +33,7 @@ def test_regress_shapes_symmetry_and_positive_definiteness(
         assert eig.min() > -1e-9 * max(eig.max(), 1e-300)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(DETERMINISTIC, max_examples=40)
 @given(params=gmm_params())
 def test_exact_covariance_dominates_mean_of_conditionals(params: tuple[np.ndarray, ...]) -> None:
     # Law of total covariance: exact = E[C_k] + Cov[m_k] >= sum_k beta_k C_k >= paper form.

@@ -21,7 +21,7 @@ from .._io import atomic_write_bytes, write_json
 from .._validation import check_int
 from ..data._demonstration import save_demonstrations
 from ..data._placement import position_of
-from ..prob._gmm import CV_TOLERANCE
+from ..prob._selection import CV_TOLERANCE
 from ._plots import (
     figure_png,
     plot_constraints,

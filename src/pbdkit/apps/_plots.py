@@ -529,11 +529,11 @@ def plot_selection(skill: Skill) -> Figure:
 
     One panel per space: the mean error over the left-out demonstrations (1 = the
     demonstrations' own variability about their mean), the bound within which a K counts as
-    good as the best (:data:`pbdkit.prob._gmm.CV_TOLERANCE`), the best K and the K kept.
+    good as the best (:data:`pbdkit.prob._selection.CV_TOLERANCE`), the best K and the K kept.
     """
     from matplotlib.ticker import FormatStrFormatter
 
-    from ..prob._gmm import CV_TOLERANCE
+    from ..prob._selection import CV_TOLERANCE
 
     names = [*skill.object_names, "joint"]
     fig = new_figure(figsize=(3.6 * len(names), 2.8))

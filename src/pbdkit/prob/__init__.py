@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from . import gaussian
 from ._frames import FrameModel
-from ._gmm import GMM, ModelSelection
+from ._gmm import GMM
+from ._selection import ModelSelection
 
 __all__ = ["GMM", "FrameModel", "ModelSelection", "gaussian"]

@@ -1,19 +1,16 @@
 """Frames (A, b): data seen from a frame, Gaussians mapped back to the world.
 
-A frame is an invertible matrix A (D, D) (a rotation, a scaling, a reflection or any
-combination) and an origin b (D,). A point x of the world is A^-1 (x - b) in the frame; a
-Gaussian N(m, S) learned in the frame is, in the world, N(A m + b, A S A^T), with precision
-A^-T L A^-1 (L = S^-1). For an orthogonal A (a rotation or a reflection) A^-1 = A^T and the
-precision maps as A L A^T, but only then: for a scaled or sheared frame it does not (pbdlib's
-``GMM.lintrans`` maps the precision as A L A^T).
+A frame is an invertible A (D, D) and an origin b (D,):
 
-:class:`FrameModel` is a task-parameterized model built on them, robot-free, like pbdlib's and
-Rofunc's task-parameterized GMMs, with one GMM per frame (as :class:`pbdkit.Skill` has one per
-object): each frame's GMM is fitted on the demonstrations seen from that frame, {t, A^-1 (x - b)};
-for new frames, GMR in each frame at the query times gives one Gaussian per frame, mapped to the
-world, and their product in information form (precisions add, :func:`product_in_world`) is the
-prediction. A frame where the demonstrations agree (the target, seen from the target) gets a
-small covariance and wins where they agree; a frame where they differ defers to the others.
+    x in the world        ->  A^-1 (x - b) in the frame               (:func:`to_local`)
+    N(m, S) in the frame  ->  N(A m + b, A S A^T) in the world       (:func:`to_world`)
+    precision L = S^-1    ->  A^-T L A^-1 (A L A^T only for an orthogonal A)
+
+:class:`FrameModel` is a task-parameterized GMM (Calinon, "A tutorial on task-parameterized
+movement learning and retrieval", Intelligent Service Robotics 9, 2016): one GMM per frame over
+{t, A^-1 (x - b)}; for new frames, GMR in each frame, mapped to the world, and the product
+Lambda = sum_p A_p^-T S_p^-1 A_p^-1 (:func:`product_in_world`). Why, and how a frame wins where
+the demonstrations agree: ``docs/math.md``, "Frames (TP-GMM)".
 
 File format (:meth:`FrameModel.save` / :meth:`FrameModel.load`): a NumPy ``.npz`` archive, no
 pickle, written atomically. Keys: ``format`` = ``"pbdkit-frame-model"``, ``version`` = 1,
@@ -219,8 +216,9 @@ def _check_trajectories(trajectories: object) -> list[Float]:
 class FrameModel:
     """A task-parameterized model: one GMM per frame, the product of the frames at reproduction.
 
-    Build it with :meth:`learn` or :meth:`load` (module docstring). Robot-free: the data are
-    D-dimensional points over time, the frames any invertible affine maps.
+    Build it with :meth:`learn` or :meth:`load` (``docs/math.md``, "Frames (TP-GMM)").
+    Robot-free: the data are D-dimensional points over time, the frames any invertible affine
+    maps.
 
     Parameters
     ----------

@@ -10,24 +10,10 @@ distribution p(xi^O | xi^I) = sum_k beta_k N(xi^O; m_k, C_k), summarized by one 
     Sigma  = sum_k beta_k (C_k + m_k m_k^T) - m m^T      ("exact": law of total covariance)
     Sigma  = sum_k beta_k^2 C_k                          ("paper": the paper's approximation)
 
-Everything that does not depend on the query (A_k = Sigma^OI (Sigma^II)^-1, C_k, the Cholesky
-factors of Sigma^II and the log normalizers) is computed once in :func:`gmr_precompute`;
-:func:`gmr_batch` then evaluates T queries with a handful of array operations, and
-:func:`gmr_step` evaluates one query with the smallest possible number of numpy calls (for a
-control loop). Responsibilities are computed in the log domain (log-sum-exp), so a query far
-from every component still gives finite weights (the nearest component takes them all).
-
-Far queries. The one-input fast paths (:func:`gmr_step_1d` and the batch of one input) form the
-second moments sum_k beta_k m_k m_k^T about a fixed centre and subtract m m^T: one product with
-a precomputed table, but the subtraction cancels when the conditional means are large, as they
-are far from the data (m_k grows with x - mu_k): at x = 1e7 for data in [0, 10] the covariance
-came out indefinite. So a query more than :data:`FAR_SIGMAS` standard deviations beyond every
-component (outside ``[GMRModel.near_lo, GMRModel.near_hi]``, two comparisons) takes the centred
-formulation of the multi-input path instead, sum_k beta_k (C_k + d_k d_k^T) with d_k = m_k - m,
-which is positive semi-definite by construction. Where even (x - mu)^2 / sigma^2 overflows
-(``|x|`` > ~1e154), the responsibilities are computed from (x - mu) / r with
-``r = max |x - mu|``, the differences of the log-densities formed before multiplying by r^2: the
-result stays finite for any finite query whose conditional mean is representable.
+(Calinon & Billard, IROS 2008, Table I.) The query-independent terms are computed once
+(:func:`gmr_precompute`); :func:`gmr_batch` evaluates T queries, :func:`gmr_step` one (a
+control loop); responsibilities in the log domain. Exact against paper covariance, and the
+centred formulation far from the data: ``docs/math.md``, "Gaussian mixture regression".
 """
 
 from __future__ import annotations
@@ -53,8 +39,8 @@ __all__ = [
 Float = NDArray[np.float64]
 CovarianceMode = Literal["exact", "paper"]
 #: One input: a query more than this many standard deviations beyond every component is "far"
-#: and takes the centred formulation (module docstring). At the switch the fast path's
-#: cancellation error is about eps * FAR_SIGMAS^2 ~ 2e-13 of the output variances.
+#: and takes the centred formulation (``docs/math.md``, "Far queries"). At the switch the fast
+#: path's cancellation error is about eps * FAR_SIGMAS^2 ~ 2e-13 of the output variances.
 FAR_SIGMAS = 30.0
 
 
@@ -345,7 +331,7 @@ def gmr_step_1d(model: GMRModel, x: float, with_cov: bool = True) -> tuple[Float
     Unnormalized weights w_k = exp(log_norm_k - max_i log_norm_i - s_k^2 / (2 var_k)) cannot
     overflow; if they all underflow the weights are recomputed relative to their maximum in the
     log domain, so the result is never NaN. A query beyond ``[near_lo, near_hi]`` takes the
-    centred formulation (module docstring, "Far queries").
+    centred formulation (``docs/math.md``, "Far queries").
 
     Parameters
     ----------

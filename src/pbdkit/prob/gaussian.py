@@ -1,12 +1,17 @@
-"""Pure functions on Gaussian distributions.
+"""Pure functions on Gaussian distributions: products in information form, linear maps, densities.
 
-Products of Gaussians are computed in *information form*: a Gaussian N(mu, Sigma) is carried as
-its precision Lambda = Sigma^-1 and information vector eta = Lambda mu. Precisions add under a
-product, so a factor may be rank-deficient (a task-space constraint projected into joint space
-constrains only 3 of n directions) as long as the sum of the precisions is positive definite.
+A Gaussian N(mu, Sigma) is carried as its precision Lambda = Sigma^-1 and information vector
+eta = Lambda mu; precisions add under a product (paper eq. (1) in information form)::
 
-Every function works on a single Gaussian or on a leading batch axis; shapes are stated per
-argument. Nothing here calls ``inv`` on a covariance: Cholesky factors and solves only.
+    prod_i N(mu_i, Lambda_i^-1)  ~  N(mu, Sigma),   Sigma = (sum_i Lambda_i)^-1,
+                                                      mu = Sigma sum_i eta_i
+    y = A x + b,  x ~ N(mu, Sigma)  =>  y ~ N(A mu + b, A Sigma A^T)
+
+A factor may be rank-deficient as long as the sum of the precisions is positive definite. Every
+function works on a single Gaussian or on a leading batch axis; shapes are stated per argument.
+Nothing here calls ``inv`` on a covariance: Cholesky factors and solves only. The derivation, and
+why a task-space constraint needs the information form: ``docs/math.md``, "Products of Gaussians
+in information form".
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ from .._validation import check_int, check_positive_float
 from ..data._demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning, check_demonstrations
 from ..data._placement import is_pose, position_of
 from ..motion._limits import LimitSpec, MotionLimits
-from ..prob._gmm import GMM, ModelSelection
+from ..prob import GMM, ModelSelection
 from ..prob._gmr import CovarianceMode
 from ..reproduction._constraints import JOINT, Constraints, KinematicModel
 from ..reproduction._controller import Controller
@@ -268,11 +268,11 @@ class Skill:
             Steps of the time grid (the paper: 1000), 2 .. :data:`MAX_STEPS`.
         n_components : int, "auto" or "bic"
             K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
-            by leaving one demonstration out at a time (:mod:`pbdkit.prob._gmm`, "Choosing K"): the
+            by leaving one demonstration out at a time (``docs/math.md``, "Choosing K"): the
             smallest K whose generalized trajectory predicts a left-out demonstration as well
-            as the best K does (within :data:`pbdkit.prob._gmm.CV_TOLERANCE`), its error at every
-            moment measured against the demonstrations' spread at that moment, so that phases
-            where they agree (a grasp) are kept whatever they do elsewhere; ``"bic"``: the
+            as the best K does (within :data:`pbdkit.prob._selection.CV_TOLERANCE`), its error
+            at every moment measured against the demonstrations' spread at that moment, so that
+            phases where they agree (a grasp) are kept whatever they do elsewhere; ``"bic"``: the
             effective-sample-size BIC of earlier versions (kept for comparison).
         max_components : int
             Largest K tried.
@@ -303,8 +303,8 @@ class Skill:
             Number of evenly spaced steps per demonstration given to EM (all ``n_steps`` if
             None or larger). Consecutive steps of a smooth motion carry almost no new
             information (the demonstration, not the sample, is the unit of evidence, see
-            :mod:`pbdkit.prob._gmm`), while EM's cost grows linearly with the points: with 1000
-            steps, 100 of them learn 5 times faster and reproduce as well
+            ``docs/math.md``, "Choosing K"), while EM's cost grows linearly with the points:
+            with 1000 steps, 100 of them learn 5 times faster and reproduce as well
             (``benchmarks/README.md``, "Skill learning and reproduction"). The GMMs still
             model time in steps 0 .. n_steps-1.
 
