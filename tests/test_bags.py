@@ -28,7 +28,7 @@ from typer.testing import CliRunner, Result
 
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
 from pbdkit.apps._cli import app
-from pbdkit.data._bags import write_demonstration_bag
+from pbdkit.data._bag_write import write_demonstration_bag
 from pbdkit.data._placement import is_pose, position_of, rotation_of
 
 TS = get_typestore(Stores.ROS2_HUMBLE)

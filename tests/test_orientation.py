@@ -14,12 +14,9 @@ from scipy.spatial.transform import Rotation
 import pbdkit
 from pbdkit._rotations import exp_map, left_jacobian_inverse, log3, log_map
 from pbdkit.reproduction._pose_steps import PoseFusedStep, PoseTaskStep
-from pbdkit.reproduction._probabilistic_ik import (
-    RunOptions,
-    make_step,
-    setup_run,
-)
-from pbdkit.skill._skill import mean_relative_rotation, space_data
+from pbdkit.reproduction._setup import RunOptions, setup_run
+from pbdkit.reproduction._table_ii import make_step
+from pbdkit.skill._spaces import mean_relative_rotation, space_data
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ._validation import check_array, check_int, check_positive_float
 from .data._demonstration import Demonstration
-from .reproduction._constraints import KinematicModel
+from .robots._protocols import KinematicModel
 
 __all__ = ["LasaDemo", "ReachGraspReturn", "lasa", "lasa_names", "reach_grasp_return"]
 
