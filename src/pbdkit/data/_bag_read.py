@@ -1,5 +1,13 @@
 """A demonstration from a ROS bag (:func:`read_bag`): joint states, object placements and
-the gripper signal of one recording."""
+the gripper signal of one recording.
+
+Time is the joint states' header stamps (integer nanoseconds, converted once as differences);
+joints are reordered by each message's names; an object is placed from the messages of the
+demonstration's first second (median position, Karcher mean orientation; through tf for
+another frame); the gripper is held between messages (closed where > 0.5). ROS quaternions are
+(x, y, z, w), w last; pbdkit's (qw, qx, qy, qz), w first. The message types, every convention
+and what is refused: :doc:`/reproduction`, "ROS bags".
+"""
 
 from __future__ import annotations
 
@@ -66,7 +74,7 @@ def read_bag(
     start: float | None = None,
     end: float | None = None,
 ) -> Demonstration:
-    """One demonstration from a ROS bag (see the module docstring for the conventions).
+    """One demonstration from a ROS bag (conventions: :doc:`/reproduction`, "ROS bags").
 
     Parameters
     ----------

@@ -1,5 +1,10 @@
 """An open ROS bag, streamed: its topics, and the messages of a topic one at a time, header
-stamps read from their raw bytes; what cannot be a bag is refused before it is opened."""
+stamps read from their raw bytes; what cannot be a bag is refused before it is opened.
+
+A FIFO, a device or a socket (or a bag directory holding one) is refused before the reader
+opens it; any failure of the reader on a damaged file is a ValueError naming the bag
+(:doc:`/reproduction`, "ROS bags").
+"""
 
 from __future__ import annotations
 

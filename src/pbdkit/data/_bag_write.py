@@ -1,5 +1,12 @@
-"""ROS bags out: a reproduction as a ``JointTrajectory`` (:func:`write_trajectory_bag`) and a
-demonstration as a teaching session's bag (:func:`write_demonstration_bag`), written atomically."""
+"""ROS bags out: a reproduction as a ``JointTrajectory`` (:func:`write_trajectory_bag`,
+checked first by :func:`check_trajectory_bag`) and a demonstration as a teaching session's bag
+(:func:`write_demonstration_bag`).
+
+Every argument is checked before anything is written (times below 2**31 s and increasing at
+1 ns, ROS topic names, distinct); an existing path is refused, and the bag is written into a
+temporary sibling directory and renamed onto it (``os.replace``). :doc:`/reproduction`,
+"ROS bags".
+"""
 
 from __future__ import annotations
 

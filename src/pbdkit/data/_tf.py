@@ -1,9 +1,14 @@
 """The tf tree of a bag's first second: each parent -> child link estimated from its
-transforms, and a frame's pose in the robot's base frame (tf2's lookup)."""
+transforms, and a frame's pose in the robot's base frame (tf2's lookup).
+
+A link is the median translation and the sign-aligned mean of its finite, non-zero quaternions,
+normalized; T_base_frame = T_root_base^-1 T_root_frame (:doc:`/reproduction`, "ROS bags").
+"""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,11 +30,18 @@ __all__: list[str] = []
 Float = NDArray[np.float64]
 
 
-class _TfTree:
-    """The tf links of a demonstration's first second: child -> (parent, rotation, translation),
-    the child frame's pose in its parent's."""
+class _Link(NamedTuple):
+    """One tf link: the child frame's pose in its parent's."""
 
-    def __init__(self, links: Mapping[str, tuple[str, Float, Float]], source: str) -> None:
+    parent: str
+    rotation: Float  # (3, 3)
+    translation: Float  # (3,)
+
+
+class _TfTree:
+    """The tf links of a demonstration's first second: child frame -> :class:`_Link`."""
+
+    def __init__(self, links: Mapping[str, _Link], source: str) -> None:
         self.links = dict(links)
         self.source = source
 
@@ -55,13 +67,13 @@ class _TfTree:
                     samples.setdefault(key, []).append(
                         (np.array([v.x, v.y, v.z]), np.array([r.x, r.y, r.z, r.w]))
                     )
-        links: dict[str, tuple[str, Float, Float]] = {}
+        links: dict[str, _Link] = {}
         for (parent, child), items in samples.items():
             if child in links:
                 raise ValueError(
-                    f"tf: frame {child!r} has two parents, {links[child][0]!r} and {parent!r}"
+                    f"tf: frame {child!r} has two parents, {links[child].parent!r} and {parent!r}"
                 )
-            links[child] = (parent, *_mean_transform(items, parent, child))
+            links[child] = _Link(parent, *_mean_transform(items, parent, child))
         return cls(links, " and ".join(present))
 
     def _to_root(self, frame: str) -> tuple[list[str], Float, Float]:

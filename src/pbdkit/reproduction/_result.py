@@ -51,7 +51,8 @@ class ReproductionResult:
     influence : dict str -> ndarray, shape (T,)
         Share of each constraint in use in the hand's space (paper Fig. 6): tr(S P_n) / 3 for
         task constraint n, S = J Sigma J^T the hand's covariance, and 1 - their sum for the joint
-        constraint. Each in [0, 1], summing to 1 at each step (module docstring, "Influence").
+        constraint. Each in [0, 1], summing to 1 at each step (:doc:`/reproduction`,
+        "Influence of the constraints").
     influence_joint_space : dict str -> ndarray, shape (T,)
         Share of each constraint in joint space, tr(Sigma Lambda_c) / n, summing to 1: who
         governs the posture, including the directions the hand does not see (a task
@@ -67,9 +68,9 @@ class ReproductionResult:
         duration the limits stretched. False at step 0.
     times : ndarray, shape (T,), or None
         With motion limits: the time (s) of each sample, from 0, such that the samples played
-        at these times respect the limits, starting and ending at rest (module docstring,
-        "Motion limits"). None without them (:meth:`pbdkit.Skill.times` then spreads the steps
-        over the skill's duration).
+        at these times respect the limits, starting and ending at rest (:doc:`/reproduction`,
+        "Motion limits and lead-in"). None without them (:meth:`pbdkit.Skill.times` then
+        spreads the steps over the skill's duration).
     velocities, accelerations : ndarray, shape (T, n), or None
         With motion limits: joint velocities and accelerations at the samples, from the timing
         (the derivatives of the cubic spline through the samples at ``times``, at rest at both

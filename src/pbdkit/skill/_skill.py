@@ -420,7 +420,7 @@ class Skill:
         demonstrations' pace; played over :meth:`times` it stays within the limits, starting
         and ending at rest: where the limits need it, the steps get more time (the path and the
         gripper events stay with their steps; :attr:`ReproductionResult.stretch` says by how
-        much). See :mod:`pbdkit.reproduction._probabilistic_ik`, "Motion limits".
+        much). See :doc:`/reproduction`, "Motion limits and lead-in".
 
         Parameters
         ----------
@@ -458,11 +458,11 @@ class Skill:
             explicit limit needs a known :attr:`duration`.
         line_search : bool
             Fused controller: halve a step that would raise the fused energy of its step
-            (:mod:`pbdkit.reproduction._probabilistic_ik`, "Stability"). False: Table II as written.
+            (:doc:`/reproduction`, "Stability"). False: Table II as written.
         newton : bool
             Fused controller: the curvature of the forward kinematics where it stiffens a step,
             which removes the limit cycle of Gauss-Newton where a tight task constraint meets a
-            loose joint constraint (:mod:`pbdkit.reproduction._probabilistic_ik`, "Stability").
+            loose joint constraint (:doc:`/reproduction`, "Stability").
 
         Returns
         -------
@@ -558,7 +558,8 @@ class Skill:
         run is over; ``ctrl.stream(rate_hz)`` gives setpoints for a faster loop. Within the
         robot's limits (the default), consecutive commands are within the velocity,
         acceleration and jerk limits at ``ctrl.dt``, the first one starting from the measured
-        posture at rest; see :mod:`._controller` for how the phase follows the arm.
+        posture at rest; see :doc:`/reproduction`, "The online controller", for how the phase
+        follows the arm.
         Without limits (all three None), fed its own commands with constant objects it equals
         :meth:`reproduce` with no limits step for step (one implementation of the loop).
 
