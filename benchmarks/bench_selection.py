@@ -64,10 +64,11 @@ from pbdkit.prob._selection import (
     pooled_spread,
     sequences_from_time,
 )
+from pbdkit.reproduction._constraints import JOINT
 from pbdkit.robots import katana
 from pbdkit.sim._task_skill import constrained_objects
 from pbdkit.sim._teacher import teach
-from pbdkit.skill._skill import JOINT, Skill
+from pbdkit.skill._skill import Skill
 
 Float = NDArray[np.float64]
 ROLL = 4  # the Katana's wrist roll
@@ -192,7 +193,7 @@ METHODS = ["auto", "auto-pooled", "bic20", "bic-plain", "bic-acf", "loo-lik"]
 
 def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
     """The rows each GMM of ``skill`` was fitted on (100 steps per demonstration)."""
-    from pbdkit.skill._skill import space_data
+    from pbdkit.skill._spaces import space_data
 
     steps = np.unique(np.round(np.linspace(0, skill.n_steps - 1, 100)).astype(int))
     data = space_data(demos, skill.robot, skill.object_names, skill.n_steps, steps)
@@ -392,7 +393,7 @@ def run(args: argparse.Namespace) -> None:
 
 def _floor_of(skill: Skill, name: str) -> Float:
     """Skill.learn's default per-dimension floor of a space."""
-    from pbdkit.skill._skill import TIME_FLOOR, VARIABILITY_FLOOR
+    from pbdkit.skill._spaces import TIME_FLOOR, VARIABILITY_FLOOR
 
     if name == JOINT:
         n = skill.n_joints

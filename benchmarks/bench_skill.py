@@ -8,8 +8,8 @@ the 3 constraints fused (default settings: the Katana's velocity limits and max_
 steps; the comparison with the naive loop turns both off).
 
 The reproduction is within the Katana's velocity, acceleration and jerk limits (the default):
-Table II with Newton's term, a lead-in and the timing (``pbdkit.reproduction._probabilistic_ik``,
-"Motion limits").
+Table II with Newton's term, a lead-in and the timing (docs/reproduction.md, "Motion limits and
+lead-in").
 
 Peers:
 - learning: scikit-learn ``GaussianMixture`` with its default (k-means) initialisation, a BIC sweep
@@ -17,7 +17,7 @@ Peers:
 - reproduction: a naive loop as the paper's Matlab would run it: at every step GMR of every space
   for that step (``GMM.regress_one``), Table II with explicit inverses (J+ from np.linalg.pinv,
   eq. (1) with the pseudo-inverse of the rank-deficient J+ Sigma J+^T and np.linalg.inv), with
-  the same line search written out (_probabilistic_ik, "Stability");
+  the same line search written out (docs/reproduction.md, "Stability");
 - the paper: "the whole computation (using Matlab) took less than one minute".
 
 BLAS is limited to one thread (threadpoolctl): these matrices are tiny. Times are medians.
@@ -131,7 +131,7 @@ def naive_reproduce(skill: Skill, objects: dict[str, Float], alpha: float = 0.5)
             robot.lower,
             robot.upper,
         )
-        # The same line search as pbdkit's (_probabilistic_ik, "Stability"), written
+        # The same line search as pbdkit's (docs/reproduction.md, "Stability"), written
         # out: halve a step while it raises the fused energy of step j.
         terms = [(np.linalg.inv(sigma_theta), theta_hat, None)]
         for k in names:

@@ -75,7 +75,7 @@ import numpy as np
 
 import pbdkit
 from pbdkit._rotations import exp_map, log_map, mean_rotation, pose_matrix, quaternion_from_matrix
-from pbdkit.data._bags import write_demonstration_bag
+from pbdkit.data._bag_write import write_demonstration_bag
 from pbdkit.motion._limits import MotionLimits, MotionPeaks, StreamMonitor, motion_peaks
 
 RATE = 100.0  # Hz, the joint state rate of the driver

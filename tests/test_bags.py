@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from arms import KinematicOnly
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -28,7 +29,8 @@ from typer.testing import CliRunner, Result
 
 from pbdkit import Demonstration, Robot, Skill, read_bag, write_trajectory_bag
 from pbdkit.apps._cli import app
-from pbdkit.data._bags import write_demonstration_bag
+from pbdkit.data import check_trajectory_bag
+from pbdkit.data._bag_write import write_demonstration_bag
 from pbdkit.data._placement import is_pose, position_of, rotation_of
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
@@ -883,6 +885,42 @@ def test_trajectory_velocities_and_accelerations_are_checked(tmp_path: Path, rob
     with pytest.raises(ValueError, match=r"accelerations need velocities"):
         write_trajectory_bag(tmp_path / "a", t, q, names, accelerations=ok)
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_check_trajectory_bag_refuses_what_the_writer_refuses(tmp_path: Path, robot: Robot) -> None:
+    t, q, names = [0.0, 1.0, 2.0], np.zeros((3, 5)), robot.joint_names
+    grip = [0.0, 1.0, 1.0]
+    cases: list[tuple[tuple[Any, ...], dict[str, Any], str]] = [
+        ((t, q, names[:4]), {}, r"joint_names must be 5 non-empty strings"),
+        (([0.0, 1.0, 1.0], q, names), {}, r"t must increase strictly"),
+        (([0.0, 1.5e9, 3e9], q, names), {}, r"t must be < 2147483648 s .*int32 seconds"),
+        ((t, q[:2], names), {}, r"joints must have shape \(3, \*\)"),
+        ((t, q, names), {"accelerations": q}, r"accelerations need velocities"),
+        ((t, q, names), {"velocities": q[:, :4]}, r"velocities must have shape \(3, 5\)"),
+        ((t, q, names), {"storage": "zip"}, r"storage must be one of \['sqlite3', 'mcap'\]"),
+        ((t, q, names, grip), {"gripper_topic": "grip"}, r"gripper_topic must be a ROS topic"),
+    ]
+    for args, kwargs, match in cases:
+        with pytest.raises(ValueError, match=match):
+            check_trajectory_bag(*args, **kwargs)
+        with pytest.raises(ValueError, match=match):
+            write_trajectory_bag(tmp_path / "bag", *args, **kwargs)
+    assert list(tmp_path.iterdir()) == []  # neither wrote anything
+    check_trajectory_bag(t, q, names, grip, velocities=q, accelerations=q, storage="mcap")
+    assert list(tmp_path.iterdir()) == []
+    write_trajectory_bag(tmp_path / "bag", t, q, names, grip, velocities=q, accelerations=q)
+    assert [c for c, _ in _topics(tmp_path / "bag")] == ["/gripper", "/joint_trajectory"]
+
+
+def test_read_bag_needs_the_names_and_base_of_the_arm(
+    bags: dict[str, list[Path]], robot: Robot
+) -> None:
+    with pytest.raises(
+        ValueError,
+        match=r"robot must be a BagRobot \(joint_names, base; e\.g\. pbdkit\.robots\.katana\(\) "
+        r".*\): KinematicOnly lacks base",
+    ):
+        read_bag(bags["sqlite3"][0], robot=KinematicOnly(robot))  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------------------- the CLI

@@ -14,7 +14,7 @@ from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion._limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
 from pbdkit.motion._otg import follow
 from pbdkit.reproduction._controller import REPLAN_DISTANCE, Command
-from pbdkit.reproduction._probabilistic_ik import RunOptions
+from pbdkit.reproduction._setup import RunOptions
 from pbdkit.robots._robot import Robot
 
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from pbdkit import Skill, demonstration_from_csv, read_bag
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.reproduction._probabilistic_ik import ReproductionResult
+from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.robots import panda
 from pbdkit.robots._robot import Robot
 

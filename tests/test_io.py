@@ -282,7 +282,8 @@ def _small_skill(tmp_path: Path) -> Path:
 def test_skill_load_refuses_unknown_keys_and_bombs_before_loading(
     tmp_path: Path, no_array_read: list[str]
 ) -> None:
-    from pbdkit.skill._skill import MAX_FILE_BYTES, Skill
+    from pbdkit.skill._skill import Skill
+    from pbdkit.skill._skill_file import MAX_FILE_BYTES
 
     with np.load(_small_skill(tmp_path)) as data:
         arrays = {k: data[k] for k in data.files}

@@ -17,12 +17,9 @@ pytest.importorskip("mujoco")
 
 from pbdkit import Skill
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.reproduction._probabilistic_ik import (
-    ReproductionResult,
-    RunOptions,
-    solve,
-    step_limit_from_velocity,
-)
+from pbdkit.reproduction._probabilistic_ik import solve
+from pbdkit.reproduction._result import ReproductionResult
+from pbdkit.reproduction._setup import RunOptions, step_limit_from_velocity
 from pbdkit.robots import katana
 from pbdkit.sim._task_skill import constrained_objects
 from pbdkit.sim._teacher import teach

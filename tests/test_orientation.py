@@ -8,18 +8,16 @@ import warnings
 
 import numpy as np
 import pytest
+from arms import KinematicOnly
 from pose_teacher import demonstrations, grasp_pose, mug_pose
 from scipy.spatial.transform import Rotation
 
 import pbdkit
 from pbdkit._rotations import exp_map, left_jacobian_inverse, log3, log_map
 from pbdkit.reproduction._pose_steps import PoseFusedStep, PoseTaskStep
-from pbdkit.reproduction._probabilistic_ik import (
-    RunOptions,
-    make_step,
-    setup_run,
-)
-from pbdkit.skill._skill import mean_relative_rotation, space_data
+from pbdkit.reproduction._setup import RunOptions, setup_run
+from pbdkit.reproduction._table_ii import make_step
+from pbdkit.skill._spaces import mean_relative_rotation, space_data
 
 
 @pytest.fixture(scope="module")
@@ -225,6 +223,28 @@ def test_pose_steps_are_chosen_for_oriented_constraints(panda, pose_skill):
     fused = make_step(panda, setup_run(panda, c, objs, RunOptions()))
     task = make_step(panda, setup_run(panda, c, objs, RunOptions(use=["mug"])))
     assert isinstance(fused, PoseFusedStep) and isinstance(task, PoseTaskStep)
+
+
+def test_oriented_constraints_need_a_pose_kinematic_model_where_the_robot_enters(
+    tmp_path, panda, mug_demos, pose_skill
+):
+    arm = KinematicOnly(panda)  # positions only: no fk_pose, jacobian6, fk_pose_jacobian_unchecked
+    lacks = (
+        r"PoseKinematicModel .*KinematicOnly lacks fk_pose, jacobian6, fk_pose_jacobian_unchecked"
+    )
+    with pytest.raises(
+        ValueError, match=rf"the objects \['mug'\] are poses: .*orientation=False.*{lacks}"
+    ):
+        pbdkit.Skill.learn(mug_demos, arm, n_steps=50)
+    flat = pbdkit.Skill.learn(mug_demos, arm, n_steps=50, orientation=False)  # the paper's skill
+    assert flat.oriented == [] and flat.robot is arm
+    pose_skill.save(tmp_path / "pose.npz")
+    with pytest.raises(ValueError, match=rf"robot must be a {lacks}"):
+        pbdkit.Skill.load(tmp_path / "pose.npz", robot=arm)
+    c, objs = pose_skill.constraints(), {"mug": mug_pose(0.2, 0.5, 0.0)}
+    for use in (None, ["joint"]):  # the orientation errors of every oriented object need fk_pose
+        with pytest.raises(ValueError, match=rf"robot must be a {lacks}"):
+            setup_run(arm, c, objs, RunOptions(use=use))
 
 
 def test_fused_step_lowers_the_fused_energy_and_converges_to_its_minimum(panda, pose_skill):

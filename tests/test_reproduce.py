@@ -14,16 +14,17 @@ import numpy.typing as npt
 import pytest
 from numpy.typing import NDArray
 
-from pbdkit.reproduction._constraints import Constraints, KinematicModel
-from pbdkit.reproduction._probabilistic_ik import (
+from pbdkit.reproduction._constraints import Constraints
+from pbdkit.reproduction._probabilistic_ik import solve
+from pbdkit.reproduction._setup import (
     VELOCITY_SAFETY,
     ReachWarning,
     RunOptions,
     check_objects,
     reach_from_samples,
-    solve,
     step_limit_from_velocity,
 )
+from pbdkit.robots import KinematicModel
 from pbdkit.robots._kinematics import damped_pinv
 
 Float = NDArray[np.float64]

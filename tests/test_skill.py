@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from arms import KinematicOnly
+from arms import KinematicOnly, no_limits
 from numpy.typing import NDArray
 from synthetic_teacher import (
     COASTER_OFFSET,
@@ -32,9 +32,11 @@ import pbdkit
 from pbdkit.data._demonstration import Demonstration, LimitWarning, save_demonstrations
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.prob._gmm import MAX_COMPONENTS
-from pbdkit.reproduction._probabilistic_ik import ReachWarning, ReproductionResult
+from pbdkit.reproduction._result import ReproductionResult
+from pbdkit.reproduction._setup import ReachWarning
 from pbdkit.robots._robot import Robot
-from pbdkit.skill._skill import VARIABILITY_FLOOR, Skill
+from pbdkit.skill._skill import Skill
+from pbdkit.skill._spaces import VARIABILITY_FLOOR
 
 Float = NDArray[np.float64]
 NO_LIMITS = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
@@ -359,13 +361,10 @@ def test_velocity_limit_needs_a_known_duration(robot: Robot, skill: Skill) -> No
         with pytest.raises(ValueError, match=rf"{kind} is per second and needs the duration"):
             undated.reproduce(objs, **{kind: 1.0})
 
-    class Arm:  # a KinematicModel without velocity limits
-        n_joints = robot.n_joints
-        lower, upper = robot.lower, robot.upper
-        fk, fk_jacobian = robot.fk, robot.fk_jacobian
-
+    # A KinematicModel without limits: Table II as written, with Newton's term (every
+    # KinematicModel has the joint axes it needs; docs/reproduction.md, "Stability").
     bare = Skill(
-        Arm(),
+        KinematicOnly(robot, **no_limits(robot.n_joints)),
         skill.gmms,
         n_steps=skill.n_steps,
         object_names=skill.object_names,
@@ -373,9 +372,35 @@ def test_velocity_limit_needs_a_known_duration(robot: Robot, skill: Skill) -> No
         reach=skill.reach,
         duration=skill.duration,
     )
-    # Without joint axes there is no Newton term (_probabilistic_ik, "Stability").
-    gauss_newton = skill.reproduce(objs, newton=False, **NO_LIMITS)
-    np.testing.assert_array_equal(bare.reproduce(objs).joints, gauss_newton.joints)
+    np.testing.assert_array_equal(bare.reproduce(objs).joints, ref.joints)
+    assert not np.array_equal(ref.joints, skill.reproduce(objs, newton=False, **NO_LIMITS).joints)
+
+
+def test_reproduce_refuses_a_robot_that_lacks_the_contract(robot: Robot, skill: Skill) -> None:
+    class Arm:  # what the paper's loop once needed: no names, no limits, no fast paths
+        n_joints = robot.n_joints
+        lower, upper = robot.lower, robot.upper
+        fk, fk_jacobian = robot.fk, robot.fk_jacobian
+
+    bare = Skill(
+        Arm(),  # type: ignore[arg-type]
+        skill.gmms,
+        n_steps=skill.n_steps,
+        object_names=skill.object_names,
+        has_gripper=skill.has_gripper,
+        reach=skill.reach,
+        duration=skill.duration,
+    )
+    objs = {"glass": robot.fk(Q_REACH)}
+    lacks = (
+        r"robot must be a KinematicModel \(n_joints, joint_names, .*\): Arm lacks joint_names, "
+        r"revolute, velocity_limit, acceleration_limit, jerk_limit, fk_jacobian_unchecked, "
+        r"fk_jacobian_axes_unchecked"
+    )
+    with pytest.raises(ValueError, match=lacks):
+        bare.reproduce(objs)
+    with pytest.raises(ValueError, match=lacks):
+        bare.reproduce(objs, use=["joint"], velocity_limit=None)
 
 
 # ----------------------------------------------------------------------------- save / load
@@ -488,7 +513,7 @@ def test_load_bounds_n_steps_and_checks_n_joints(
 def test_learn_bounds_n_steps_like_load(robot: Robot, demos: list[Demonstration]) -> None:
     with pytest.raises(ValueError, match=r"n_steps must be <= 1000000, got 1000001"):
         Skill.learn(demos, robot, n_steps=10**6 + 1)
-    from pbdkit.skill._skill import MAX_STEPS
+    from pbdkit.skill._spaces import MAX_STEPS
 
     assert MAX_STEPS == 10**6
 
@@ -568,7 +593,7 @@ def test_learn_rejects_bad_input(robot: Robot, demos: list[Demonstration]) -> No
         Skill.learn(demos, robot, reg_covar=-1.0)
     with pytest.raises(ValueError, match="fit_samples must be >= 2, got 1"):
         Skill.learn(demos, robot, fit_samples=1)
-    with pytest.raises(ValueError, match="robot must provide n_joints, lower, upper, fk"):
+    with pytest.raises(ValueError, match=r"robot must be a KinematicModel .*: str lacks n_joints"):
         Skill.learn(demos, "katana")  # type: ignore[arg-type]
 
 

@@ -26,7 +26,7 @@ from .._io import write_json
 
 if TYPE_CHECKING:
     from ..data._demonstration import Demonstration
-    from ..reproduction._probabilistic_ik import ReproductionResult
+    from ..reproduction._result import ReproductionResult
     from ..robots._robot import Robot
     from ..sim._tasks import TaskSpec
     from ..skill._skill import Skill
@@ -633,7 +633,7 @@ def _load_demos(
         from ..data._demonstration import load_demonstrations
 
         return load_demonstrations(paths[0])
-    from ..data._bags import read_bag
+    from ..data._bag_read import read_bag
 
     items = []
     for path in paths:
@@ -781,7 +781,7 @@ def reproduce(
     save_npz_atomic(out, arrays)
     console.print(f"wrote {out} ({len(res.t)} samples{timed}); {_closest_approach(res)}")
     if bag is not None and timing is not None:
-        from ..data._bags import write_trajectory_bag
+        from ..data._bag_write import write_trajectory_bag
 
         t, names = timing
         write_trajectory_bag(bag, t, res.joints, names, **_bag_extras(skill, res))
@@ -824,7 +824,7 @@ def _bag_extras(skill: Skill, res: ReproductionResult) -> dict[str, Any]:
 def _bag_timing(skill: Skill, res: ReproductionResult, bag: Path) -> tuple[np.ndarray, list[str]]:
     """Times (s, from :meth:`pbdkit.Skill.times`) and joint names (the skill's robot's) of the
     trajectory bag of `reproduce`, its whole content checked (nothing is written)."""
-    from ..data._bags import _trajectory_messages
+    from ..data._bag_write import _trajectory_messages
 
     names = getattr(skill.robot, "joint_names", None)
     if names is None:

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from ..data._demonstration import Demonstration
     from ..motion._limits import MotionLimits
     from ..prob._gmm import GMM
-    from ..reproduction._probabilistic_ik import ReproductionResult
+    from ..reproduction._result import ReproductionResult
     from ..sim._execute import ExecutionResult
     from ..sim._online import OnlineRun
     from ..skill._skill import Skill

@@ -22,7 +22,7 @@ import numpy as np
 from .._io import atomic_write_bytes
 
 if TYPE_CHECKING:
-    from ..reproduction._probabilistic_ik import ReproductionResult
+    from ..reproduction._result import ReproductionResult
     from ..skill._skill import Skill
 
 __all__ = [

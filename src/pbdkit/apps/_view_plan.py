@@ -27,11 +27,11 @@ from numpy.typing import NDArray
 from .._rotations import exp_map, quaternion_from_matrix
 from ..data._placement import position_of, rotation_of
 from ..reproduction._constraints import JOINT
-from ..reproduction._probabilistic_ik import ReachWarning
+from ..reproduction._setup import ReachWarning
 
 if TYPE_CHECKING:
     from ..reproduction._constraints import Constraints
-    from ..reproduction._probabilistic_ik import ReproductionResult
+    from ..reproduction._result import ReproductionResult
     from ..skill._skill import Skill
 
 __all__ = [

@@ -1,11 +1,13 @@
 """Demonstrations: what a teacher recorded (:class:`Demonstration`), its files, and ROS bags in
-(:func:`read_bag`) and out (:func:`write_trajectory_bag`, :func:`write_demonstration_bag`).
+(:func:`read_bag`) and out (:func:`write_trajectory_bag`, :func:`check_trajectory_bag`,
+:func:`write_demonstration_bag`).
 
 Above :mod:`pbdkit.robots`; never imports the simulator, OpenCV or matplotlib."""
 
 from __future__ import annotations
 
-from ._bags import read_bag, write_demonstration_bag, write_trajectory_bag
+from ._bag_read import read_bag
+from ._bag_write import check_trajectory_bag, write_demonstration_bag, write_trajectory_bag
 from ._demonstration import (
     Demonstration,
     LimitWarning,
@@ -17,6 +19,7 @@ from ._demonstration import (
 __all__ = [
     "Demonstration",
     "LimitWarning",
+    "check_trajectory_bag",
     "demonstration_from_csv",
     "load_demonstrations",
     "read_bag",

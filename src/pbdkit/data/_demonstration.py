@@ -10,46 +10,10 @@ angles and the gripper signal onto ``n_steps`` samples uniformly spread over the
 own duration ``[t[0], t[-1]]``; the time of the result is expressed in *steps*:
 ``t = 0, 1, ..., n_steps - 1`` (the paper's t_j, as in its figures "time steps 200-500").
 
-File formats
-------------
-``.npz`` (:func:`save_demonstrations` / :func:`load_demonstrations`): a NumPy archive with no
-pickled object (``allow_pickle=False`` on load), written atomically. Keys:
-
-======================  ==================  ==================================================
-key                     dtype, shape        meaning
-======================  ==================  ==================================================
-``format``              unicode, ()         ``"pbdkit-demonstrations"``
-``version``             int64, ()           ``1`` (positions only) or ``2`` (poses)
-``n_demos``             int64, ()           number of demonstrations M
-``object_names``        unicode, (N,)       object names, in a fixed order
-``has_gripper``         bool, ()            whether ``demo_i_gripper`` keys exist
-``demo_{i}_t``          float64, (T_i,)     time stamps in seconds, strictly increasing
-``demo_{i}_joints``     float64, (T_i, n)   joint angles in radians
-``demo_{i}_objects``    float64, (N, 3)     object positions, rows in ``object_names`` order
-``demo_{i}_rotations``  float64, (N, 3, 3)  version 2: rotations (poses), NaN for a position
-``demo_{i}_gripper``    float64, (T_i,)     gripper signal (0 open, 1 closed), optional
-======================  ==================  ==================================================
-
-Version 2 is written when some object has a pose (:mod:`pbdkit.data._placement`); a file of
-positions only is written as version 1, as before, and both versions load.
-
-:func:`load_demonstrations` judges the archive from its headers before it loads an array: a
-key not in this table (or a ``demo_{i}_*`` with i >= ``n_demos``), an object array, or arrays of
-more than 1 GiB in all (``pbdkit._io.MAX_NPZ_BYTES``) are refused.
-
-CSV (:func:`demonstration_from_csv`), for logs recorded on a real robot: one file per
-demonstration, comma-separated, one header line, then one row per sample::
-
-    t,pan,lift1,lift2,lift3,wrist_roll,gripper
-    0.00,0.10,0.52,-1.20,0.30,0.00,0
-    0.01,0.11,0.53,-1.19,0.30,0.00,0
-    ...
-
-The column ``t`` (seconds, strictly increasing) is required; an optional column ``gripper``
-holds the gripper signal (0 open, 1 closed); every other column is a joint angle in radians, in
-the robot's joint order (or selected and ordered with ``joint_columns``). Object positions are not
-in the file: pass them as ``objects={"glass": (x, y, z), ...}`` in the robot's base frame (metres).
-Lines starting with ``#`` are comments.
+Files: ``.npz`` (:func:`save_demonstrations` / :func:`load_demonstrations`, a
+``pbdkit-demonstrations`` archive without pickle, written atomically, judged from its headers
+before an array is loaded) and CSV logs of a real robot (:func:`demonstration_from_csv`). Their
+keys and columns: :doc:`/reproduction`, "File formats".
 """
 
 from __future__ import annotations
@@ -335,7 +299,7 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
     path : str or path-like
         Destination; replaced atomically (readers see the old file or the new one).
 
-    See the module docstring for the keys of the file.
+    Its keys: :doc:`/reproduction`, "Demonstration files".
     """
     items = check_demonstrations(demos, min_demos=1)
     names = list(items[0].object_names)
@@ -506,7 +470,8 @@ def demonstration_from_csv(
     joint_columns: Sequence[str] | None = None,
     delimiter: str = ",",
 ) -> Demonstration:
-    """Read one demonstration from a CSV log (format in the module docstring).
+    """Read one demonstration from a CSV log (format: :doc:`/reproduction`, "Demonstration
+    files").
 
     Parameters
     ----------

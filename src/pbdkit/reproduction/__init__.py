@@ -7,6 +7,7 @@ Above :mod:`pbdkit.data`; never imports the simulator, OpenCV or matplotlib."""
 from __future__ import annotations
 
 from ._controller import Command, CommandStream, Controller
-from ._probabilistic_ik import ReachWarning, ReproductionResult
+from ._result import ReproductionResult
+from ._setup import ReachWarning
 
 __all__ = ["Command", "CommandStream", "Controller", "ReachWarning", "ReproductionResult"]

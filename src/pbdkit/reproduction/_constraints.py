@@ -1,16 +1,14 @@
-"""The generalized constraints of a skill, as its reproduction uses them, and what it needs
-from an arm.
+"""The generalized constraints of a skill, as its reproduction uses them.
 
 :class:`Constraints` holds a skill's GMR outputs over its whole time grid: the joint-space
 constraint (theta_hat, Sigma^theta) and, for each object n, the task-space constraint
 (x_hat^(n), Sigma^x(n)), position-only or oriented, with their precisions computed once.
 :meth:`Constraints.world_task` places a task constraint in the robot's base frame for the
-object's new position or pose (a :class:`WorldTask`). :class:`KinematicModel` is what
-reproduction needs from an arm (:class:`pbdkit.Robot` satisfies it).
+object's new position or pose (a :class:`WorldTask`).
 
 The controllers that fuse these constraints step by step are in :mod:`pbdkit.reproduction._steps`
-(and, for oriented constraints, :mod:`pbdkit.reproduction._pose_steps`); the loop of Table II that
-runs them, and the math, in :mod:`pbdkit.reproduction._probabilistic_ik`.
+(and, for oriented constraints, :mod:`pbdkit.reproduction._pose_steps`); the loop of Table II
+that runs them in :mod:`pbdkit.reproduction._table_ii`; the math in :doc:`/reproduction`.
 """
 
 from __future__ import annotations
@@ -26,9 +24,8 @@ from .._rotations import check_rotation, exp_map, left_jacobian
 from .._validation import check_array
 from ..prob._frames import precision_to_world
 from ..prob.gaussian import inverse_cholesky_factor
-from ..robots._protocols import KinematicModel
 
-__all__ = ["Constraints", "KinematicModel", "WorldTask"]
+__all__ = ["Constraints", "WorldTask"]
 
 Float = NDArray[np.float64]
 #: The name of the joint-space constraint, beside the objects' (``use=["joint"]``).

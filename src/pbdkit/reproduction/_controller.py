@@ -1,75 +1,21 @@
-"""Online control: a skill run step by step from the measured joint angles.
+"""Online control: a skill run step by step from the measured joint angles
+(:class:`Controller`, its :class:`Command` s, and :class:`CommandStream` for a faster loop).
 
-:meth:`pbdkit.Skill.reproduce` computes a whole trajectory from object positions seen once. A
-real arm is controlled step by step: :meth:`pbdkit.Skill.controller` returns a
-:class:`Controller` whose :meth:`Controller.step` takes the measured posture q (and any new
-object positions) and returns the next command. With motion limits (the default for a robot
-that declares them) the commands follow a plan within the limits, made again when objects move
-or the arm is pushed (section "Motion limits" below). Without (this section), each call closes
-the loop of Table II on q and runs the same step as the offline reproduction (a
-:class:`pbdkit.reproduction._steps.ControllerStep` from
-:func:`~pbdkit.reproduction._probabilistic_ik.make_step`), linearized at q instead of at the
-previous target: fed its own targets with constant objects, a controller reproduces
-:meth:`Skill.reproduce` step for step. Objects may move: ``step(q, objects={...})`` updates
-any subset of the positions from that step on (the tracker's 15 Hz updates in between steps
-keep the last ones).
+Without motion limits each :meth:`Controller.step` closes Table II on the measured posture q:
+the same step as the offline reproduction
+(:func:`~pbdkit.reproduction._table_ii.make_step`), linearized at q, so that fed its own targets
+with constant objects a controller reproduces :meth:`pbdkit.Skill.reproduce` step for step. The
+phase advances one step per call while the arm follows, and holds while
 
-Timing and phase. Step j of the skill's time grid is meant to be reached ``dt`` seconds after
-step j - 1 (:attr:`Controller.dt`: the demonstrations' mean duration spread over the steps, as
-:meth:`Skill.times`). Table II indexes the constraints by time, so a controller that advanced
-one step per call whatever the arm does would race ahead of an arm that is held back (a push,
-a joint at its velocity limit): the constraints would move on to a phase the arm has not
-reached. The phase therefore advances by one step per call only while the arm follows: when
-the measured posture is more than ``max_lag`` steps behind the last target, in units of the
-largest step each joint may take (its velocity limit times dt; ``max_step`` without velocity
-limits), the phase holds and the command re-targets the same step, from where the arm is,
-until it has caught up. A command never asks a joint to move faster than its velocity limit
-over ``dt`` from the measured posture, and never leaves the joint limits (the same bounds as
-the offline loop). While the arm follows, the step is also bounded from the last target, so
-that a reference through consecutive commands keeps the speed limits despite a small tracking
-error. Held back (:attr:`Command.held`), the command re-targets from where the arm is: a pushed
-arm is not snapped back to where it was, it is steered back to the constraints at the speed
-limits from where the push left it.
+    lag = max_i |q_i - q_last,i| / (v_i dt) > max_lag       (steps at top speed; v_i dt is
+                                                            max_step without velocity limits).
 
-Motion limits (the default for a robot that declares them: :meth:`pbdkit.Skill.controller`)
--------------------------------------------------------------------------------------------
-With velocity, acceleration and jerk limits, what must be feasible is the command stream, and
-a closed loop that re-linearizes Table II at every measured posture cannot promise it: a
-jerk-limited arm cannot follow a target that the loop moves by a whole step each cycle (tried:
-a jerk-limited generator chasing each cycle's Table II target oscillated away from the path,
-measured on the coaster task). So the controller plans and follows:
-
-1. A plan is the reproduction within the limits from where the arm is
-   (:func:`pbdkit.reproduction._probabilistic_ik.timed_path`: Table II's path at the demonstrations'
-   pace, timed by
-   ``MotionLimits.retime`` where the limits need more time; from the start, a lead-in to
-   the skill's first posture first).
-2. The commands are that plan sampled every ``dt`` by a jerk-limited follower
-   (:func:`pbdkit.motion._otg.follow_samples`, Ruckig), from the state the commands are in:
-   consecutive commands are within all three limits at ``dt`` (their divided differences,
-   :mod:`pbdkit.motion._limits`), and every command carries its velocity and acceleration. Fed its
-   own commands with constant objects, the commands are :meth:`pbdkit.Skill.reproduce`'s samples
-   played over :meth:`pbdkit.Skill.times`.
-3. The plan is made again (a re-plan) from the last command's state (position, velocity,
-   acceleration) and the skill's phase there, with the positions known then:
-
-   - when an object moves by more than ``replan_distance`` (m) from the positions the plan
-     was made for (or a posed object turns by more than :data:`REPLAN_ANGLE`): the arm heads
-     for the object where it now is, the command stream staying continuous;
-   - when the measured posture is more than ``max_lag`` steps (at top speed) from the last
-     command (a push): the command is held (:attr:`Command.held`), and the plan starts from the
-     measured state (the measured posture, its velocity from the last two measurements):
-     that command is within the limits from the measured state, not from the last command.
-     The phase restarts where it was: a pushed arm is steered back to the constraints, not
-     snapped back to where it was.
-
-The first command starts from the measured posture at rest. The last commands bring the arm to
-rest at the last posture; :attr:`Controller.done` is True once the last one was given.
-Between re-plans a step costs an array look-up; a re-plan costs what a reproduction of the
-steps left costs.
-
-:meth:`Controller.stream` gives setpoints at a faster rate (a 1 kHz ``ros2_control`` or Franka
-loop): the same plans followed at that rate (:class:`CommandStream`).
+With motion limits (the default for a robot that declares them) the commands are samples every
+``dt`` of a jerk-limited follower (:func:`pbdkit.motion._otg.follow`) of a plan, the
+reproduction within the limits from where the arm is
+(:func:`~pbdkit.reproduction._timing.timed_path`), made again when an object moves by more than
+:data:`REPLAN_DISTANCE` (or turns by more than :data:`REPLAN_ANGLE`) or the arm is pushed.
+Why, and what each case does: :doc:`/reproduction`, "The online controller".
 """
 
 from __future__ import annotations
@@ -90,24 +36,19 @@ from .._validation import check_array
 from ..data._placement import check_placements, position_of, rotation_of
 from ..motion._limits import LIMIT_SAFETY, MotionLimits
 from ..motion._otg import Motion, follow
-from ._constraints import Constraints, KinematicModel
-from ._probabilistic_ik import (
-    ReproductionResult,
-    RunOptions,
-    _check_reach,
-    check_objects,
-    check_timing,
-    make_step,
-    setup_run,
-    timed_path,
-)
+from ..robots._protocols import KinematicModel
+from ._constraints import Constraints
+from ._result import ReproductionResult
+from ._setup import RunOptions, _check_reach, check_objects, setup_run
+from ._table_ii import make_step
+from ._timing import check_timing, timed_path
 
 __all__ = ["REPLAN_ANGLE", "REPLAN_DISTANCE", "Command", "CommandStream", "Controller"]
 
 #: With motion limits, an object that moves farther than this (m) from the position the plan
-#: was made for makes the controller plan again (module docstring, "Motion limits"): about
-#: twice the cameras' noise (pbdkit.sim._tracking: 0.6 mm), a tenth of the coaster task's
-#: tolerance.
+#: was made for makes the controller plan again (:doc:`/reproduction`, "The online
+#: controller"): about twice the cameras' noise (pbdkit.sim._tracking: 0.6 mm), a tenth of the
+#: coaster task's tolerance.
 REPLAN_DISTANCE = 1e-3
 #: With motion limits, an object whose pose turns farther than this (rad) from the one the plan
 #: was made for makes the controller plan again: 1 mm at 0.1 m from its origin, as
@@ -233,10 +174,11 @@ class Controller:
         As :func:`pbdkit.reproduction._probabilistic_ik.solve`.
     max_lag : float
         The phase holds while the measured posture is more than this many steps behind the
-        last target (module docstring, "Timing and phase"). ``inf``: it always advances.
+        last target (module docstring; :doc:`/reproduction`, "The online controller"). ``inf``:
+        it always advances.
     limits : MotionLimits, optional
-        Velocity, acceleration and jerk limits of the command stream (module docstring,
-        "Motion limits"); needs a known ``dt``. ``step_limit`` and ``q0`` are then not used
+        Velocity, acceleration and jerk limits of the command stream (:doc:`/reproduction`,
+        "The online controller"); needs a known ``dt``. ``step_limit`` and ``q0`` are then not used
         (the first measured posture is where the run starts).
     replan_distance : float
         With motion limits: an object that moves farther than this (m) from where the plan
@@ -412,7 +354,7 @@ class Controller:
         if self._timed is not None:
             return self._step_timed(q, self._timed)
         last = self._last
-        # Phase: advance while the arm follows (module docstring, "Timing and phase").
+        # Phase: advance while the arm follows (docs: "The online controller").
         lag = float((np.abs(q - last.q) / self._step_bound).max())
         held = last.index > 0 and lag > self.max_lag
         j = last.index if held else last.index + 1
@@ -432,7 +374,7 @@ class Controller:
         if lag > 0.0 and not held:
             # The arm follows but is not at the last target: bound the step from the last
             # target too, so that the reference through consecutive commands keeps the bound.
-            # (Held back, the command re-targets from where the arm is: module docstring.)
+            # (Held back, the command re-targets from where the arm is: docs.)
             bound = self._step_bound
             capped = np.minimum(np.maximum(new, last.q - bound), last.q + bound)
             capped = np.minimum(np.maximum(capped, self._lower), self._upper)
@@ -442,7 +384,7 @@ class Controller:
         return Command(self, new, j, limited, jac, held)
 
     def _step_timed(self, q: Float, st: _Timed) -> Command:
-        """:meth:`step` with motion limits (module docstring, "Motion limits")."""
+        """:meth:`step` with motion limits (:doc:`/reproduction`, "The online controller")."""
         held = False
         now = st.cycle * self.dt  # the time of the last command (of the measurement)
         if st.plan is None:

@@ -1,37 +1,13 @@
 """The steps of Table II's controllers when a task constraint in use is oriented: the hand's
 position and orientation fused with the other constraints.
 
-Orientation. An oriented task constraint (learned from objects given as poses: ``rotation_base``
-of :class:`Constraints`) expects the hand's position and orientation relative to its object.
-For the object's new pose, :meth:`Constraints.world_task` gives it in the robot's base frame
-(a :class:`WorldTask`): at every step a target position x_n and orientation R_n, and the
-precision P_n (6 x 6) of the error r_n = [x - x_n ; log(R_hand R_n^T)].
-:func:`pbdkit.reproduction._probabilistic_ik.make_step` takes a step of this module as soon as one
-constraint in use is oriented (the robot must then give the tip's pose and 6-D Jacobian, as
-:class:`pbdkit.Robot` does); the position-only constraints in use beside it keep their 3-D terms.
-
-The orientation error is not linear in the joints, but its Jacobian is known: a turn w of the
-hand moves log(R_hand R_n^T) by J_l(e_n)^-1 w (J_l the left Jacobian of SO(3),
-:mod:`pbdkit._rotations`), so the error's Jacobian is G_n = [J_p ; J_l(e_n)^-1 J_w] with
-J_p, J_w the rows of the robot's 6-D Jacobian, and the controllers of
-:mod:`pbdkit.reproduction._steps` carry over with G_n in place of J:
-
-- fused (:class:`PoseFusedStep`): one Gauss-Newton step on the fused energy of the step, the
-  product of the joint constraint and every task constraint in information form (precisions
-  add), bounded and line-searched like :class:`~pbdkit.reproduction._steps.FusedStep` (the energy is
-  evaluated afresh at each halving: it is not quadratic in the posture), without Newton's
-  curvature term;
-- task-only (:class:`PoseTaskStep`): the task constraints fused in the hand's pose space first,
-  at every step (Gauss-Newton, batched over the time grid), then Table II's step with the damped
-  pseudo-inverse of the precision-weighted Jacobian.
-
-Influence. The share of each constraint (:mod:`pbdkit.reproduction._probabilistic_ik`, "Influence of
-the constraints") is measured in the hand's pose space, which has 6 dimensions:
-share_n = tr(Sigma Lambda_n) / 6 with Lambda_n = G_n^T P_n G_n the joint-space precision of task
-constraint n (its orientation error linearized at 0: G_n = J; J_p^T P_n J_p for a position-only
-constraint), and the joint constraint has the rest; in joint space tr(Sigma Lambda_c) / n, as for
-positions. The task-only controller's shares are tr(S_fused P_n) / 6 in the fused pose space (a
-position-only constraint's P_n padded with zeros), the same in joint space.
+An oriented constraint n, placed in the base frame (:meth:`Constraints.world_task`), has the
+error r_n = [x - x_n ; log(R_hand R_n^T)] with precision P_n (6 x 6), and its Jacobian
+G_n = [J_p ; J_l(e_n)^-1 J_w] (J_l the left Jacobian of SO(3), :mod:`pbdkit._rotations`; J_p,
+J_w the rows of the 6-D Jacobian): the controllers of :mod:`pbdkit.reproduction._steps` carry
+over with G_n in place of J (:class:`PoseFusedStep`, :class:`PoseTaskStep`). The shares of the
+constraints are measured in the hand's 6-D pose space: share_n = tr(Sigma Lambda_n) / 6,
+Lambda_n = G_n^T P_n G_n. Derivation: :doc:`/reproduction`, "Orientation constraints".
 """
 
 from __future__ import annotations
@@ -45,11 +21,13 @@ from scipy.linalg.lapack import dposv
 
 from .._rotations import exp_map, left_jacobian_inverse, left_jacobian_inverse3, log3, log_map
 from ..robots._kinematics import damped_pinv
-from ._constraints import JOINT, Constraints, KinematicModel, WorldTask
+from ..robots._protocols import PoseKinematicModel
+from ._constraints import JOINT, Constraints, WorldTask
+from ._setup import RunSetup
 from ._steps import (
     MAX_HALVINGS,
     ControllerStep,
-    RunSetup,
+    LoopOutput,
     _bound_step,
     _free_step2,
     _limited_mask,
@@ -84,7 +62,7 @@ class PoseFusedStep(ControllerStep):
 
     mode = "fused"
 
-    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+    def __init__(self, robot: PoseKinematicModel, run: RunSetup) -> None:
         c = run.constraints
         self.c, self.tasks, self.n = c, run.tasks, c.n_joints
         self.lower, self.upper = run.lower, run.upper
@@ -93,7 +71,7 @@ class PoseFusedStep(ControllerStep):
             run.step_limit,
             run.line_search,
         )
-        self.kin = robot.fk_pose_jacobian_unchecked  # type: ignore[attr-defined]
+        self.kin = robot.fk_pose_jacobian_unchecked
         self.free2 = _free_step2(run.max_step, run.step_limit)
         self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
         self.set_objects(run.objects)
@@ -213,7 +191,7 @@ class PoseFusedStep(ControllerStep):
 
     def influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
         """Hand pose space (6-D): share_n = tr(Sigma Lambda_n) / 6, the joint constraint the
-        rest (module docstring, "Influence")."""
+        rest (:doc:`/reproduction`, "Orientation constraints")."""
         prec = self.precisions(j, jac)
         shares = {k: float(np.trace(cov.dot(prec[k]))) / 6 for k in self.tasks}
         return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
@@ -240,12 +218,12 @@ class PoseTaskStep(ControllerStep):
 
     mode = "task"
 
-    def __init__(self, robot: KinematicModel, run: RunSetup) -> None:
+    def __init__(self, robot: PoseKinematicModel, run: RunSetup) -> None:
         c = run.constraints
         self.c, self.tasks, self.alpha, self.n = c, run.tasks, run.alpha, c.n_joints
         self.lower, self.upper = run.lower, run.upper
         self.max_step, self.step_limit = run.max_step, run.step_limit
-        self.kin = robot.fk_pose_jacobian_unchecked  # type: ignore[attr-defined]
+        self.kin = robot.fk_pose_jacobian_unchecked
         self.free2 = _free_step2(run.max_step, run.step_limit)
         self.eye = np.eye(c.n_joints)
         self.set_objects(run.objects)
@@ -346,7 +324,7 @@ def _fuse_world_tasks(
 
 def _pose_loop(
     c: Constraints, step: PoseFusedStep | PoseTaskStep, theta0: Float, start: int = 0
-) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+) -> LoopOutput:
     """The loop of an oriented controller (:class:`PoseFusedStep` or :class:`PoseTaskStep`)
     over every step from ``start``: the same outputs as
     :func:`~pbdkit.reproduction._steps._fused_loop`."""
@@ -367,7 +345,7 @@ def _pose_loop(
     jac_used = [jacs_l[0], *jacs_l[:-1]]
     if isinstance(step, PoseFusedStep):
         covs_b, influence_b, influence_js_b = step.outputs(start, np.array(jac_used))
-        return (
+        return LoopOutput(
             np.array(joints_l),
             np.array(positions_l),
             covs_b,
@@ -385,7 +363,7 @@ def _pose_loop(
             influence.setdefault(k, []).append(v)
         for k, v in step.influence_joint_space(j, jac_used[i], covs[i]).items():
             influence_js.setdefault(k, []).append(v)
-    return (
+    return LoopOutput(
         np.array(joints_l),
         np.array(positions_l),
         covs,

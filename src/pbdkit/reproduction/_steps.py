@@ -1,68 +1,59 @@
 """The steps of Table II's controllers for position constraints: theta_j from the posture
-theta_{j-1}, for the joint-space, fused and task-only controllers.
+theta_{j-1}, for the joint-space, fused and task-only controllers, and their loops.
 
-A step is what the offline loop (:func:`pbdkit.reproduction._probabilistic_ik.solve`) and the online
+A step is what the offline loop (:func:`pbdkit.reproduction._table_ii._table_ii`) and the online
 controller (:class:`pbdkit.reproduction.Controller`) share:
-:func:`pbdkit.reproduction._probabilistic_ik.make_step` builds the one a run asks for from the run's
-validated inputs (a :class:`RunSetup`), and both run that same step, so an online run fed its
-own targets is the offline reproduction. :class:`ControllerStep` is the interface;
-:class:`JointStep` follows theta_hat, :class:`FusedStep` is eq. (1) in information form and
-:class:`TaskStep` a task-only controller. Beside each step is its loop over the time grid, which
-also computes the covariances and the influence of the constraints, batched. The steps of
-oriented constraints are in :mod:`pbdkit.reproduction._pose_steps`.
+:func:`~pbdkit.reproduction._table_ii.make_step` builds the one a run asks for from a
+:class:`~pbdkit.reproduction._setup.RunSetup`, so an online run fed its own targets is the
+offline reproduction. :class:`ControllerStep` is the interface; :class:`JointStep` follows
+theta_hat, :class:`FusedStep` is eq. (1) in information form and :class:`TaskStep` a task-only
+controller. Beside each step is its loop over the time grid (a :class:`LoopOutput`), which also
+computes the covariances and the influence of the constraints, batched. The steps of oriented
+constraints are in :mod:`pbdkit.reproduction._pose_steps`.
 
-Every step is bounded alike: ``step_limit`` (per joint) and ``max_step`` (over the joints) scale
-it down uniformly, keeping its direction; the fused step is also line-searched on the fused
-energy of its step (at most ``MAX_HALVINGS`` halvings) and takes Newton's curvature term where
-it stiffens the step. Why, and the math of each controller, is in the docstring of
-:mod:`pbdkit.reproduction._probabilistic_ik` ("Step size", "Stability", "Influence of the
-constraints", "Performance").
+Every step is scaled down uniformly by ``step_limit`` (per joint) and ``max_step`` (over the
+joints); the fused step is line-searched on the fused energy of its step (at most
+``MAX_HALVINGS`` halvings) and takes Newton's term (w x omega_a) . J_b where it stiffens the step.
+Why, and the math of each controller: :doc:`/reproduction` ("Step size", "Stability",
+"Influence of the constraints", "Performance").
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dposv
 
 from ..robots._kinematics import damped_pinv
-from ._constraints import JOINT, Constraints, KinematicModel
+from ..robots._protocols import KinematicModel
+from ._constraints import JOINT, Constraints
+from ._setup import RunSetup
 
-__all__ = ["ControllerStep", "FusedStep", "JointStep", "RunSetup", "TaskStep"]
+__all__ = ["ControllerStep", "FusedStep", "JointStep", "LoopOutput", "TaskStep"]
 
 Float = NDArray[np.float64]
 # skew(w)^T = _LEVI_CIVITA . w: the Levi-Civita symbol, entry (i, j) sum_k eps_ijk w_k.
 _LEVI_CIVITA = np.zeros((3, 3, 3))
 for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _LEVI_CIVITA[_i, _j, _k], _LEVI_CIVITA[_j, _i, _k] = 1.0, -1.0
-# Line search of the fused loop: at most this many halvings of a step
-# (_probabilistic_ik, "Stability").
+# Line search of the fused loop: at most this many halvings of a step (docs: "Stability").
 MAX_HALVINGS = 8
 
 
-@dataclass(frozen=True)
-class RunSetup:
-    """The validated inputs of one reproduction or controller run (see
-    :func:`~pbdkit.reproduction._probabilistic_ik.setup_run`)."""
+class LoopOutput(NamedTuple):
+    """What a controller's loop over the time grid gives, for steps ``start`` .. T - 1 (row 0:
+    the posture it starts from)."""
 
-    constraints: Constraints
-    objects: dict[str, Float]
-    used: list[str]
-    tasks: list[str]
-    alpha: float
-    max_step: float  # inf: no trust region
-    step_limit: Float | None
-    lower: Float
-    upper: Float
-    theta0: Float
-    line_search: bool
-    newton: bool
-    reach: float | None
-    on_unreachable: str
+    joints: Float  # (T', n)
+    positions: Float  # (T', 3): f(joints)
+    covariances: Float  # (T', n, n)
+    influence: dict[str, Float]  # hand space, each (T',), summing to 1
+    influence_joint_space: dict[str, Float]
+    limited: NDArray[np.bool_]  # (T',): the steps a bound scaled down
 
 
 def _free_step2(max_step: float, step_limit: Float | None) -> float:
@@ -111,7 +102,7 @@ class ControllerStep:
 
     The interface :func:`~pbdkit.reproduction._probabilistic_ik.solve`'s loops and
     :class:`pbdkit.Controller` run every controller through
-    (:func:`~pbdkit.reproduction._probabilistic_ik.make_step` builds the one a run asks for):
+    (:func:`~pbdkit.reproduction._table_ii.make_step` builds the one a run asks for):
     :class:`FusedStep`, :class:`TaskStep` or :class:`JointStep`, and for oriented constraints
     :class:`~pbdkit.reproduction._pose_steps.PoseFusedStep` or
     :class:`~pbdkit.reproduction._pose_steps.PoseTaskStep` (whose ``jac`` is the 6-D Jacobian and
@@ -235,15 +226,13 @@ class FusedStep(ControllerStep):
         self.c, self.tasks, self.n = c, tasks, c.n_joints
         self.lower, self.upper = lower, upper
         self.max_step, self.step_limit, self.line_search = max_step, step_limit, line_search
-        # Skip per-step validation where the robot offers it: theta stays a clean float64 array.
-        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
-        # The curvature term needs the joints' axes (_probabilistic_ik, "Stability").
-        axes = getattr(robot, "fk_jacobian_axes_unchecked", None) if newton else None
-        self.fk_axes = axes
-        self.newton = axes is not None
+        # No per-step validation: theta stays a clean float64 array.
+        self.fk_jac = robot.fk_jacobian_unchecked
+        # The curvature term needs the joints' axes (docs: "Stability").
+        self.fk_axes = robot.fk_jacobian_axes_unchecked if newton else None
+        self.newton = newton
         self._z, self._z_new = np.empty(self.n + 3), np.empty(self.n + 3)  # line search buffers
-        # A step shorter than this fits every bound: one comparison
-        # (pbdkit.reproduction._probabilistic_ik, "Performance").
+        # A step shorter than this fits every bound: one comparison (docs: "Performance").
         self.free2 = _free_step2(max_step, step_limit)
         # Lists of per-step views are cheaper to index in the loop than the arrays.
         self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
@@ -268,7 +257,7 @@ class FusedStep(ControllerStep):
     def kinematics(self, theta: Float) -> tuple[Float, Float, Float | None]:
         """f(theta), J(theta) and the joint axes (n, 3) when the Newton term uses them."""
         if self.fk_axes is not None:
-            return self.fk_axes(theta)  # type: ignore[no-any-return]
+            return self.fk_axes(theta)
         x, jac = self.fk_jac(theta)
         return x, jac, None
 
@@ -296,7 +285,7 @@ class FusedStep(ControllerStep):
         if axes is not None:
             # Newton: the Hessian of E_j adds sum_i w_i d^2 f_i, w = P x - h, with
             # d^2 x / d theta_a d theta_b = omega_min x J_max, so its (a, b) entry for a <= b is
-            # (w x omega_a) . J_b (_probabilistic_ik, "Stability"); rows
+            # (w x omega_a) . J_b (docs: "Stability"); rows
             # w x omega_a = axes skew(w)^T, skew(w) = LEVI_CIVITA . w (np.cross costs 20x more on
             # these sizes).
             skew_t = _LEVI_CIVITA.dot(self.p_sum_list[j].dot(x) - self.h_list[j])
@@ -322,8 +311,7 @@ class FusedStep(ControllerStep):
         new = np.minimum(np.maximum(target, self.lower), self.upper)
         x_new, jac_new, axes_new = self.kinematics(new)
         if self.line_search:
-            # The step must lower the fused energy of step j
-            # (_probabilistic_ik, "Stability").
+            # The step must lower the fused energy of step j (docs: "Stability").
             n = self.n
             z, z_new = self._z, self._z_new  # [theta | f(theta)], filled in place
             z[:n], z[n:] = theta, x
@@ -361,12 +349,9 @@ def _fused_loop(
     theta0: Float,
     step: FusedStep,
     start: int = 0,
-) -> tuple[Float, Float, Float, dict[str, Float], dict[str, Float], NDArray[np.bool_]]:
+) -> LoopOutput:
     """Table II with eq. (1) in information form: :class:`FusedStep` over every step (from
-    step ``start``, at ``theta0``).
-
-    Returns joints, positions, covariances, influence (hand space), influence in joint space
-    and the mask of the steps scaled down, for steps ``start`` .. T - 1.
+    step ``start``, at ``theta0``), for steps ``start`` .. T - 1.
     """
     n_steps, n = c.n_steps, c.n_joints
     limited: list[int] = []
@@ -392,7 +377,7 @@ def _fused_loop(
     cov = _spd_inverse(lam)
     # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
     # share_n = tr(S P_n) / 3 and the joint constraint has the rest
-    # (pbdkit.reproduction._probabilistic_ik, "Influence of the constraints").
+    # (docs: "Influence of the constraints").
     s_hand = jac_used @ cov @ jt  # (T, 3, 3)
     traces = [np.einsum("tij,tji->t", s_hand, prec[:, i]) for i in range(len(tasks))]
     influence = {k: tr / 3 for k, tr in zip(tasks, traces, strict=True)}
@@ -400,7 +385,8 @@ def _fused_loop(
     # Joint space: tr(Sigma Lambda_c) / n, with tr(Sigma J^T P_n J) = tr(S P_n).
     influence_js = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
     influence_js.update({k: tr / n for k, tr in zip(tasks, traces, strict=True)})
-    return joints, positions, cov, influence, influence_js, _limited_mask(n_steps - start, limited)
+    mask = _limited_mask(n_steps - start, limited)
+    return LoopOutput(joints, positions, cov, influence, influence_js, mask)
 
 
 def _task_stack(
@@ -436,7 +422,7 @@ class TaskStep(ControllerStep):
         self.c, self.tasks, self.alpha = c, run.tasks, run.alpha
         self.lower, self.upper = run.lower, run.upper
         self.max_step, self.step_limit = run.max_step, run.step_limit
-        self.fk_jac = getattr(robot, "fk_jacobian_unchecked", robot.fk_jacobian)
+        self.fk_jac = robot.fk_jacobian_unchecked
         self.free2 = _free_step2(run.max_step, run.step_limit)
         self.eye = np.eye(c.n_joints)
         self.set_objects(run.objects)

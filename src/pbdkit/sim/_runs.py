@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..reproduction._probabilistic_ik import ReachWarning, ReproductionResult
+from ..reproduction._result import ReproductionResult
+from ..reproduction._setup import ReachWarning
 from ..skill._skill import Skill
 from ._execute import ExecutionResult, execute
 from ._metrics import run_summary
