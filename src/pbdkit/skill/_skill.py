@@ -103,10 +103,13 @@ class Skill:
         duration: float = float("nan"),
         rotation_base: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
-        self.robot = robot
         self.rotation_base: dict[str, Float] = {
             k: np.asarray(v, dtype=np.float64) for k, v in (rotation_base or {}).items()
         }
+        # The robot enters here, whichever way the skill is made (learn, load, by hand).
+        self.robot = check_robot(
+            robot, PoseKinematicModel if self.rotation_base else KinematicModel
+        )
         self.duration = float(duration)
         self.n_steps = int(n_steps)
         self.object_names = list(object_names)

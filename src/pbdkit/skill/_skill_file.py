@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from .._io import NpzArchive, check_format
 from .._rotations import check_rotation
-from ..prob._gmm import GMM, ModelSelection
+from ..prob import GMM, ModelSelection
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import KinematicModel, PoseKinematicModel, RobotDescription, check_robot
 from ._spaces import MAX_STEPS, duration_problem
