@@ -65,8 +65,8 @@ from pbdkit.prob._gmm import (
     sequences_from_time,
 )
 from pbdkit.robots import katana
-from pbdkit.sim._task_skill import constrained_objects
-from pbdkit.sim._teacher import teach
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import constrained_objects, teach
 from pbdkit.skill._skill import JOINT, Skill
 
 Float = NDArray[np.float64]
@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> None:
         for seed in range(args.seeds):
             demos = teach(task, 5, seed=seed)
             start = time.perf_counter()
-            skill = Skill.learn(demos, robot, task_objects=constrained_objects(task))
+            skill = Skill.learn(demos, robot, task_objects=constrained_objects(get_task(task)))
             learn_s = time.perf_counter() - start
             q = joint_quality(skill, demos)
             jumps = mean_jumps(skill, demos)
