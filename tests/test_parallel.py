@@ -123,7 +123,7 @@ def test_connect_refuses_bad_arguments() -> None:
 
 
 def _imported_sim() -> bool:
-    return "pbdkit.sim.experiment" in sys.modules
+    return all(name in sys.modules for name in ("pbdkit.sim._trials", "pbdkit.sim._taskdefs"))
 
 
 def _profiling() -> bool:

@@ -926,6 +926,39 @@ def test_a_scene_without_the_tasks_glass_is_refused() -> None:
         build_scene(spec)
 
 
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"online": 1}, r"online must be True or False, got 1"),
+        ({"ground_truth": "yes"}, r"ground_truth must be True or False, got 'yes'"),
+        ({"perturb": None}, r"perturb must be a perturbation's name, got None"),
+        ({"seed": -1}, r"seed must be >= 0, got -1"),
+        ({"seed": 1.5}, r"seed must be an integer, got 1.5"),
+        ({"noise_mm": -2.0}, r"noise_mm must be finite and >= 0, got -2.0"),
+        ({"noise_mm": math.nan}, r"noise_mm must be finite and >= 0, got nan"),
+    ],
+)
+def test_trial_conditions_are_one_checked_frozen_value(
+    options: dict[str, Any], message: str
+) -> None:
+    default = TrialConditions()
+    assert (default.online, default.perturb, default.ground_truth, default.seed) == (
+        False,
+        "none",
+        False,
+        0,
+    )
+    assert default.vision and not TrialConditions(ground_truth=True).vision
+    same = TrialConditions(seed=np.int64(3), noise_mm=2)
+    assert same == TrialConditions(seed=3, noise_mm=2.0) and type(same.seed) is int
+    with pytest.raises(AttributeError):
+        default.seed = 1  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        TrialConditions(False, "push")  # type: ignore[misc]  # keywords only
+    with pytest.raises(ValueError, match=message):
+        TrialConditions(**options)
+
+
 def test_summarize_counts_successes_and_metric_statistics() -> None:
     # The summarising half of evaluate, on hand-made trials (no physics).
     from types import SimpleNamespace

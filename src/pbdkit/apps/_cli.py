@@ -116,7 +116,6 @@ def demo(
         ground_truth=ground_truth,
         seed=seed,
     )
-
     try:
         with console.status("starting ...") as st:
             robot_metrics = run_robot_demo(

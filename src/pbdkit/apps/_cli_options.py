@@ -279,7 +279,7 @@ def parse_objects(texts: list[str], *, sources: bool = False) -> dict[str, Any]:
 
 
 def parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
-    """One --object NAME=VALUE option (see :func:`_parse_objects`)."""
+    """One --object NAME=VALUE option (see :func:`parse_objects`)."""
     name, sep, rest = text.partition("=")
     forms = "NAME=x,y,z (metres) or NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w first)"
     if not sep or not name or not rest:

@@ -353,7 +353,7 @@ def grasp_via_points(
     ----------
     person : Person
     glass : ndarray, shape (3,)
-        The glass's position (its reference point, :mod:`pbdkit.sim._tasks`).
+        The glass's position (its reference point, :mod:`pbdkit.sim._glass`).
     lift : float
         Height (m) of the lift once the glass is held.
     approach_time : float

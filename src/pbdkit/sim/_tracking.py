@@ -17,7 +17,7 @@ the simulator's renders, calibrated the way a real session would be, with nothin
 Bias correction: why an offset, and not tracked positions in the demonstrations
 -------------------------------------------------------------------------------
 The cameras measure the centroid of what they see of a patch, which is not the object's reference
-point (:mod:`pbdkit.sim._tasks`): they see the front half of the glass's red band, and the top face
+point (:mod:`pbdkit.sim._glass`): they see the front half of the glass's red band, and the top face
 plus the near rim of the coaster. Measured over 100 random placements per task
 (``benchmarks/bench_tracking.py``, error = tracked - true, mm): the glass reads 11.9 low on the
 shelf (coaster task) and 16.2 low on the table (basin task, seen more from above), the coaster

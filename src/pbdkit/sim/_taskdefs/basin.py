@@ -2,7 +2,7 @@
 
 The glass moves between placements (tracked, with a task-space constraint); the basin is fixed
 (known without vision, no constraint in the paper's configuration: the pouring gesture is a
-joint-space constraint). Reference points: the glass's (:mod:`.._tasks`); the basin's is the
+joint-space constraint). Reference points: the glass's (:mod:`.._glass`); the basin's is the
 centre of its floor's top face. The glass holds :data:`N_LIQUID` liquid spheres.
 
 Success: the glass is still held at the end of the trajectory and at least 90 % of the liquid

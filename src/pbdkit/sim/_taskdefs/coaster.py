@@ -1,7 +1,7 @@
 """Task 1 of the paper (Sec. III), set the table: grasp the glass on a shelf, put it on a coaster.
 
 Both objects move between placements, so both are tracked by the cameras and both get a
-task-space constraint. Reference points: the glass's (:mod:`.._tasks`); the coaster's is the
+task-space constraint. Reference points: the glass's (:mod:`.._glass`); the coaster's is the
 centre of its top face.
 
 Success: the glass stands upright (tilt < 10 deg) and rests on the coaster (its bottom within
