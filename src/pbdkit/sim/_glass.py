@@ -1,4 +1,4 @@
-"""The glass every paper task holds: its dimensions, its colored band, where it is held.
+"""The glass the paper's tasks hold: its dimensions, its colored band, where the fingers hold it.
 
 Built by :func:`pbdkit.sim._world.add_glass`; its reference point (what the cameras measure, a
 task's placement of it) is on its axis at the height of the centre of its red band. Lengths in
