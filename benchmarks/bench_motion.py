@@ -46,8 +46,8 @@ from pbdkit import Skill
 from pbdkit.data._demonstration import save_demonstrations
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
 from pbdkit.robots import katana
-from pbdkit.sim._task_skill import constrained_objects
-from pbdkit.sim._teacher import teach
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import constrained_objects, teach
 
 ROOT = Path(__file__).resolve().parent.parent
 TASKS = ("coaster", "basin")
@@ -143,7 +143,7 @@ def main() -> None:
                 demos = teach(task, 5, seed=seed)
                 path = tmp / f"{task}{seed}.npz"
                 save_demonstrations(demos, path)
-                objects = constrained_objects(task)
+                objects = constrained_objects(get_task(task))
                 skill = Skill.learn(demos, robot, task_objects=objects)
                 pls = placements(skill, demos)
                 name = f"{task} {seed}"

@@ -7,7 +7,7 @@ in the loop), each serial (no Dask), ``--workers 1`` and ``--workers 2`` (a Dask
 1. the command, end to end: ``pbdkit evaluate --task coaster --trials 20 --seed 0 --json F
    [--workers N]`` timed as a new process (imports, teaching and learning, the trials, the
    cluster's start and close). This is the figure of the target, 2 workers <= 0.6x;
-2. the trials alone: :func:`pbdkit.sim.experiment.evaluate` in this process with the skill
+2. the trials alone: :func:`pbdkit.sim.evaluate` in this process with the skill
    learned once beforehand, so the cluster's start and the workers' imports are not hidden
    behind the learning.
 

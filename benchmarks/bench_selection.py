@@ -1,6 +1,6 @@
 """Benchmark: how K is chosen, measured on the simulated teacher's tasks and on LASA.
 
-The evidence behind ``n_components="auto"`` (docs/math.md, "Choosing K"). For both tasks and
+The evidence behind ``n_components="auto"`` (pbdkit.prob._gmm, "Choosing K"). For both tasks and
 teach seeds 0-9 (5 demonstrations each, the paper's configuration: the basin task has no
 basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
 
@@ -13,7 +13,7 @@ basin-relative constraint), with ``Skill.learn``'s defaults, it prints per seed:
   largest over the joints; task spaces in mm, the norm of the 3-D step), and its ratio to the
   demonstrations' own largest one-step change (rescaled to the same grid; for a task space the
   hand position f(theta) minus the object's): a ratio well above 1 is a jump of the
-  generalized trajectory (docs/math.md, "Time floor");
+  generalized trajectory (pbdkit.prob._gmm, "Time floor");
 - the fused reproduction's peak joint speed over the URDF limit, played over ``skill.times()``,
   from q0 = None and from every demonstration's first posture (worst);
 - learning time.
@@ -66,8 +66,8 @@ from pbdkit.prob._selection import (
 )
 from pbdkit.reproduction._constraints import JOINT
 from pbdkit.robots import katana
-from pbdkit.sim._task_skill import constrained_objects
-from pbdkit.sim._teacher import teach
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import constrained_objects, teach
 from pbdkit.skill._skill import Skill
 
 Float = NDArray[np.float64]
@@ -244,7 +244,7 @@ def run(args: argparse.Namespace) -> None:
         for seed in range(args.seeds):
             demos = teach(task, 5, seed=seed)
             start = time.perf_counter()
-            skill = Skill.learn(demos, robot, task_objects=constrained_objects(task))
+            skill = Skill.learn(demos, robot, task_objects=constrained_objects(get_task(task)))
             learn_s = time.perf_counter() - start
             q = joint_quality(skill, demos)
             jumps = mean_jumps(skill, demos)

@@ -29,10 +29,10 @@ from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from pbdkit.robots import katana
-from pbdkit.sim import Simulation, nominal_objects, sample_objects
+from pbdkit.sim import Simulation, get_task, nominal_objects, sample_objects
 from pbdkit.sim._gl import BACKEND
 from pbdkit.sim._teacher import random_start_posture
-from pbdkit.sim._tracking import SimTracker, tracked_objects
+from pbdkit.sim._tracking import SimTracker
 from pbdkit.vision import PinholeCamera, StereoTracker
 
 PAPER_MEAN, PAPER_STD = 5.9, 2.8  # mm, paper Sec. III
@@ -42,7 +42,7 @@ PAPER_PERIOD_S = 1.0 / 15.0  # the paper's cameras: 15 Hz
 
 def calibrate(task: str, perturb: bool, seed: int) -> tuple[SimTracker, SimTracker]:
     """Trackers (raw, corrected) calibrated at the nominal placement of ``task``."""
-    calib = Simulation.from_task(task, nominal_objects(task))
+    calib = Simulation.from_task(get_task(task), nominal_objects(task))
     calib.set_joints(random_start_posture(katana(), np.random.default_rng(seed)))
     try:
         cams: tuple[PinholeCamera, PinholeCamera] | None = None
@@ -65,13 +65,13 @@ def errors(
     """Error vectors (mm) per tracker and object over ``n`` placements; failures per tracker."""
     rng = np.random.default_rng(seed)
     out: dict[str, dict[str, list[NDArray[np.float64]]]] = {
-        k: {o: [] for o in tracked_objects(task)} for k in trackers
+        k: {o: [] for o in get_task(task).tracked_objects} for k in trackers
     }
-    out["arm at rest"] = {o: [] for o in tracked_objects(task)}
+    out["arm at rest"] = {o: [] for o in get_task(task).tracked_objects}
     failures = dict.fromkeys(out, 0)
     robot = katana()
     for _ in range(n):
-        sim = Simulation.from_task(task, sample_objects(task, rng))
+        sim = Simulation.from_task(get_task(task), sample_objects(task, rng))
         try:
             truth = sim.object_positions()
             sim.set_joints(random_start_posture(robot, rng))
@@ -184,7 +184,7 @@ def main() -> None:
     task = "coaster"
     _, tracker = calibrate(task, perturb=False, seed=args.seed)
     rng = np.random.default_rng(args.seed)
-    sim = Simulation.from_task(task, sample_objects(task, rng))
+    sim = Simulation.from_task(get_task(task), sample_objects(task, rng))
     sim.set_joints(random_start_posture(katana(), rng))
     try:
         with threadpool_limits(1):

@@ -35,7 +35,8 @@ from typing import Any
 import numpy as np
 from _common import print_table
 
-from pbdkit.apps._view import HOST, ViewApp, served
+from pbdkit.apps._view import ViewApp
+from pbdkit.apps._view_serve import HOST, served
 from pbdkit.sim._task_skill import learn_task
 
 # Headless Chromium as the tests launch it.

@@ -8,7 +8,7 @@ import socket
 from pathlib import Path
 from typing import Any
 
-from pbdkit.apps._view import HOST
+from pbdkit.apps._view_serve import HOST
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [

@@ -63,7 +63,7 @@ def limits(robot: Robot) -> MotionLimits:
 # ----------------------------------------------------------------------------- simulated tasks
 @functools.cache
 def _taught(task: str, n_demos: int, seed: int) -> tuple[Demonstration, ...]:
-    from pbdkit.sim._teacher import teach
+    from pbdkit.sim._task_skill import teach
 
     return tuple(teach(task, n_demos, seed=seed, speed=FAST))
 
@@ -77,14 +77,16 @@ def _small_task_skill(
     max_components: int | None,
     objects: tuple[str, ...] | None,
 ) -> TaskSkill:
+    from pbdkit.sim._task_registry import get_task
     from pbdkit.sim._task_skill import TaskSkill, constrained_objects
 
+    spec = get_task(task)  # the tests name the task: resolved here, at their edge
     demos = list(_taught(task, n_demos, seed))
     # Skill.learn's own default when no maximum is asked for.
     options = {} if max_components is None else {"max_components": max_components}
-    names = constrained_objects(task) if objects is None else list(objects)
+    names = constrained_objects(spec) if objects is None else list(objects)
     skill = Skill.learn(demos, katana(), n_steps=n_steps, task_objects=names, **options)
-    return TaskSkill(task, demos, skill, 0.0, 0.0)
+    return TaskSkill(task=spec, demos=demos, skill=skill, learn_seconds=0.0, teach_seconds=0.0)
 
 
 @pytest.fixture(scope="session")

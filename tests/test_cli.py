@@ -325,12 +325,12 @@ def test_a_negative_seed_names_the_option(
 def test_one_object_parser_for_learn_and_reproduce() -> None:
     """`reproduce` takes positions, `learn` also a topic or tf:FRAME; one parser, one set of
     messages (there were two)."""
-    from pbdkit.apps._cli import _parse_objects
+    from pbdkit.apps._cli_options import parse_objects
 
-    positions = _parse_objects(["glass=0.3,0,0.1", "coaster=-1e-1,2,inf"])
+    positions = parse_objects(["glass=0.3,0,0.1", "coaster=-1e-1,2,inf"])
     assert list(positions) == ["glass", "coaster"]
     np.testing.assert_array_equal(positions["glass"], [0.3, 0.0, 0.1])
-    sources = _parse_objects(
+    sources = parse_objects(
         ["glass=/glass/pose", "coaster=tf:coaster", "basin=0.5,0,0"], sources=True
     )
     assert sources["glass"] == "/glass/pose" and sources["coaster"] == "tf:coaster"
@@ -346,10 +346,10 @@ def test_one_object_parser_for_learn_and_reproduce() -> None:
         (["=1,2,3"], {"sources": True}, r"expected NAME=SOURCE \(a topic, tf:frame, x,y,z or"),
     ]:
         with pytest.raises(typer.BadParameter, match=match):
-            _parse_objects(texts, **kinds)
+            parse_objects(texts, **kinds)
     for kinds in ({}, {"sources": True}):
         with pytest.raises(typer.Exit):
-            _parse_objects(["glass=1,2,3", "glass=1,2,3"], **kinds)
+            parse_objects(["glass=1,2,3", "glass=1,2,3"], **kinds)
 
 
 def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
@@ -357,7 +357,7 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
     x,y,z,w), given on as the 7-vector the library reads; other counts name both forms."""
     from scipy.spatial.transform import Rotation
 
-    from pbdkit.apps._cli import _parse_objects
+    from pbdkit.apps._cli_options import parse_objects
     from pbdkit.data._placement import check_placements, position_of, rotation_of
 
     rng = np.random.default_rng(23)
@@ -365,7 +365,7 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
     x, y, z, w = (float(v) for v in rot.as_quat())  # scipy: x, y, z, w
     text = f"mug=0.5,-0.1,0.02,{w!r},{x!r},{y!r},{z!r}"
     for kinds in ({}, {"sources": True}):
-        parsed = _parse_objects([text, "glass=0.3,0,0.1"], **kinds)
+        parsed = parse_objects([text, "glass=0.3,0,0.1"], **kinds)
         np.testing.assert_array_equal(parsed["mug"], [0.5, -0.1, 0.02, w, x, y, z])
         assert parsed["glass"].shape == (3,)
         placed = check_placements(parsed)  # what Demonstration and the skill accept
@@ -374,7 +374,7 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
         assert rotation is not None and rotation_of(placed["glass"]) is None
         np.testing.assert_allclose(rotation, rot.as_matrix(), rtol=0, atol=1e-12)
     # A quarter turn about z: w first reads as intended; read as x,y,z,w it would not be.
-    quarter = _parse_objects(["mug=0,0,0,0.7071067811865476,0,0,0.7071067811865476"])
+    quarter = parse_objects(["mug=0,0,0,0.7071067811865476,0,0,0.7071067811865476"])
     rotation = rotation_of(check_placements(quarter)["mug"])
     assert rotation is not None
     np.testing.assert_allclose(rotation @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
@@ -386,7 +386,7 @@ def test_object_parser_takes_a_pose_with_the_quaternion_w_first() -> None:
             with pytest.raises(
                 typer.BadParameter, match=rf"expected {forms}, got 'mug={values}' \({n} numbers\)"
             ):
-                _parse_objects([f"mug={values}"], **kinds)
+                parse_objects([f"mug={values}"], **kinds)
     # On the command line: a usage error (exit code 2) naming the option and both forms.
     result = CliRunner().invoke(app, ["reproduce", "skill.npz", "--object", "mug=1,2,3,1,0,0"])
     assert result.exit_code == 2, result.output

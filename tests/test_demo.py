@@ -7,6 +7,7 @@ import json
 import re
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,12 +15,15 @@ from typer.testing import CliRunner
 
 pytest.importorskip("mujoco")
 
+from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.apps._cli import app
 from pbdkit.apps._demo import run_lasa_demo, run_robot_demo
-from pbdkit.prob._gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import _evaluation as evaluation
+from pbdkit.sim._task_registry import get_task
 from pbdkit.sim._task_skill import TaskSkill, constrained_objects
+from pbdkit.sim._tasks import TaskSpec
+from pbdkit.sim._trials import TrialConditions
 from pbdkit.skill._skill import Skill
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -122,13 +126,15 @@ class FastBasin:
         self.demos = demos
         self.got: dict[str, object] = {}
 
-    def __call__(self, task: str, **kwargs: object) -> TaskSkill:
+    def __call__(self, spec: TaskSpec, **kwargs: object) -> TaskSkill:
         self.got.update(kwargs)
-        objects = constrained_objects(task, constrain_fixed=bool(kwargs["constrain_fixed"]))
+        objects = constrained_objects(spec, constrain_fixed=bool(kwargs["constrain_fixed"]))
         skill = Skill.learn(
             self.demos, katana(), n_steps=100, max_components=3, task_objects=objects
         )
-        return TaskSkill(task, self.demos, skill, 0.0, 0.0)
+        return TaskSkill(
+            task=spec, demos=self.demos, skill=skill, learn_seconds=0.0, teach_seconds=0.0
+        )
 
 
 @pytest.fixture
@@ -212,7 +218,7 @@ def test_evaluate_online_with_a_perturbation(fast_basin: dict[str, object], tmp_
 def test_demo_basin_paper_configuration(basin_learner: FastBasin, tmp_path: Path) -> None:
     # With vision: the cameras track the glass, the fixed basin is known; the skill has no
     # basin constraint, yet the run is judged on the scene's basin.
-    run_robot_demo("basin", tmp_path, seed=0, learn=basin_learner)
+    run_robot_demo(get_task("basin"), tmp_path, learn=basin_learner)
     assert basin_learner.got == {"n_demos": 5, "seed": 0, "constrain_fixed": False}
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert m["constraints"] == ["joint", "glass"]
@@ -239,7 +245,7 @@ def test_demo_slot_with_the_cameras_reports_the_yaw(
 ) -> None:
     """`pbdkit demo --task slot` with the cameras: the objects' yaw error beside the position
     error in metrics.json and the report, and each posed object's calibration in its frame."""
-    run_robot_demo("slot", tmp_path, seed=0, learn=FastBasin(fast_demos("slot", 5, 1)))
+    run_robot_demo(get_task("slot"), tmp_path, learn=FastBasin(fast_demos("slot", 5, 1)))
     m = json.loads((tmp_path / "metrics.json").read_text())
     tracking = m["tracking"]
     assert set(tracking["error_deg"]) == {"block", "tray"}
@@ -254,9 +260,8 @@ def test_demo_slot_with_the_cameras_reports_the_yaw(
 @pytest.mark.slow
 def test_demo_online_shows_the_online_run(basin_learner: FastBasin, tmp_path: Path) -> None:
     # As `pbdkit demo --online --ground-truth` (whose --perturb is move by default).
-    run_robot_demo(
-        "basin", tmp_path, online=True, ground_truth=True, perturb="move", learn=basin_learner
-    )
+    conditions = TrialConditions(online=True, ground_truth=True, perturb="move")
+    run_robot_demo(get_task("basin"), tmp_path, conditions=conditions, learn=basin_learner)
     m = json.loads((tmp_path / "metrics.json").read_text())
     online = m["online"]
     assert online["perturb"]["name"] == "move" and online["perturb"]["object"] == "glass"
@@ -326,28 +331,36 @@ def _never(*args: object, **kwargs: object) -> TaskSkill:
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "message"),
+    ("kwargs", "conditions", "message"),
     [
-        ({"n_demos": 1}, r"n_demos must be >= 2, got 1"),
-        ({"n_demos": True}, r"n_demos must be an integer, got True"),
-        ({"n_demos": 2.0}, r"n_demos must be an integer, got 2.0"),
-        ({"seed": -1}, r"seed must be >= 0, got -1"),
-        ({"perturb": "move"}, r"perturb applies to the online run"),
-        ({"perturb": "shake", "online": True}, r"perturb must be one of .*got 'shake'"),
+        ({"n_demos": 1}, {}, r"n_demos must be >= 2, got 1"),
+        ({"n_demos": True}, {}, r"n_demos must be an integer, got True"),
+        ({"n_demos": 2.0}, {}, r"n_demos must be an integer, got 2.0"),
+        ({"spec": "basin"}, {}, r"spec must be a TaskSpec .*got 'basin'"),
+        ({}, {"perturb": "move"}, r"perturb applies to the online run"),
+        ({}, {"perturb": "shake", "online": True}, r"perturb must be one of .*got 'shake'"),
     ],
 )
 def test_robot_demo_checks_its_arguments_before_any_physics(
-    tmp_path: Path, kwargs: dict[str, object], message: str
+    tmp_path: Path, kwargs: dict[str, object], conditions: dict[str, Any], message: str
 ) -> None:
     out = tmp_path / "demo"
+    args = {"spec": get_task("basin"), **kwargs}
     with pytest.raises(ValueError, match=message):
-        run_robot_demo("basin", out, learn=_never, **kwargs)  # type: ignore[arg-type]
+        run_robot_demo(
+            out=out,
+            conditions=TrialConditions(**conditions),
+            learn=_never,
+            **args,  # type: ignore[arg-type]
+        )
     assert not out.exists()
 
 
 def test_a_failed_demo_leaves_the_output_as_it_found_it(
     basin_learner: FastBasin, tmp_path: Path
 ) -> None:
+    basin, truth = get_task("basin"), TrialConditions(ground_truth=True)
+
     def status(message: str) -> None:
         # Raised after the demonstrations and the skill were saved, before any run.
         if message.startswith("reproducing"):
@@ -355,14 +368,14 @@ def test_a_failed_demo_leaves_the_output_as_it_found_it(
 
     out = tmp_path / "new" / "demo"
     with pytest.raises(RuntimeError, match="pressed stop"):
-        run_robot_demo("basin", out, ground_truth=True, status=status, learn=basin_learner)
+        run_robot_demo(basin, out, conditions=truth, status=status, learn=basin_learner)
     assert basin_learner.got  # it did learn
     assert not (tmp_path / "new").exists()
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "metrics.json").write_text("{}")  # an earlier demo's, kept as it was
     with pytest.raises(RuntimeError, match="pressed stop"):
-        run_robot_demo("basin", mine, ground_truth=True, status=status, learn=basin_learner)
+        run_robot_demo(basin, mine, conditions=truth, status=status, learn=basin_learner)
     assert [p.name for p in mine.iterdir()] == ["metrics.json"]
     assert (mine / "metrics.json").read_text() == "{}"
 

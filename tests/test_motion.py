@@ -21,8 +21,8 @@ from pbdkit.reproduction._probabilistic_ik import solve
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.reproduction._setup import RunOptions, step_limit_from_velocity
 from pbdkit.robots import katana
-from pbdkit.sim._task_skill import constrained_objects
-from pbdkit.sim._teacher import teach
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import constrained_objects, teach
 
 pytestmark = pytest.mark.slow
 
@@ -38,7 +38,7 @@ def _skill(task: str, seed: int) -> tuple[Skill, list[dict[str, np.ndarray]]]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         demos = teach(task, 5, seed=seed)
-        skill = Skill.learn(demos, katana(), task_objects=constrained_objects(task))
+        skill = Skill.learn(demos, katana(), task_objects=constrained_objects(get_task(task)))
     mean = {k: np.mean([d.objects[k] for d in demos], axis=0) for k in skill.object_names}
     off = [0.04 * np.array([np.cos(a), np.sin(a), 0.0]) for a in (0.3, 2.4, 4.5)]
     return skill, [mean, *({k: v + o for k, v in mean.items()} for o in off)]

@@ -22,9 +22,10 @@ from pbdkit.sim._perturb import Disturbance, DisturbanceSetup, PushArm, SlideObj
 from pbdkit.sim._runs import run_controller, run_online
 from pbdkit.sim._scene import TIMESTEP, Simulation
 from pbdkit.sim._sensing import calibrate_tracker, observe
-from pbdkit.sim._task_skill import TaskSkill, start_posture, step_seconds
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import TaskSkill
 from pbdkit.sim._tasks import TaskSpec
-from pbdkit.sim._trials import trial_disturbance
+from pbdkit.sim._trials import TrialConditions, trial_disturbance
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +40,7 @@ def placement(coaster: TaskSkill) -> dict[str, np.ndarray]:
 
 
 def _disturbance(ts: TaskSkill, name: str, truth: dict[str, np.ndarray]) -> Disturbance:
-    return trial_disturbance(ts, name, truth, seed=0)
+    return trial_disturbance(ts, TrialConditions(perturb=name, seed=0), truth)
 
 
 def test_online_run_equals_the_offline_one_and_keeps_the_limits(
@@ -84,7 +85,7 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
     assert isinstance(move, SlideObject) and move.obj == "coaster"
     assert np.linalg.norm(move.displacement) == pytest.approx(0.05)
     t_grasp = grasp_time(
-        np.arange(ts.skill.n_steps) * step_seconds(ts), ts.skill.constraints().gripper
+        np.arange(ts.skill.n_steps) * ts.skill.step_seconds, ts.skill.constraints().gripper
     )
     assert move.start == pytest.approx(t_grasp + 0.5)
     online = run_online(ts, placement, "fused", disturbance=move)
@@ -139,7 +140,7 @@ def test_online_with_the_cameras_holds_the_grasped_glass_and_the_hidden_coaster(
 ) -> None:
     ts = coaster
     tracker = calibrate_tracker(ts)
-    seen = observe(ts.task, placement, tracker, arm=start_posture(ts))
+    seen = observe(ts.task, placement, tracker, arm=ts.start_posture)
     run = run_online(
         ts,
         seen,
@@ -251,11 +252,11 @@ def test_a_perturbation_is_one_registry_entry(coaster: TaskSkill) -> None:
         ev = evaluate("coaster", 1, 0, task_skill=coaster, controllers=["fused"],
                         ground_truth=True, perturb="tap")  # fmt: skip
         (p,) = ev.as_dict()["perturbations"]
-        assert p["name"] == "tap" and ev.perturb == "tap"
+        assert p["name"] == "tap" and ev.conditions.perturb == "tap"
         setup = seen[-1]
         assert setup.task is coaster.task and set(setup.objects) == {"glass", "coaster"}
         assert p["start_s"] == pytest.approx(setup.grasp_time())
-        again = trial_disturbance(coaster, "tap", ev.trials[0].truth, seed=0).as_dict()
+        again = trial_disturbance(coaster, ev.conditions, ev.trials[0].truth).as_dict()
         assert again == p
         with pytest.raises(ValueError, match="the basin task is not tapped"):
             evaluate("basin", 1, 0, perturb="tap")
@@ -265,7 +266,7 @@ def test_a_perturbation_is_one_registry_entry(coaster: TaskSkill) -> None:
 
 
 def test_objects_slide_and_static_ones_refuse() -> None:
-    sim = Simulation.from_task("coaster")
+    sim = Simulation.from_task(get_task("coaster"))
     start = sim.object_positions()
     d = np.array([0.03, -0.04, 0.0])
     glass = SlideObject("glass", d, start=0.1, duration=0.5)
@@ -280,7 +281,7 @@ def test_objects_slide_and_static_ones_refuse() -> None:
     np.testing.assert_allclose(now["glass"], start["glass"] + d, atol=1e-3)  # stays where it slid
     assert sim.glass_tilt() < 0.02
     with pytest.raises(ValueError, match="cannot move"):
-        Simulation.from_task("basin").place_object("basin", [0.3, 0.0, 0.0])
+        Simulation.from_task(get_task("basin")).place_object("basin", [0.3, 0.0, 0.0])
     with pytest.raises(ValueError, match="finite"):
         sim.place_object("coaster", [0.3, np.nan, 0.0])
 
@@ -289,4 +290,4 @@ def test_execute_online_refuses_a_used_controller(coaster: TaskSkill, placement:
     ctrl = coaster.skill.controller({k: placement[k] for k in coaster.skill.object_names})
     ctrl.step(ctrl.target)
     with pytest.raises(ValueError, match="already run"):
-        execute_online(Simulation.from_task("coaster", placement), ctrl)
+        execute_online(Simulation.from_task(get_task("coaster"), placement), ctrl)

@@ -19,9 +19,9 @@ pytest.importorskip("distributed")
 
 from pbdkit.sim._evaluation import Evaluation, evaluate
 from pbdkit.sim._parallel import Session, connect, session
+from pbdkit.sim._task_registry import get_task
 from pbdkit.sim._task_skill import TaskSkill
-from pbdkit.sim._tasks import get_task
-from pbdkit.sim._trials import run_trials
+from pbdkit.sim._trials import TrialConditions, run_trials
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +123,7 @@ def test_connect_refuses_bad_arguments() -> None:
 
 
 def _imported_sim() -> bool:
-    return "pbdkit.sim.experiment" in sys.modules
+    return all(name in sys.modules for name in ("pbdkit.sim._trials", "pbdkit.sim._taskdefs"))
 
 
 def _profiling() -> bool:
@@ -186,11 +186,11 @@ def test_one_session_runs_the_same_evaluation_twice(coaster: TaskSkill) -> None:
     placements = [
         get_task("coaster").sample_objects(np.random.default_rng([3, i])) for i in range(2)
     ]
-    args: dict[str, Any] = {"seed": 0}
-    serial = run_trials(coaster, placements, ["fused"], **args)
+    truth = TrialConditions(ground_truth=True, seed=0)
+    serial = run_trials(coaster, placements, ["fused"], truth)
     with session(workers=2) as run:
         for _ in range(3):
-            again = run_trials(coaster, placements, ["fused"], client=run, **args)
+            again = run_trials(coaster, placements, ["fused"], truth, client=run)
             assert [t.runs for t in again] == [t.runs for t in serial]
 
 
@@ -419,9 +419,9 @@ def test_a_session_of_1000_workers_starts_one_per_core(
     # The cluster the session and connect would start is recorded, not started.
     started: list[int] = []
 
-    def cluster(n: int) -> tuple[str, None]:
+    def cluster(n: int) -> parallel._Connection:
         started.append(n)
-        return "client", None
+        return parallel._Connection("client", None)
 
     monkeypatch.setattr(parallel, "_local_cluster", cluster)
     monkeypatch.setattr(_forkserver, "start", lambda: None)

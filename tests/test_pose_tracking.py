@@ -36,7 +36,7 @@ from pbdkit.sim._tracking import (
     observed_objects,
     patch_models,
 )
-from pbdkit.sim._trials import Trial
+from pbdkit.sim._trials import Trial, TrialConditions
 from pbdkit.vision import PoseTrack, Track
 
 # Measured by benchmarks/bench_pose_tracking.py over 100 slot placements (default calibration):
@@ -186,8 +186,20 @@ def test_evaluation_reports_the_yaw_error_for_posed_tasks() -> None:
     told["tray"] = yaw_pose(truth["tray"][:3, 3], math.radians(-3.0))
     runs = {"fused": {"success": True}}
     trials = [
-        Trial(truth, told, {}, {"block": 1.0, "tray": 0.0}, runs),
-        Trial(truth, None, {"block": "not_visible_ab"}, None, {"fused": {"success": False}}),
+        Trial(
+            truth=truth,
+            observed=told,
+            tracking_status={},
+            tracking_error_mm={"block": 1.0, "tray": 0.0},
+            runs=runs,
+        ),
+        Trial(
+            truth=truth,
+            observed=None,
+            tracking_status={"block": "not_visible_ab"},
+            tracking_error_mm=None,
+            runs={"fused": {"success": False}},
+        ),
     ]
     ts: Any = SimpleNamespace(
         task=spec,
@@ -195,23 +207,29 @@ def test_evaluation_reports_the_yaw_error_for_posed_tasks() -> None:
         constrain_fixed=False,
         learn_seconds=0.0,
     )
-    res = evaluation.summarize(ts, trials, seed=0, n_demos=5, vision=True).as_dict()
+    cameras, truth_told = TrialConditions(), TrialConditions(ground_truth=True)
+    res = evaluation.summarize(ts, trials, cameras, n_demos=5).as_dict()
     keys = list(res)
     assert keys.index("tracking_error_deg") == keys.index("tracking_error_mm") + 1
     deg = res["tracking_error_deg"]
     assert deg["mean"] == pytest.approx(2.0) and deg["sd"] == pytest.approx(1.0)
     assert deg["n"] == 2 and deg["max"] == pytest.approx(3.0)
     assert deg["per_object"]["tray"]["mean"] == pytest.approx(3.0)
-    gt = evaluation.summarize(ts, trials[:1], seed=0, n_demos=5, vision=False).as_dict()
+    gt = evaluation.summarize(ts, trials[:1], truth_told, n_demos=5).as_dict()
     assert gt["tracking_error_deg"] is None
     # A task without posed objects has no such key (the paper's JSON is unchanged).
     ts.task = get_task("coaster")
     coaster = {"glass": np.zeros(3), "coaster": np.zeros(3)}
-    plain = [Trial(coaster, coaster, {}, {"glass": 0.5, "coaster": 0.5}, runs)]
-    assert (
-        "tracking_error_deg"
-        not in evaluation.summarize(ts, plain, seed=0, n_demos=5, vision=True).as_dict()
-    )
+    plain = [
+        Trial(
+            truth=coaster,
+            observed=coaster,
+            tracking_status={},
+            tracking_error_mm={"glass": 0.5, "coaster": 0.5},
+            runs=runs,
+        )
+    ]
+    assert "tracking_error_deg" not in evaluation.summarize(ts, plain, cameras, n_demos=5).as_dict()
 
 
 @pytest.fixture

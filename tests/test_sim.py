@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -17,11 +20,11 @@ pytest.importorskip("mujoco")
 import mujoco
 from typer.testing import CliRunner
 
+from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.apps._cli import app
 from pbdkit.data._demonstration import load_demonstrations
 from pbdkit.motion._limits import LIMIT_SAFETY, MotionLimits, StreamMonitor, motion_peaks
 from pbdkit.motion._otg import follow
-from pbdkit.prob._gmm import MAX_COMPONENTS
 from pbdkit.robots import katana
 from pbdkit.sim import (
     Outcome,
@@ -37,20 +40,15 @@ from pbdkit.sim import (
     task_names,
     teach,
 )
-from pbdkit.sim import _tasks as T
+from pbdkit.sim import _glass as G
 from pbdkit.sim._evaluation import Evaluation, evaluate, summarize
 from pbdkit.sim._execute import TIMESTEP, Recorder, servo_stream
 from pbdkit.sim._runs import ControllerRun, run_controller
+from pbdkit.sim._task_registry import unregister_task
 from pbdkit.sim._task_skill import TaskSkill, constrained_objects, learn_task
 from pbdkit.sim._taskdefs import basin as B
 from pbdkit.sim._taskdefs import coaster as C
-from pbdkit.sim._tasks import (
-    RunStats,
-    fixed_objects,
-    full_placement,
-    tracked_objects,
-    unregister_task,
-)
+from pbdkit.sim._tasks import RunStats
 from pbdkit.sim._teacher import (
     APPROACH,
     UP,
@@ -61,7 +59,7 @@ from pbdkit.sim._teacher import (
     solve_ik,
     tool_pitch,
 )
-from pbdkit.sim._trials import Trial
+from pbdkit.sim._trials import Trial, TrialConditions
 from pbdkit.sim._world import CAMERA_POSITIONS, CAMERA_TARGET, add_glass
 from pbdkit.skill._naming import controller_names
 from pbdkit.skill._skill import Skill
@@ -78,7 +76,7 @@ def test_tool_position_matches_pinocchio(task: str) -> None:
     # The scene's arm comes from the same URDF text as the kinematics: no offset may creep in.
     rng = np.random.default_rng(0)
     robot = katana()
-    with Simulation.from_task(task) as sim:
+    with Simulation.from_task(get_task(task)) as sim:
         for _ in range(200):
             q = rng.uniform(robot.lower, robot.upper)
             sim.set_joints(q)
@@ -91,7 +89,7 @@ def test_tool_pitch_and_roll_conventions() -> None:
     # point in place; both are checked against MuJoCo's tool frame.
     rng = np.random.default_rng(1)
     robot = katana()
-    with Simulation.from_task("coaster") as sim:
+    with Simulation.from_task(get_task("coaster")) as sim:
         for _ in range(50):
             q = rng.uniform(robot.lower, robot.upper)
             sim.set_joints(q)
@@ -111,7 +109,7 @@ def test_tool_pitch_and_roll_conventions() -> None:
 def test_build_scene_places_objects_and_validates() -> None:
     rng = np.random.default_rng(2)
     objects = sample_objects("coaster", rng)
-    model, info = build_scene("coaster", objects)
+    model, info = build_scene(get_task("coaster"), objects)
     assert model.nu == 12  # 5 position + 5 velocity servos, 2 fingers
     assert info.n_liquid == 0
     for name, p in objects.items():
@@ -121,20 +119,20 @@ def test_build_scene_places_objects_and_validates() -> None:
     sim.step(250)  # the glass rests on the shelf: it does not move
     np.testing.assert_allclose(sim.object_positions()["glass"], objects["glass"], atol=5e-4)
 
-    _, info_b = build_scene("basin", seed=0)
+    _, info_b = build_scene(get_task("basin"), seed=0)
     assert info_b.n_liquid == B.N_LIQUID
     assert info_b.spec is get_task("basin") and info_b.task == "basin"
 
-    with pytest.raises(ValueError, match="task must be one of"):
-        build_scene("juggling")
+    with pytest.raises(ValueError, match=r"spec must be a TaskSpec .*get_task.*got 'coaster'"):
+        build_scene("coaster")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="unknown object"):
-        build_scene("coaster", {"cup": [0.5, 0.0, 0.1]})
+        build_scene(get_task("coaster"), {"cup": [0.5, 0.0, 0.1]})
     with pytest.raises(ValueError, match=r"objects\['glass'\]: z must be"):
-        build_scene("coaster", {"glass": [0.47, 0.2, 0.5]})
+        build_scene(get_task("coaster"), {"glass": [0.47, 0.2, 0.5]})
     with pytest.raises(ValueError, match="fixed"):
-        build_scene("basin", {"basin": [0.3, -0.2, B.BASIN_FLOOR]})
+        build_scene(get_task("basin"), {"basin": [0.3, -0.2, B.BASIN_FLOOR]})
     with pytest.raises(ValueError, match="finite"):
-        build_scene("coaster", {"glass": [np.nan, 0.2, 0.175]})
+        build_scene(get_task("coaster"), {"glass": [np.nan, 0.2, 0.175]})
 
 
 def test_sample_objects_inside_ranges() -> None:
@@ -149,35 +147,37 @@ def test_sample_objects_inside_ranges() -> None:
 
 
 def test_tracked_and_fixed_objects_come_from_the_ranges() -> None:
-    assert tracked_objects("coaster") == ("glass", "coaster")
-    assert fixed_objects("coaster") == ()
-    assert tracked_objects("basin") == ("glass",)
-    assert fixed_objects("basin") == ("basin",)
+    coaster_spec, basin_spec = get_task("coaster"), get_task("basin")
+    assert coaster_spec.tracked_objects == ("glass", "coaster")
+    assert coaster_spec.fixed_objects == ()
+    assert basin_spec.tracked_objects == ("glass",)
+    assert basin_spec.fixed_objects == ("basin",)
     rng = np.random.default_rng(20)
     glass = sample_objects("basin", rng)["glass"]
-    placement = full_placement("basin", {"glass": glass})
+    placement = basin_spec.full_placement({"glass": glass})
     assert list(placement) == ["glass", "basin"]
     np.testing.assert_array_equal(placement["glass"], glass)
-    np.testing.assert_array_equal(placement["basin"], get_task("basin").ranges["basin"].low)
+    np.testing.assert_array_equal(placement["basin"], basin_spec.ranges["basin"].low)
     coaster = sample_objects("coaster", rng)
-    full = full_placement("coaster", coaster)
+    full = coaster_spec.full_placement(coaster)
     assert all(np.array_equal(full[k], coaster[k]) for k in coaster)
     with pytest.raises(ValueError, match=r"missing position\(s\) for \['glass'\]"):
-        full_placement("basin", {"basin": placement["basin"]})
+        basin_spec.full_placement({"basin": placement["basin"]})
     with pytest.raises(ValueError, match=r"missing position\(s\) for \['coaster'\]"):
-        full_placement("coaster", {"glass": coaster["glass"]})
+        coaster_spec.full_placement({"glass": coaster["glass"]})
     with pytest.raises(ValueError, match=r"unknown object\(s\) \['coaster'\]"):
-        full_placement("basin", {"glass": glass, "coaster": coaster["coaster"]})
+        basin_spec.full_placement({"glass": glass, "coaster": coaster["coaster"]})
     with pytest.raises(ValueError, match="task must be one of"):
-        tracked_objects("juggling")
+        sample_objects("juggling", rng)
 
 
 def test_constrained_objects_are_the_moving_ones_unless_asked() -> None:
-    assert constrained_objects("basin") == ["glass"]
-    assert constrained_objects("basin", constrain_fixed=True) == ["glass", "basin"]
+    basin, coaster = get_task("basin"), get_task("coaster")
+    assert constrained_objects(basin) == ["glass"]
+    assert constrained_objects(basin, constrain_fixed=True) == ["glass", "basin"]
     # Nothing is fixed in the coaster task: the option changes nothing there.
     for flag in (False, True):
-        assert constrained_objects("coaster", constrain_fixed=flag) == ["glass", "coaster"]
+        assert constrained_objects(coaster, constrain_fixed=flag) == ["glass", "coaster"]
 
 
 @pytest.mark.parametrize(
@@ -239,7 +239,7 @@ def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
 
 
 def test_render_frames_and_red_patch_in_both_cameras() -> None:
-    with Simulation.from_task("coaster") as sim:
+    with Simulation.from_task(get_task("coaster")) as sim:
         glass = sim.object_positions()["glass"]
         for cam in sim.info.cameras:
             image = sim.render(cam)
@@ -259,7 +259,7 @@ def test_render_frames_and_red_patch_in_both_cameras() -> None:
 
 
 def test_camera_parameters_conventions() -> None:
-    with Simulation.from_task("basin") as sim:
+    with Simulation.from_task(get_task("basin")) as sim:
         centres = []
         for cam in sim.info.cameras:
             K, R, t, w, h = sim.camera_parameters(cam)
@@ -295,7 +295,7 @@ def test_solve_ik_reaches_targets() -> None:
 
 
 def test_execute_validates_input() -> None:
-    sim = Simulation.from_task("coaster")
+    sim = Simulation.from_task(get_task("coaster"))
     t = np.linspace(0.0, 1.0, 11)
     q = np.zeros((11, 5))
     with pytest.raises(ValueError, match="joints must have shape"):
@@ -335,8 +335,8 @@ def test_teacher_demonstrations_structure() -> None:
         # Tight relative to the glass when the gripper closes, to the coaster when it opens.
         close = int(np.argmax(d.gripper > 0.5))
         open_ = close + int(np.argmax(d.gripper[close:] < 0.5))
-        np.testing.assert_allclose(x[close] - d.objects["glass"], T.GRASP_OFFSET, atol=1e-6)
-        expected = np.array([0.0, 0.0, T.GLASS_PATCH_CENTER + 0.002]) + T.GRASP_OFFSET
+        np.testing.assert_allclose(x[close] - d.objects["glass"], G.GRASP_OFFSET, atol=1e-6)
+        expected = np.array([0.0, 0.0, G.GLASS_PATCH_CENTER + 0.002]) + G.GRASP_OFFSET
         np.testing.assert_allclose(x[open_] - d.objects["coaster"], expected, atol=1e-6)
     basin = teach("basin", n_demos=2, seed=6)
     # The pouring gesture is the same in joint space: roll profiles after the roll starts.
@@ -351,7 +351,7 @@ def test_teacher_demonstrations_structure() -> None:
 def _run_demos(task: str, n: int, seed: int) -> list[dict[str, float]]:
     metrics = []
     for i, d in enumerate(teach(task, n_demos=n, seed=seed)):
-        with Simulation.from_task(task, d.objects, seed=i) as sim:
+        with Simulation.from_task(get_task(task), d.objects, seed=i) as sim:
             res = execute(sim, d.t, d.joints, d.gripper, settle=0.8, record_rate=20.0)
         assert res.outcome.success, (task, i, res.outcome.metrics)
         # the servos track the demonstration: no collision held the arm back
@@ -385,7 +385,7 @@ def test_every_demonstration_succeeds(task: str) -> None:
 def test_execute_records_frames() -> None:
     rng = np.random.default_rng(9)
     robot = katana()
-    with Simulation.from_task("coaster") as sim:
+    with Simulation.from_task(get_task("coaster")) as sim:
         q0 = np.array([0.0, 1.6, -1.9, 0.0, 0.0]) + rng.normal(0.0, 0.01, 5)
         t = np.linspace(0.0, 0.5, 51)
         q = np.tile(q0, (51, 1))
@@ -415,7 +415,7 @@ def test_outcome_detects_a_failed_grasp() -> None:
     # The same motion without closing the gripper never lifts the glass (the open fingers may
     # drag it along the shelf): a failure, with the error measured from where the glass is.
     (d,) = teach("coaster", n_demos=1, seed=12)
-    with Simulation.from_task("coaster", d.objects) as sim:
+    with Simulation.from_task(get_task("coaster"), d.objects) as sim:
         res = execute(sim, d.t, d.joints, np.zeros_like(d.t), settle=0.2, record_rate=10.0)
         glass_xy = sim.glass_pose()[0][:2]
     assert not res.outcome.success
@@ -433,7 +433,7 @@ def test_default_learning_captures_every_demonstrated_feature(task: str, seed: i
     # (basin 0 and 2: joint K = 3, wrist roll 0.53 rad off at the end) or under-fitted the
     # joints (coaster 1: RMSE 2.15 x the floor). benchmarks/bench_selection.py: seeds 0-9.
     demos = teach(task, 5, seed=seed)
-    skill = Skill.learn(demos, katana(), task_objects=constrained_objects(task))
+    skill = Skill.learn(demos, katana(), task_objects=constrained_objects(get_task(task)))
     cap = MAX_COMPONENTS
     # No space collapses; the joints' K is interior. (A task space may reach the cap: where
     # the demonstrations agree, narrower components keep predicting a left-out demonstration a
@@ -458,7 +458,7 @@ def test_a_run_under_physics_is_the_same_every_time() -> None:
     (demo,) = teach("basin", n_demos=1, seed=3, speed=2.0)
     runs = []
     for _ in range(2):
-        sim = Simulation.from_task("basin", dict(demo.objects))
+        sim = Simulation.from_task(get_task("basin"), dict(demo.objects))
         try:
             ex = execute(sim, demo.t, demo.joints, demo.gripper)
         finally:
@@ -518,7 +518,7 @@ def test_recorder_measures_the_servo_stream_as_a_stream_monitor_outside_a_push()
     q[75:] += 0.02
     window = (0.1, 0.2)
     peaks = {}
-    with Simulation.from_task("coaster") as sim:
+    with Simulation.from_task(get_task("coaster")) as sim:
         for name, w in (("push", window), ("none", None)):
             rec = Recorder(sim, 50.0, None, 15.0, force_window=w)
             for k, row in enumerate(q):
@@ -626,11 +626,29 @@ def test_playback_servos_follow_the_samples(
 
 
 # ----------------------------------------------------------------------------- tasks as data
+def test_the_package_and_the_task_data_import_without_mujoco() -> None:
+    # MuJoCo comes with the first name that needs it, after the choice of its OpenGL backend;
+    # the built-in tasks (which build MuJoCo scenes) with the first look-up of a task.
+    code = (
+        "import os, sys\n"
+        "import pbdkit.sim, pbdkit.sim._tasks, pbdkit.sim._teacher, pbdkit.sim._task_registry\n"
+        "print('mujoco' in sys.modules, 'pbdkit.sim._taskdefs' in sys.modules)\n"
+        "print(pbdkit.sim.task_names()[:3] == ('coaster', 'basin', 'slot'))\n"
+        "gl = sys.modules['mujoco.rendering.classic.gl_context']\n"
+        "print(gl._MUJOCO_GL == os.environ['MUJOCO_GL'] == pbdkit.sim._gl.BACKEND)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert out.stdout.split() == ["False", "False", "True", "True"]
+
+
 def test_task_registry_resolves_names_once_and_refuses_bad_specs() -> None:
     assert task_names()[:2] == ("coaster", "basin")
     spec = get_task("coaster")
     assert get_task(spec) is spec
-    assert spec.tracked_objects == tracked_objects("coaster") == ("glass", "coaster")
+    assert spec.tracked_objects == ("glass", "coaster")
     with pytest.raises(ValueError, match=r"task must be one of \['coaster', 'basin'"):
         get_task("juggling")
     with pytest.raises(ValueError, match="'coaster' is already registered"):
@@ -675,9 +693,9 @@ def _mark_via_points(
     p = Person(rng, speed)
     g, m = objects["glass"], objects["mark"]
     # Released with the glass's bottom 2 mm above the table, centred on the mark.
-    place = m + UP * (T.GLASS_PATCH_CENTER + 0.001) + T.GRASP_OFFSET
+    place = m + UP * (G.GLASS_PATCH_CENTER + 0.001) + G.GRASP_OFFSET
     back = APPROACH * radial(m)
-    carry = between(g + T.GRASP_OFFSET, place) + UP * 0.08 + p.jitter(0.01)
+    carry = between(g + G.GRASP_OFFSET, place) + UP * 0.08 + p.jitter(0.01)
     return [
         *grasp_via_points(p, g, 0.08, 2.6),
         ViaPoint(p.duration(1.8), carry, p.holding_pitch(), p.roll(), True),
@@ -716,7 +734,7 @@ def _mark_judge(sim: Simulation, run: RunStats) -> Outcome:
 
 
 _MARK_FUNCTIONS = (_mark_add_objects, _mark_via_points, _mark_judge)
-_ON_TABLE = T.GLASS_PATCH_CENTER
+_ON_TABLE = G.GLASS_PATCH_CENTER
 MARK = TaskSpec(
     name="mark",
     description="Put the glass from the table on the green mark.",
@@ -727,7 +745,7 @@ MARK = TaskSpec(
     add_objects=_mark_add_objects,
     via_points=_mark_via_points,
     judge=_mark_judge,
-    patches={"glass": T.GLASS_PATCH_PREFIX, "mark": "mark"},
+    patches={"glass": G.GLASS_PATCH_PREFIX, "mark": "mark"},
 )
 
 
@@ -749,15 +767,23 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     assert all(set(d.objects) == {"glass", "mark"} for d in demos)
     # The teacher's via points do the task: its demonstration succeeds under physics.
     d = demos[0]
-    with Simulation.from_task("mark", d.objects) as sim:
+    with Simulation.from_task(get_task("mark"), d.objects) as sim:
         res = execute(sim, d.t, d.joints, d.gripper, settle=0.8, record_rate=20.0)
     assert res.outcome.success, res.outcome.metrics
     assert res.outcome.metrics["placement_error_mm"] < 2.0
 
-    objects = constrained_objects("mark")
+    objects = constrained_objects(mark_task)
     assert objects == ["glass", "mark"]
     skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
-    ts = TaskSkill("mark", demos, skill, 0.0, 0.0)
+    ts = TaskSkill(task=mark_task, demos=demos, skill=skill, learn_seconds=0.0, teach_seconds=0.0)
+    with pytest.raises(ValueError, match=r"task must be a TaskSpec .*got 'mark'"):
+        TaskSkill(
+            task="mark",  # type: ignore[arg-type]
+            demos=demos,
+            skill=skill,
+            learn_seconds=0.0,
+            teach_seconds=0.0,
+        )
     assert ts.task is mark_task and ts.constrain_fixed is False
     placement = sample_objects("mark", np.random.default_rng(24))
     run = run_controller(ts, placement, "fused")
@@ -834,7 +860,7 @@ CUP = TaskSpec(
     add_objects=_cup_add_objects,
     via_points=_cup_via_points,
     judge=C.judge,
-    patches={"cup": T.patch_prefix("cup"), "coaster": "coaster"},
+    patches={"cup": G.patch_prefix("cup"), "coaster": "coaster"},
     move=C.SPEC.move,
     grasped="cup",
 )
@@ -842,7 +868,7 @@ CUP = TaskSpec(
 
 @pytest.mark.slow
 def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
-    assert T.GLASS_PATCH_PREFIX == T.patch_prefix("glass") == "glass_patch"
+    assert G.GLASS_PATCH_PREFIX == G.patch_prefix("glass") == "glass_patch"
     assert TaskSpec("plain", "", CUP.ranges, *_MARK_FUNCTIONS, grasped="cup").patches == {
         "cup": "cup_patch"
     }
@@ -855,7 +881,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         objects = constrained_objects(CUP)
         assert objects == ["cup", "coaster"]
         skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
-        ts = TaskSkill(CUP, demos, skill, 0.0, 0.0)
+        ts = TaskSkill(task=CUP, demos=demos, skill=skill, learn_seconds=0.0, teach_seconds=0.0)
         with Simulation.from_task(CUP) as sim:
             assert set(sim.object_positions()) == {"cup", "coaster"}
             sim.place_object("cup", sim.object_positions()["cup"] + [0.01, 0.0, 0.0])
@@ -866,7 +892,9 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
                  "coaster": d.objects["coaster"]}, d.gripper) for d in demos]  # fmt: skip
         skill = Skill.learn(glass, katana(), n_steps=200, max_components=5,
                             task_objects=["glass", "coaster"])  # fmt: skip
-        ts_glass = TaskSkill(C.SPEC, glass, skill, 0.0, 0.0)
+        ts_glass = TaskSkill(
+            task=C.SPEC, demos=glass, skill=skill, learn_seconds=0.0, teach_seconds=0.0
+        )
         same = evaluate(C.SPEC, 1, 0, task_skill=ts_glass, controllers=["fused"],
                           ground_truth=True)  # fmt: skip
         assert cup.trials[0].runs == same.trials[0].runs
@@ -898,6 +926,39 @@ def test_a_scene_without_the_tasks_glass_is_refused() -> None:
         build_scene(spec)
 
 
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"online": 1}, r"online must be True or False, got 1"),
+        ({"ground_truth": "yes"}, r"ground_truth must be True or False, got 'yes'"),
+        ({"perturb": None}, r"perturb must be a perturbation's name, got None"),
+        ({"seed": -1}, r"seed must be >= 0, got -1"),
+        ({"seed": 1.5}, r"seed must be an integer, got 1.5"),
+        ({"noise_mm": -2.0}, r"noise_mm must be finite and >= 0, got -2.0"),
+        ({"noise_mm": math.nan}, r"noise_mm must be finite and >= 0, got nan"),
+    ],
+)
+def test_trial_conditions_are_one_checked_frozen_value(
+    options: dict[str, Any], message: str
+) -> None:
+    default = TrialConditions()
+    assert (default.online, default.perturb, default.ground_truth, default.seed) == (
+        False,
+        "none",
+        False,
+        0,
+    )
+    assert default.vision and not TrialConditions(ground_truth=True).vision
+    same = TrialConditions(seed=np.int64(3), noise_mm=2)
+    assert same == TrialConditions(seed=3, noise_mm=2.0) and type(same.seed) is int
+    with pytest.raises(AttributeError):
+        default.seed = 1  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        TrialConditions(False, "push")  # type: ignore[misc]  # keywords only
+    with pytest.raises(ValueError, match=message):
+        TrialConditions(**options)
+
+
 def test_summarize_counts_successes_and_metric_statistics() -> None:
     # The summarising half of evaluate, on hand-made trials (no physics).
     from types import SimpleNamespace
@@ -923,10 +984,18 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
         },
     ]
     trials = [
-        Trial({"glass": np.zeros(3)}, None if i == 2 else {"glass": np.zeros(3)}, {}, None, r)
+        Trial(
+            truth={"glass": np.zeros(3)},
+            observed=None if i == 2 else {"glass": np.zeros(3)},
+            tracking_status={},
+            tracking_error_mm=None,
+            runs=r,
+        )
         for i, r in enumerate(rows)
     ]
-    ev = summarize(ts, trials, seed=4, n_demos=5, vision=True)  # type: ignore[arg-type]
+    conditions = TrialConditions(seed=4)
+    ev = summarize(ts, trials, conditions, n_demos=5)  # type: ignore[arg-type]
+    assert ev.conditions is conditions and ev.vision
     assert ev.controllers["fused"].successes == 2
     assert ev.controllers["fused"].success_rate == pytest.approx(2 / 3)
     assert ev.controllers["fused"].metrics["err"] == {"mean": 2.0, "median": 2.0, "max": 3.0}
@@ -937,6 +1006,7 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
     assert ev.tracking_failures == 1
     d = ev.as_dict()
     assert d["trials"] == 3 and d["observed"][2] is None and d["runs"]["joint"][1]["err"] is None
+    assert (d["seed"], d["online"], d["perturb"], d["vision"]) == (4, False, "none", True)
     json.dumps(d)
 
 

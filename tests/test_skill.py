@@ -29,9 +29,9 @@ from synthetic_teacher import (
 )
 
 import pbdkit
+from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.data._demonstration import Demonstration, LimitWarning, save_demonstrations
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
-from pbdkit.prob._gmm import MAX_COMPONENTS
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.reproduction._setup import ReachWarning
 from pbdkit.robots._robot import Robot

@@ -15,9 +15,10 @@ from pbdkit.robots import katana
 from pbdkit.sim import Simulation
 from pbdkit.sim import _parts as P
 from pbdkit.sim._runs import run_controller
+from pbdkit.sim._task_registry import get_task
 from pbdkit.sim._task_skill import TaskSkill, learn_task
 from pbdkit.sim._taskdefs import slot
-from pbdkit.sim._tasks import RunStats, get_task, yaw_of, yaw_pose
+from pbdkit.sim._tasks import RunStats, yaw_of, yaw_pose
 
 
 def _relative(hand: np.ndarray, obj: np.ndarray) -> np.ndarray:
@@ -71,7 +72,7 @@ def test_judge_accepts_a_block_in_the_pocket_and_refuses_one_on_the_rim(
 ) -> None:
     tray = yaw_pose([0.14, -0.12, P.TRAY_RIM_HEIGHT], math.radians(25.0))
     block = yaw_pose([0.14, 0.12, P.BLOCK_HEIGHT], 0.0)
-    sim = Simulation.from_task("slot", {"block": block, "tray": tray})
+    sim = Simulation.from_task(get_task("slot"), {"block": block, "tray": tray})
     # Dropped from 1 mm above the floor (aligned) or above the rim (turned), let go.
     floor = P.TRAY_RIM_HEIGHT - P.TRAY_DEPTH
     z = floor + 0.001 + P.BLOCK_HEIGHT if turn_deg in (0.0, 180.0) else P.TRAY_RIM_HEIGHT + 0.03

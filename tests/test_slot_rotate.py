@@ -19,12 +19,15 @@ from pbdkit.sim import _perturb as P
 from pbdkit.sim._evaluation import evaluate
 from pbdkit.sim._runs import run_controller, run_online
 from pbdkit.sim._scene import Simulation
-from pbdkit.sim._task_skill import TaskSkill, step_seconds
+from pbdkit.sim._task_registry import get_task
+from pbdkit.sim._task_skill import TaskSkill
 from pbdkit.sim._taskdefs import slot
-from pbdkit.sim._tasks import ObjectTurn, PlacementRange, TaskSpec, get_task, yaw_of, yaw_pose
-from pbdkit.sim._trials import trial_disturbance
+from pbdkit.sim._tasks import ObjectTurn, PlacementRange, TaskSpec, yaw_of, yaw_pose
+from pbdkit.sim._trials import TrialConditions, trial_disturbance
 
 SLOT = get_task("slot")
+#: The trials of the rotate disturbance (seed 0).
+ROTATE = TrialConditions(perturb="rotate", seed=0)
 YAW_LOW, YAW_HIGH = (math.degrees(v) for v in slot.YAW_RANGE)
 
 
@@ -32,7 +35,13 @@ def _setup(objects: dict[str, np.ndarray], seed: int) -> P.DisturbanceSetup:
     """A trial of the slot task whose skill closes its gripper at 4 s (step 40 of 0.1 s)."""
     times = 0.1 * np.arange(100, dtype=np.float64)
     gripper = np.where((times >= 4.0) & (times < 8.0), 1.0, 0.0)
-    return P.DisturbanceSetup(SLOT, objects, times, gripper, np.random.default_rng(seed))
+    return P.DisturbanceSetup(
+        task=SLOT,
+        objects=objects,
+        times=times,
+        gripper=gripper,
+        rng=np.random.default_rng(seed),
+    )
 
 
 def _turn(objects: dict[str, np.ndarray], seed: int = 0) -> P.TurnObject:
@@ -179,14 +188,14 @@ def test_online_follows_the_turned_tray_where_the_offline_trajectory_misses_it(
 ) -> None:
     ts = small_task_skill("slot", 5, seed=1, n_steps=150)
     placement = ts.task.sample_objects(np.random.default_rng(0))
-    act = trial_disturbance(ts, "rotate", placement, seed=0)
+    act = trial_disturbance(ts, ROTATE, placement)
     assert isinstance(act, P.TurnObject)
-    grid = np.arange(ts.skill.n_steps) * step_seconds(ts)
+    grid = np.arange(ts.skill.n_steps) * ts.skill.step_seconds
     t_grasp = P.grasp_time(grid, ts.skill.constraints().gripper)
     assert act.start == pytest.approx(t_grasp + P.TURN_DELAY)
     online = run_online(ts, placement, "fused", disturbance=act)
     offline = run_controller(
-        ts, placement, "fused", disturbance=trial_disturbance(ts, "rotate", placement, seed=0)
+        ts, placement, "fused", disturbance=trial_disturbance(ts, ROTATE, placement)
     )
     size = abs(math.degrees(act.angle))
     assert 20.0 <= size <= 30.0

@@ -20,7 +20,7 @@ import mujoco
 from numpy.typing import NDArray
 
 from pbdkit.robots import katana
-from pbdkit.sim import Outcome, PlacementRange, Simulation, TaskSpec
+from pbdkit.sim import Outcome, PlacementRange, Simulation, TaskSpec, get_task
 from pbdkit.sim import _parts as P
 from pbdkit.sim._tasks import yaw_of, yaw_pose
 from pbdkit.sim._teacher import LIMIT_MARGIN, solve_ik
@@ -341,7 +341,7 @@ def test_grasp_checks_for_a_block_closed_between_the_fingers() -> None:
 
 
 def test_a_glass_is_still_the_grasped_object_of_the_papers_tasks() -> None:
-    with Simulation.from_task("coaster") as sim:
+    with Simulation.from_task(get_task("coaster")) as sim:
         assert sim.grasped_kind == "glass"
         bottom, rot = sim.glass_pose()
         pose = sim.grasped_pose()

@@ -28,7 +28,6 @@ from pbdkit.sim._tracking import (
     label_patches,
     observed_objects,
     patch_geom_ids,
-    tracked_objects,
 )
 from pbdkit.vision import StereoTracker
 
@@ -44,12 +43,12 @@ def _arm(seed: int) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def coaster_tracker() -> SimTracker:
-    with Simulation.from_task("coaster", nominal_objects("coaster")) as sim:
+    with Simulation.from_task(get_task("coaster"), nominal_objects("coaster")) as sim:
         return SimTracker.from_simulation(sim, at_nominal=False, arm=_arm(0))
 
 
 def test_segmentation_labels_calibrate_both_objects() -> None:
-    with Simulation.from_task("coaster", nominal_objects("coaster")) as sim:
+    with Simulation.from_task(get_task("coaster"), nominal_objects("coaster")) as sim:
         sim.set_joints(_arm(0))
         for camera in sim.info.cameras:
             masks = label_patches(sim, camera, ["glass", "coaster"])
@@ -82,7 +81,7 @@ def test_segmentation_labels_calibrate_both_objects() -> None:
 def test_tracked_positions_match_the_truth(coaster_tracker: SimTracker) -> None:
     rng = np.random.default_rng(7)
     for _ in range(4):
-        with Simulation.from_task("coaster", sample_objects("coaster", rng)) as sim:
+        with Simulation.from_task(get_task("coaster"), sample_objects("coaster", rng)) as sim:
             sim.set_joints(random_start_posture(katana(), rng))
             truth = sim.object_positions()
             tracks = coaster_tracker.locate(sim)
@@ -122,7 +121,7 @@ def _glass_seen_by_left_only(sim: Simulation, tracker: SimTracker) -> np.ndarray
 
 
 def test_object_out_of_one_view_is_refused_not_guessed(coaster_tracker: SimTracker) -> None:
-    with Simulation.from_task("coaster", nominal_objects("coaster")) as sim:
+    with Simulation.from_task(get_task("coaster"), nominal_objects("coaster")) as sim:
         sim.set_joints(_arm(0))
         bottom = _glass_seen_by_left_only(sim, coaster_tracker)
         adr = sim.model.jnt_qposadr[sim.model.joint("glass_free").id]
@@ -140,11 +139,11 @@ def test_object_out_of_one_view_is_refused_not_guessed(coaster_tracker: SimTrack
 
 
 def test_observed_objects_passes_fixed_objects_through() -> None:
-    assert tracked_objects("basin") == ("glass",)
-    assert tracked_objects("coaster") == ("glass", "coaster")
+    assert get_task("basin").tracked_objects == ("glass",)
+    assert get_task("coaster").tracked_objects == ("glass", "coaster")
     rng = np.random.default_rng(3)
     truth = sample_objects("basin", rng)
-    with Simulation.from_task("basin", truth) as sim:
+    with Simulation.from_task(get_task("basin"), truth) as sim:
         sim.set_joints(_arm(1))
         tracker = SimTracker.from_simulation(sim, arm=_arm(1))
         seen = observed_objects(sim, tracker, fixed={"basin": truth["basin"]})
@@ -164,7 +163,7 @@ def test_observed_objects_passes_fixed_objects_through() -> None:
 
 
 def test_bad_objects_are_named() -> None:
-    with Simulation.from_task("basin") as sim:
+    with Simulation.from_task(get_task("basin")) as sim:
         with pytest.raises(ValueError, match=r"\['coaster'\] are not objects of the 'basin'"):
             SimTracker.from_simulation(sim, ["coaster"])
         with pytest.raises(ValueError, match="no colored patch is known for 'basin'"):

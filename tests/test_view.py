@@ -23,7 +23,6 @@ import pytest
 from browser import CHROMIUM, free_port, launch
 
 from pbdkit._rotations import matrix_from_quaternion
-from pbdkit.apps._view import HOST, check_port
 from pbdkit.apps._view_plan import (
     LatestWins,
     carry_transform,
@@ -33,6 +32,7 @@ from pbdkit.apps._view_plan import (
     step_gaussians,
     typical_placements,
 )
+from pbdkit.apps._view_serve import HOST, check_port
 from pbdkit.skill._skill import Skill
 
 
@@ -312,7 +312,8 @@ def coaster_view(small_task_skill: Callable[..., Any]) -> Iterator[Any]:
     """``pbdkit view --task coaster`` on a small skill (previews of 50 steps), served from a
     thread: (task skill, {"app": the app}, port)."""
     pytest.importorskip("viser")
-    from pbdkit.apps._view import ViewApp, served
+    from pbdkit.apps._view import ViewApp
+    from pbdkit.apps._view_serve import served
 
     ts = small_task_skill("coaster", 3, 1)
     placement = ts.task.nominal_objects()

@@ -6,7 +6,7 @@
   renamed there fails the build instead of leaving a stale copy.
 - References by the names users write resolve to where an object is documented, its defining
   module: ``pbdkit.Skill`` to ``pbdkit.skill._skill.Skill``, ``pbdkit.sim.register_task`` to
-  ``pbdkit.sim._tasks.register_task``, and a short name to what the current module imports.
+  ``pbdkit.sim._task_registry.register_task``, and a short name to what the current module imports.
 - ``.. pbdkit-names:: PACKAGE`` is a table of a package's ``__all__``: each name, where it lives
   and the first paragraph of its docstring; ``.. pbdkit-modules::`` a table of modules;
   ``.. pbdkit-cli::`` the ``--help`` of every ``pbdkit`` command. The module pages are

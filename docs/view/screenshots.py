@@ -16,8 +16,9 @@ from pathlib import Path
 from typing import Any
 
 import pbdkit
-from pbdkit.apps._view import HOST, ViewApp, served
+from pbdkit.apps._view import ViewApp
 from pbdkit.apps._view_plan import typical_placements
+from pbdkit.apps._view_serve import HOST, served
 from pbdkit.sim._task_skill import learn_task
 from pbdkit.sim._tasks import yaw_pose
 

@@ -26,17 +26,17 @@ from ._plots import (
     figure_png,
     plot_constraints,
     plot_demonstrations_3d,
-    plot_motion_limits,
-    plot_online_run,
     plot_reproductions,
     plot_selection,
 )
+from ._plots_motion import plot_motion_limits, plot_online_run
 from ._report import Figure, Section, orientation_section, write_report
 from ._staging import staged_output
 
 if TYPE_CHECKING:
     from ..sim._task_skill import TaskSkill
     from ..sim._tasks import TaskSpec
+    from ..sim._trials import TrialConditions
 
 __all__ = ["run_lasa_demo", "run_robot_demo"]
 
@@ -93,30 +93,28 @@ def run_lasa_demo(
 
 
 def run_robot_demo(
-    task: str | TaskSpec,
+    spec: TaskSpec,
     out: Path,
     *,
-    seed: int = 0,
+    conditions: TrialConditions | None = None,
     n_demos: int = 5,
     status: Callable[[str], None] | None = None,
-    ground_truth: bool = False,
     constrain_fixed: bool = False,
-    online: bool = False,
-    perturb: str = "none",
     learn: Callable[..., TaskSkill] | None = None,
 ) -> dict[str, Any]:
-    """Run the paper's experiment for one task (a registered name or a spec) and write its
-    results to ``out``.
+    """Run the paper's experiment for the task ``spec`` and write its results to ``out``.
 
+    ``conditions`` (:class:`pbdkit.sim.TrialConditions`; default: offline, no disturbance,
+    the cameras, seed 0): ``seed`` seeds the demonstrations and the new situation.
     ``learn(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)`` teaches and
-    learns the skill, a ``TaskSkill`` (default: ``pbdkit.sim.experiment.learn_task``, the
-    simulated teacher and the full time grid); inject a faster or a different learner.
+    learns the skill, a ``TaskSkill`` (default: :func:`pbdkit.sim.learn_task`, the simulated
+    teacher and the full time grid); inject a faster or a different learner.
 
-    With ``online``, the fused controller also runs online, in the physics loop (told the
-    cameras' positions at 15 Hz, or the true ones with ``ground_truth``), under the
-    disturbance ``perturb`` ("none", "move" or "push", :mod:`pbdkit.sim._perturb`); beside it
-    the offline fused reproduction plays under the same disturbance. They add
-    ``fig_online.png``, ``online.mp4``, a report section and ``metrics.json["online"]``.
+    With ``conditions.online``, the fused controller also runs online, in the physics loop
+    (told the cameras' positions at 15 Hz, or the true ones with ``ground_truth``), under the
+    disturbance ``conditions.perturb`` (:mod:`pbdkit.sim._perturb`); beside it the offline
+    fused reproduction plays under the same disturbance. They add ``fig_online.png``,
+    ``online.mp4``, a report section and ``metrics.json["online"]``.
 
     Writes ``demos.npz``, ``skill.npz``, ``fig3_cartesian.png``, ``fig45_constraints.png``,
     ``fig6_controllers.png``, ``fig_limits.png`` (one joint of the fused run's servo stream
@@ -126,11 +124,11 @@ def run_robot_demo(
 
     The skill is told the object positions the stereo tracker measures in the new situation
     (:mod:`pbdkit.sim._tracking`, calibrated at the nominal placement); the simulated world keeps
-    the true ones. ``ground_truth=True`` tells the skill the true positions instead.
+    the true ones. ``conditions.ground_truth`` tells the skill the true positions instead.
 
     The skill has a task-space constraint per moving object, as in the paper (the basin task:
     joint space and glass); ``constrain_fixed=True`` also learns one relative to the fixed basin
-    (:func:`pbdkit.sim.experiment.learn_task`). ``metrics.json`` records ``"constraints"`` and
+    (:func:`pbdkit.sim.learn_task`). ``metrics.json`` records ``"constraints"`` and
     ``"constrain_fixed"``.
 
     The arguments are checked before any physics runs. The files are written to a hidden
@@ -140,9 +138,8 @@ def run_robot_demo(
     Raises
     ------
     ValueError
-        Before any physics: an unknown task or perturbation, ``perturb`` without ``online``,
-        ``n_demos`` not an integer >= 2, ``seed`` not an integer >= 0, ``out`` not a
-        directory.
+        Before any physics: ``spec`` not a TaskSpec, an unknown perturbation or one without
+        ``online``, ``n_demos`` not an integer >= 2, ``out`` not a directory.
     pbdkit.sim._tracking.ObjectNotSeenError
         With vision, if the cameras cannot locate an object of the new situation.
 
@@ -153,38 +150,43 @@ def run_robot_demo(
     """
     from ..sim._perturb import check_perturb
     from ..sim._task_skill import learn_task
-    from ..sim._tasks import get_task
+    from ..sim._tasks import check_task
+    from ..sim._trials import TrialConditions
 
     def say(msg: str) -> None:
         if status is not None:
             status(msg)
 
-    spec = get_task(task)
-    check_perturb(perturb, spec)
-    if perturb != "none" and not online:
+    spec = check_task(spec, "spec")
+    conditions = TrialConditions() if conditions is None else conditions
+    check_perturb(conditions.perturb, spec)
+    if conditions.perturb != "none" and not conditions.online:
         raise ValueError("perturb applies to the online run: give online=True (--online) too")
     check_int(n_demos, "n_demos", minimum=2)  # a skill needs two demonstrations
-    check_int(seed, "seed", minimum=0)
     if learn is None:
         learn = learn_task
     t_start = time.perf_counter()
     with staged_output(Path(out), last="metrics.json") as stage:
         return _run_robot_demo(
-            spec, stage, seed, n_demos, say, ground_truth, constrain_fixed, online, perturb,
-            learn, t_start,
-        )  # fmt: skip
+            spec,
+            stage,
+            conditions,
+            n_demos=n_demos,
+            say=say,
+            constrain_fixed=constrain_fixed,
+            learn=learn,
+            t_start=t_start,
+        )
 
 
 def _run_robot_demo(
     spec: TaskSpec,
     out: Path,
-    seed: int,
+    conditions: TrialConditions,
+    *,
     n_demos: int,
     say: Callable[[str], None],
-    ground_truth: bool,
     constrain_fixed: bool,
-    online: bool,
-    perturb: str,
     learn: Callable[..., TaskSkill],
     t_start: float,
 ) -> dict[str, Any]:
@@ -192,9 +194,10 @@ def _run_robot_demo(
     from ..sim._metrics import tracking_errors, yaw_errors
     from ..sim._runs import run_controller, run_online
     from ..sim._sensing import calibrate_tracker, observe
-    from ..sim._task_skill import start_posture
     from ..sim._trials import trial_disturbance
     from ..sim._video import save_video
+
+    seed, perturb = conditions.seed, conditions.perturb
 
     say(f"teaching {n_demos} demonstrations of the {spec.name} task ...")
     ts = learn(spec, n_demos=n_demos, seed=seed, constrain_fixed=constrain_fixed)
@@ -205,12 +208,12 @@ def _run_robot_demo(
     vision: dict[str, Any] | None = None
     objects = truth
     tracker = None
-    if not ground_truth:
+    if conditions.vision:
         say("calibrating the cameras and locating the objects ...")
         start = time.perf_counter()
         tracker = calibrate_tracker(ts)
         calib_s = time.perf_counter() - start
-        objects = observe(spec, truth, tracker, arm=start_posture(ts))
+        objects = observe(spec, truth, tracker, arm=ts.start_posture)
         errors = tracking_errors(objects, truth, tracker.objects)
         vals = np.array(list(errors.values()))
         vision = {
@@ -245,7 +248,7 @@ def _run_robot_demo(
     if fused.execution.frames is not None and len(fused.execution.frames):
         save_video(fused.execution.frames, video_path, fps=15.0)
     online_runs: dict[str, Any] = {}
-    if online:
+    if conditions.online:
         say(f"running the fused controller online (perturb: {perturb}) ...")
         online_runs["online"] = run_online(
             ts,
@@ -254,7 +257,7 @@ def _run_robot_demo(
             tracker=tracker,
             camera="cam_left",
             sim_objects=truth,
-            disturbance=trial_disturbance(ts, perturb, truth, seed=seed),
+            disturbance=trial_disturbance(ts, conditions, truth),
         )
         frames = online_runs["online"].execution.frames
         if frames is not None and len(frames):
@@ -265,7 +268,7 @@ def _run_robot_demo(
             objects,
             "fused",
             sim_objects=truth,
-            disturbance=trial_disturbance(ts, perturb, truth, seed=seed),
+            disturbance=trial_disturbance(ts, conditions, truth),
         )
 
     say("drawing the figures ...")
@@ -283,7 +286,7 @@ def _run_robot_demo(
         ex.servo_period * np.arange(ex.servo_targets.shape[0]),
         ex.servo_targets,
         ex.servo_limits,
-        joint_names=getattr(robot, "joint_names", None),
+        joint_names=robot.joint_names,
         position_limits=(robot.lower, robot.upper),
         title="The fused run's servo stream (500 Hz) against the arm's limits: the joint "
         "closest to its acceleration limit",
@@ -341,7 +344,18 @@ def _run_robot_demo(
     }
     write_json(out / "metrics.json", metrics)
     _write_html(
-        DemoRun(out, spec, ts, truth, objects, runs, metrics, figures, video_path, online_runs)
+        DemoRun(
+            out=out,
+            spec=spec,
+            ts=ts,
+            truth=truth,
+            objects=objects,
+            runs=runs,
+            metrics=metrics,
+            figures=figures,
+            video=video_path,
+            online=online_runs,
+        )
     )
     return metrics
 
@@ -582,7 +596,7 @@ def _vision_section(
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DemoRun:
     """Everything a robot demo produced, for its report.
 

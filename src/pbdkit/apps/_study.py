@@ -1,7 +1,7 @@
 """Where a skill works: ``pbdkit study`` (a map of the table, a learning curve, noise tolerance).
 
 Three questions a researcher asks of a learned skill, each answered by many physics runs
-(:func:`pbdkit.sim.experiment.run_trials`, in parallel with ``workers`` / ``scheduler``):
+(:func:`pbdkit.sim._trials.run_trials`, in parallel with ``workers`` / ``scheduler``):
 
 1. **Generalization map.** For each object that moves, a grid of placements over the table
    spanning twice the demonstrated range on each side of its centre (the range is drawn), the
@@ -13,7 +13,7 @@ Three questions a researcher asks of a learned skill, each answered by many phys
    simulated teacher, over random placements inside the range.
 3. **Tracking-noise tolerance.** The fused controller's success rate against Gaussian noise
    added to the positions the skill is told (mean 3-D error 0 to 10 mm,
-   :func:`pbdkit.sim.experiment.observation_noise`), with the paper's tracking error,
+   :func:`pbdkit.sim._sensing.observation_noise`), with the paper's tracking error,
    5.9 +- 2.8 mm, marked.
 
 The runs are told the true positions (plus the noise of 3.): the map and the curve measure the
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,10 +37,9 @@ from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
 from .._validation import check_int, check_positive_float
-from ..sim import _tasks as T
-from ..sim._task_skill import learn_task
-from ..sim._tasks import TaskSpec
-from ..sim._trials import run_trials
+from ..sim._task_skill import constrained_objects, learn_task
+from ..sim._tasks import PlacementRange, TaskSpec, check_task, yaw_of, yaw_pose
+from ..sim._trials import TrialConditions, run_trials
 from ..skill._naming import controller_names
 from ._staging import staged_output
 
@@ -193,23 +192,23 @@ def grid_placements(
     for y in ys:
         for x in xs:
             p = {k: v.copy() for k, v in nominal.items()}
-            p[obj] = np.array([x, y, c[2]]) if r.yaw is None else T.yaw_pose([x, c[1], c[2]], y)
+            p[obj] = np.array([x, y, c[2]]) if r.yaw is None else yaw_pose([x, c[1], c[2]], y)
             out.append(p)
     return xs, ys, out
 
 
-def _map_box(r: T.PlacementRange) -> tuple[Float, Float]:
+def _map_box(r: PlacementRange) -> tuple[Float, Float]:
     """The demonstrated range in a map's coordinates: (x, y), or (x, yaw) for a pose."""
     if r.yaw is None:
         return r.low[:2].copy(), r.high[:2].copy()
     return np.array([r.low[0], r.yaw[0]]), np.array([r.high[0], r.yaw[1]])
 
 
-def _map_point(r: T.PlacementRange, placed: Float) -> Float:
+def _map_point(r: PlacementRange, placed: Float) -> Float:
     """A placement in a map's coordinates (:func:`_map_box`)."""
     if r.yaw is None:
         return np.asarray(placed[:2], dtype=np.float64)
-    return np.array([placed[0, 3], T.yaw_of(placed)])
+    return np.array([placed[0, 3], yaw_of(placed)])
 
 
 def _rate(trials: Sequence[Any], name: str) -> float:
@@ -217,7 +216,7 @@ def _rate(trials: Sequence[Any], name: str) -> float:
 
 
 def run_study(
-    task: str | TaskSpec,
+    spec: TaskSpec,
     out: Path,
     *,
     size: StudySize = SMALL,
@@ -227,7 +226,8 @@ def run_study(
     progress: Callable[[str, int, int], None] | None = None,
     learn: Callable[..., TaskSkill] | None = None,
 ) -> dict[str, Any]:
-    """Run the three studies of the module docstring for ``task`` and write their report.
+    """Run the three studies of the module docstring for the task ``spec`` and write their
+    report.
 
     Writes ``study.json`` (every success rate, the sizes, the timings), one
     ``map_OBJECT.png`` per moving object, ``learning_curve.png``, ``noise.png`` and
@@ -242,7 +242,7 @@ def run_study(
 
     Parameters
     ----------
-    task : str or TaskSpec
+    spec : TaskSpec
     out : Path
         Output folder (created, with its missing parents).
     size : StudySize
@@ -257,7 +257,7 @@ def run_study(
     learn : callable, optional
         ``learn(spec, n_demos=n, seed=seed)`` returns the ``TaskSkill`` learned from ``n``
         demonstrations of the task (the skill of the maps and the noise, ``n = 5``, then one
-        per number of the learning curve). Default: ``pbdkit.sim.experiment.learn_task``
+        per number of the learning curve). Default: :func:`pbdkit.sim.learn_task`
         (the simulated teacher, the full time grid); inject a faster or a different learner.
 
     Returns
@@ -272,7 +272,7 @@ def run_study(
     """
     from ..sim._parallel import session
 
-    spec = check_study(task, size=size, seed=seed, learn=learn)
+    spec = check_study(spec, size=size, seed=seed, learn=learn)
     out = Path(out)
     learn = learn_task if learn is None else learn
     start = time.perf_counter()
@@ -286,7 +286,7 @@ def run_study(
 
 
 def check_study(
-    task: str | TaskSpec,
+    spec: TaskSpec,
     *,
     size: StudySize = SMALL,
     seed: int = 0,
@@ -302,12 +302,10 @@ def check_study(
     Raises
     ------
     ValueError
-        An unknown task, ``size`` not a :class:`StudySize`, an unknown controller, ``seed``
-        not an integer >= 0.
+        ``spec`` not a TaskSpec, ``size`` not a :class:`StudySize`, an unknown controller,
+        ``seed`` not an integer >= 0.
     """
-    from ..sim._task_skill import constrained_objects
-
-    spec = T.get_task(task)
+    spec = check_task(spec, "spec")
     if not isinstance(size, StudySize):
         raise ValueError(f"size must be a StudySize (SMALL, FULL or your own), got {size!r}")
     check_int(seed, "seed", minimum=0)
@@ -334,6 +332,9 @@ def _run(
     from ._plots import figure_png
 
     ts = learn(spec, n_demos=5, seed=seed)
+    # The runs are told the true positions (module docstring): the skill is measured, not the
+    # cameras.
+    conditions = TrialConditions(ground_truth=True, seed=seed)
     names = list(size.map_controllers or ts.controllers)
     maps_of = list(spec.tracked_objects)
     total = size.runs(len(maps_of), len(names))
@@ -356,7 +357,7 @@ def _run(
     # 1. Generalization maps.
     for obj in maps_of:
         xs, ys, placements = grid_placements(spec, obj, size.grid)
-        trials = run_trials(ts, placements, names, client=client, seed=seed)
+        trials = run_trials(ts, placements, names, conditions, client=client)
         tick(f"map of the {obj}", len(placements) * len(names))
         success = {
             k: np.array([bool(t.runs[k]["success"]) for t in trials]).reshape(len(ys), len(xs))
@@ -382,7 +383,7 @@ def _run(
     curve = []
     for n in size.demos:
         ts_n = ts if n == len(ts.demos) else learn(spec, n_demos=n, seed=seed)
-        trials = run_trials(ts_n, curve_places, ["fused"], client=client, seed=seed)
+        trials = run_trials(ts_n, curve_places, ["fused"], conditions, client=client)
         tick(f"learning curve, {n} demonstrations", len(curve_places))
         curve.append({"n_demos": n, "success_rate": _rate(trials, "fused"),
                       "n_components": ts_n.skill.n_components})  # fmt: skip
@@ -393,9 +394,8 @@ def _run(
     noise_places = [spec.sample_objects(rng) for _ in range(size.noise_trials)]
     noise = []
     for level in size.noise_mm:
-        trials = run_trials(
-            ts, noise_places, ["fused"], client=client, seed=seed, noise_mm=float(level)
-        )
+        noisy = replace(conditions, noise_mm=float(level))
+        trials = run_trials(ts, noise_places, ["fused"], noisy, client=client)
         tick(f"noise {level:g} mm", len(noise_places))
         noise.append({"noise_mm": float(level), "success_rate": _rate(trials, "fused")})
     result["noise"] = noise

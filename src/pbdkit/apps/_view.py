@@ -23,21 +23,18 @@ a panel:
   draggable (an object in the hand stays there).
 
 The library does not need any of this: viser and yourdfpy are the optional extra
-``pbdkit[view]`` and are imported only here, when the command runs.
+``pbdkit[view]`` and are imported only by the view's modules, when the command runs (the server:
+:mod:`pbdkit.apps._view_serve`; a skill's arm from its URDF: :mod:`pbdkit.apps._view_urdf`; a
+task's MuJoCo world: :mod:`pbdkit.apps._view_world`).
 """
 
 from __future__ import annotations
 
-import contextlib
-import errno
-import io
 import math
-import signal
-import socket
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -47,6 +44,7 @@ from numpy.typing import NDArray
 from .._rotations import exp_map, matrix_from_quaternion, pose_matrix
 from ..data._placement import position_of
 from ..reproduction._constraints import JOINT
+from ..robots._protocols import PoseKinematicModel
 from ..skill._naming import controller_names, controller_use
 from ._view_plan import (
     COLOR_NAMES,
@@ -69,23 +67,13 @@ if TYPE_CHECKING:
 
     from ..sim._task_skill import TaskSkill
     from ..skill._skill import Skill
+    from ._view_urdf import UrdfArm
     from ._view_world import Frame, SimDrawing
 
-__all__ = [
-    "HOST",
-    "MIN_PREVIEW_STEPS",
-    "PREVIEW_BUDGET",
-    "PREVIEW_STEPS",
-    "ViewApp",
-    "check_port",
-    "serve",
-    "served",
-]
+__all__ = ["MIN_PREVIEW_STEPS", "PATH_SEGMENTS", "PREVIEW_BUDGET", "PREVIEW_STEPS", "ViewApp"]
 
 Float = NDArray[np.float64]
 
-#: The page is served on this interface only.
-HOST = "127.0.0.1"
 #: While an object is dragged, plans are previews on a grid of at most this many steps
 #: (:func:`pbdkit.apps._view_plan.coarse_skill`); the full plan follows when the drag ends.
 PREVIEW_STEPS = 250
@@ -95,29 +83,6 @@ PREVIEW_BUDGET = 0.030
 MIN_PREVIEW_STEPS = 100
 #: At most this many segments in the drawn path.
 PATH_SEGMENTS = 400
-
-
-def check_port(port: int) -> None:
-    """Refuse a port that is taken on :data:`HOST` (viser would silently take the next one).
-
-    Raises
-    ------
-    ValueError
-        The port is not in 1..65535, or something listens on it.
-    """
-    if not 1 <= port <= 65535:
-        raise ValueError(f"--port must be in 1..65535, got {port}")
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind((HOST, port))
-        except OSError as exc:
-            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
-                why = "in use" if exc.errno == errno.EADDRINUSE else "not allowed"
-                raise ValueError(
-                    f"port {port} on {HOST} is {why}: choose another with --port"
-                ) from None
-            raise
 
 
 def _wxyz_of(value: Float) -> tuple[float, float, float, float]:
@@ -137,7 +102,8 @@ def _yaw_pose(position: Float, yaw_deg: float) -> Float:
 
 
 class ViewApp:
-    """The page: scene, panel, planner (module docstring). :func:`serve` runs it.
+    """The page: scene, panel, planner (module docstring).
+    :func:`pbdkit.apps._view_serve.serve` runs it.
 
     Parameters
     ----------
@@ -146,7 +112,7 @@ class ViewApp:
         Where the objects start (every object the skill knows; for a task, every object of the
         task).
     server : viser.ViserServer
-        Bound to :data:`HOST`; the app adds its scene and panel.
+        Bound to :data:`pbdkit.apps._view_serve.HOST`; the app adds its scene and panel.
     task_skill : TaskSkill, optional
         For ``--task``: the task's skills (controllers, ``fused-position``), the MuJoCo scene
         and the runs in physics.
@@ -184,6 +150,11 @@ class ViewApp:
         self._preview_times: deque[float] = deque(maxlen=5)
         self._dragging: set[str] = set()
         self.ts = task_skill
+        #: The arm when it gives the hand's orientation (a PoseKinematicModel): the hand's frame
+        #: is drawn, and a task's grasped object carried; None: the hand's position only.
+        self.pose_robot: PoseKinematicModel | None = (
+            skill.robot if isinstance(skill.robot, PoseKinematicModel) else None
+        )
         self.server = server
         self._lock = threading.RLock()
         self.objects: dict[str, Float] = {
@@ -209,7 +180,7 @@ class ViewApp:
         self._updating_fields = False
         self._playing = threading.Event()
         self._draw_world: SimDrawing | None = None
-        self._urdf_arm: _UrdfArm | None = None
+        self._urdf_arm: UrdfArm | None = None
         self._build_scene(urdf)
         self._build_panel(title)
         self.planner: LatestWins[tuple[dict[str, Float], str, bool]] = LatestWins(
@@ -238,7 +209,9 @@ class ViewApp:
 
             self._draw_world = SimDrawing(self.server, self.ts.task, self.objects)
         else:
-            self._urdf_arm = _UrdfArm(self.server, self.skill.robot, urdf)
+            from ._view_urdf import UrdfArm
+
+            self._urdf_arm = UrdfArm(self.server, self.skill.robot, urdf)
         self.handles: dict[str, Any] = {}
         movable = self._movable()
         for name in movable:
@@ -612,13 +585,16 @@ class ViewApp:
             if self._running():
                 pass  # the physics draws the arm
             elif self._draw_world is not None:
-                carry = carry_transform(self.skill.robot, plan, step)
+                carry = (
+                    None
+                    if self.pose_robot is None
+                    else carry_transform(self.pose_robot, plan, step)
+                )
                 self._draw_world.show_plan(q, plan.objects | self._fixed_objects(), carry)
             elif self._urdf_arm is not None:
                 self._urdf_arm.show(q)
-            robot: Any = self.skill.robot
-            hand = robot.fk_pose(q) if hasattr(robot, "fk_pose") else None
-            if hand is not None:
+            if self.pose_robot is not None:
+                hand = self.pose_robot.fk_pose(q)
                 self.hand.position = np.asarray(hand[:3, 3])
                 self.hand.wxyz = quat_wxyz(hand[:3, :3])
             driving = plan.driving[step]
@@ -783,160 +759,3 @@ class ViewApp:
             thread.join(timeout=10.0)
         if self._draw_world is not None:
             self._draw_world.close()
-
-
-class _UrdfArm:
-    """The arm drawn from a URDF with yourdfpy (viser's ``ViserUrdf``), plus a stick figure
-    through its links' origins (a URDF without visual geometry, such as one made from a DH
-    table, still shows)."""
-
-    def __init__(self, server: viser.ViserServer, robot: Any, urdf: Path | None) -> None:
-        from functools import partial
-
-        import yourdfpy
-        from viser.extras import ViserUrdf
-
-        if urdf is not None:
-            loaded = yourdfpy.URDF.load(
-                str(urdf),
-                build_scene_graph=True,
-                load_meshes=True,
-                filename_handler=partial(yourdfpy.filename_handler_magic, dir=urdf.parent),
-            )
-        else:
-            loaded = yourdfpy.URDF.load(
-                io.StringIO(robot.urdf), build_scene_graph=True, load_meshes=True
-            )
-        self.urdf = loaded
-        self.viser_urdf = ViserUrdf(server, loaded, root_node_name="/arm")
-        names = list(self.viser_urdf.get_actuated_joint_names())
-        self._index = [names.index(j) if j in names else -1 for j in robot.joint_names]
-        self._cfg = np.zeros(len(names))
-        self._links = [j.child for j in loaded.robot.joints]
-        self._parents = [j.parent for j in loaded.robot.joints]
-        self._base = loaded.base_link
-        self._server = server
-        self.sticks: Any = None
-
-    def show(self, q: Float) -> None:
-        for i, k in enumerate(self._index):
-            if k >= 0:
-                self._cfg[k] = q[i]
-        self.viser_urdf.update_cfg(self._cfg)
-        pts = []
-        for parent, child in zip(self._parents, self._links, strict=True):
-            a = self.urdf.get_transform(parent, self._base)[:3, 3]
-            b = self.urdf.get_transform(child, self._base)[:3, 3]
-            if np.linalg.norm(b - a) > 1e-6:
-                pts.append([a, b])
-        if pts:
-            self.sticks = self._server.scene.add_line_segments(
-                "/arm_sticks",
-                points=np.array(pts, dtype=np.float32),
-                colors=(60, 60, 60),
-                thickness=0.012,
-            )
-
-
-def serve(
-    app_factory: Callable[[viser.ViserServer], ViewApp],
-    *,
-    port: int,
-    open_browser: bool = True,
-    say: Callable[[str], None] = print,
-    ready: Callable[[ViewApp], None] | None = None,
-    stop: threading.Event | None = None,
-) -> None:
-    """Serve the page until SIGINT or SIGTERM (or ``stop``), then stop cleanly.
-
-    ``app_factory`` builds the :class:`ViewApp` on the server. ``ready`` is called with it once
-    the page is served (tests and benchmarks).
-
-    Raises
-    ------
-    ValueError
-        The port is taken (checked first: viser would take the next free one).
-    """
-    import viser
-
-    check_port(port)
-    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
-        server = viser.ViserServer(host=HOST, port=port, verbose=False)
-    server.gui.configure_theme(show_share_button=False)  # sharing goes through viser's servers
-    done = stop if stop is not None else threading.Event()
-    app: ViewApp | None = None
-    previous: dict[signal.Signals, Any] = {}
-    try:
-        if server.get_port() != port:
-            raise ValueError(f"port {port} on {HOST} is in use: choose another with --port")
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                previous[sig] = signal.signal(sig, lambda *_: done.set())
-        app = app_factory(server)
-        url = f"http://{HOST}:{port}"
-        say(f"serving {url} (Ctrl+C to stop)")
-        if open_browser:
-            import webbrowser
-
-            webbrowser.open(url)
-        if ready is not None:
-            ready(app)
-        while not done.wait(timeout=0.5):
-            pass
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if app is not None:
-            app.close()
-        with contextlib.redirect_stdout(io.StringIO()):
-            server.stop()
-
-
-@contextlib.contextmanager
-def served(
-    app_factory: Callable[[viser.ViserServer], ViewApp], *, port: int, timeout: float = 120.0
-) -> Iterator[ViewApp]:
-    """Serve the page from a background thread while the block runs (a notebook, a test, a
-    benchmark): yields the app once the page is served, and stops the server at the end.
-
-    Raises
-    ------
-    ValueError
-        As :func:`serve` (a port in use).
-    TimeoutError
-        The page was not served within ``timeout`` seconds.
-    """
-    stop = threading.Event()
-    started = threading.Event()
-    box: dict[str, Any] = {}
-
-    def ready(app: ViewApp) -> None:
-        box["app"] = app
-        started.set()
-
-    def run() -> None:
-        try:
-            serve(
-                app_factory,
-                port=port,
-                open_browser=False,
-                say=lambda _: None,
-                ready=ready,
-                stop=stop,
-            )
-        except BaseException as exc:  # handed to the caller's thread
-            box["error"] = exc
-            started.set()
-
-    thread = threading.Thread(target=run, name="pbdkit-view-server", daemon=True)
-    thread.start()
-    if not started.wait(timeout):
-        stop.set()
-        raise TimeoutError(f"the view was not served within {timeout:g} s")
-    if "error" in box:
-        raise box["error"]
-    try:
-        yield box["app"]
-    finally:
-        stop.set()
-        thread.join(timeout=30.0)

@@ -32,6 +32,7 @@ from ..reproduction._setup import ReachWarning
 if TYPE_CHECKING:
     from ..reproduction._constraints import Constraints
     from ..reproduction._result import ReproductionResult
+    from ..robots._protocols import PoseKinematicModel
     from ..skill._skill import Skill
 
 __all__ = [
@@ -152,7 +153,7 @@ class LatestWins(Generic[R]):
             self._thread.join(timeout=10.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Plan:
     """One reproduction for one placement, with what the page draws of it.
 
@@ -227,16 +228,16 @@ def make_plan(
     except ValueError:  # no known duration: steps
         times = np.asarray(res.t, dtype=np.float64)
     return Plan(
-        told,
-        controller,
-        res,
-        skill.constraints(),
-        times,
-        driving,
-        seconds,
-        [str(w.message) for w in caught],
-        skill,
-        preview,
+        objects=told,
+        controller=controller,
+        result=res,
+        constraints=skill.constraints(),
+        times=times,
+        driving=driving,
+        seconds=seconds,
+        messages=[str(w.message) for w in caught],
+        skill=skill,
+        preview=preview,
     )
 
 
@@ -349,7 +350,7 @@ def typical_placements(skill: Skill) -> dict[str, Float]:
     return out
 
 
-def carry_transform(robot: Any, plan: Plan, step: int) -> Float | None:
+def carry_transform(robot: PoseKinematicModel, plan: Plan, step: int) -> Float | None:
     """How the plan moves the object it grasps at reproduction step ``step``: a 4x4 transform
     to apply to the object's pose where it lies, or None before the grasp (or if the gripper
     never closes).

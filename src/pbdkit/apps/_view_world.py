@@ -21,11 +21,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, cast
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from ..data._placement import position_of
+from ..sim._gl import mujoco
 from ..sim._perturb import Disturbance
 from ..sim._scene import Simulation
 from ..sim._tasks import TaskSpec, yaw_of

@@ -1,13 +1,15 @@
 """The simulated world of the experiment (MuJoCo): tasks, scene, cameras, execution, teacher.
 
 The only part of pbdkit that imports MuJoCo (the ``sim`` extra: ``pip install pbdkit[sim]``);
-learning and reproduction never depend on it. Names are imported on first use.
+learning and reproduction never depend on it. Names are imported on first use, MuJoCo with the
+first that needs it (``import pbdkit.sim`` imports none of it).
 
 - Tasks: a task is one :class:`TaskSpec` (placement ranges, scene objects, the teacher's via
   points, the success judge) in a registry (:func:`register_task`, :func:`get_task`,
   :func:`task_names`); the built-in ``"coaster"`` and ``"basin"`` (the paper's two) and
-  ``"slot"``. A task's name becomes its spec once, at the edge (the command line,
-  :func:`evaluate`); below that, everything takes the spec.
+  ``"slot"``, registered before the first look-up. A task's name becomes its spec once, at the
+  edge (the command line, :func:`evaluate`, :func:`learn_task`, :func:`teach`); below that,
+  everything takes the spec (:class:`Simulation`, :func:`build_scene`).
 - :class:`Simulation` (:func:`build_scene`): the Katana (from the same URDF as
   :func:`pbdkit.robots.katana`), a two-finger gripper, the task's objects, two 320x240 cameras.
 - :func:`teach`: simulated kinesthetic demonstrations (:class:`pbdkit.Demonstration`).
@@ -17,11 +19,12 @@ learning and reproduction never depend on it. Names are imported on first use.
 - Disturbances (:class:`Perturbation`, :func:`register_perturbation`,
   :func:`perturbation_names`): ``move``, ``push``, ``rotate``.
 - :func:`evaluate`: the success rate of every controller over new placements
-  (:class:`Evaluation`), serially or on Dask workers.
+  (:class:`Evaluation`), serially or on Dask workers, under one set of
+  :class:`TrialConditions` (online or not, the disturbance, cameras or ground truth, the seed).
 - :func:`save_video`: recorded frames to MP4.
 
 Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (``osmesa`` if only OSMesa is installed);
-set it before importing this package to choose another backend.
+set it before the simulation is first used to choose another backend (:mod:`pbdkit.sim._gl`).
 """
 
 from __future__ import annotations
@@ -29,24 +32,20 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from . import _gl  # noqa: F401  (must run before mujoco is imported)
-
-try:
-    import mujoco  # noqa: F401
-except ImportError as exc:  # pragma: no cover - depends on the environment
-    raise ImportError(
-        "pbdkit.sim needs MuJoCo: install the 'sim' extra, e.g. pip install 'pbdkit[sim]'"
-    ) from exc
-
-from . import _taskdefs  # noqa: F401  (registers the built-in tasks)
-
 if TYPE_CHECKING:
     from ._evaluation import Evaluation, evaluate
     from ._execute import ExecutionResult, execute
     from ._online import execute_online
     from ._perturb import Disturbance, Perturbation, perturbation_names, register_perturbation
     from ._scene import Simulation, build_scene
-    from ._task_skill import TaskSkill, learn_task
+    from ._task_registry import (
+        get_task,
+        nominal_objects,
+        register_task,
+        sample_objects,
+        task_names,
+    )
+    from ._task_skill import TaskSkill, learn_task, teach
     from ._tasks import (
         ObjectMove,
         ObjectTurn,
@@ -54,13 +53,8 @@ if TYPE_CHECKING:
         PlacementRange,
         TaskSpec,
         ViaPoint,
-        get_task,
-        nominal_objects,
-        register_task,
-        sample_objects,
-        task_names,
     )
-    from ._teacher import teach
+    from ._trials import TrialConditions
     from ._video import save_video
 
 _WHERE = {
@@ -75,21 +69,22 @@ _WHERE = {
     "Simulation": "_scene",
     "TaskSkill": "_task_skill",
     "TaskSpec": "_tasks",
+    "TrialConditions": "_trials",
     "ViaPoint": "_tasks",
     "build_scene": "_scene",
     "evaluate": "_evaluation",
     "execute": "_execute",
     "execute_online": "_online",
-    "get_task": "_tasks",
+    "get_task": "_task_registry",
     "learn_task": "_task_skill",
-    "nominal_objects": "_tasks",
+    "nominal_objects": "_task_registry",
     "perturbation_names": "_perturb",
     "register_perturbation": "_perturb",
-    "register_task": "_tasks",
-    "sample_objects": "_tasks",
+    "register_task": "_task_registry",
+    "sample_objects": "_task_registry",
     "save_video": "_video",
-    "task_names": "_tasks",
-    "teach": "_teacher",
+    "task_names": "_task_registry",
+    "teach": "_task_skill",
 }
 
 __all__ = [
@@ -104,6 +99,7 @@ __all__ = [
     "Simulation",
     "TaskSkill",
     "TaskSpec",
+    "TrialConditions",
     "ViaPoint",
     "build_scene",
     "evaluate",

@@ -5,7 +5,8 @@ inside the demonstrated ranges (:attr:`pbdkit.sim.TaskSpec.ranges`), runs the tr
 (:func:`pbdkit.sim._trials.run_trials`: each reproduces the skill with every controller, executes
 it under physics over the demonstrations' mean duration and judges the outcome with the task's
 judge) and summarises them (:func:`summarize`). It is the entry point that resolves a task's
-name (:func:`pbdkit.sim.get_task`); what it calls takes the spec.
+name (:func:`pbdkit.sim.get_task`) and builds the run's :class:`TrialConditions` from its
+options, once; what it calls takes the spec and the conditions.
 
 With the cameras (the default), a placement whose objects they cannot locate counts as a failure
 of every controller (the robot would not move), reported in ``"tracking_failures"``.
@@ -23,15 +24,16 @@ from ._metrics import tracking_summary, yaw_errors, yaw_summary
 from ._parallel import session
 from ._perturb import check_perturb
 from ._sensing import calibrate_tracker
+from ._task_registry import get_task
 from ._task_skill import TaskSkill, learn_task
-from ._tasks import TaskSpec, get_task
+from ._tasks import TaskSpec
 from ._tracking import SimTracker
-from ._trials import Trial, run_trials
+from ._trials import Trial, TrialConditions, run_trials
 
 __all__ = ["ControllerStats", "Evaluation", "evaluate", "summarize"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ControllerStats:
     """Success rate of one controller over an evaluation and its metrics' statistics.
 
@@ -51,31 +53,35 @@ class ControllerStats:
     metrics: dict[str, dict[str, float] | None]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Evaluation:
     """The result of :func:`evaluate`; :meth:`as_dict` is ``pbdkit evaluate``'s JSON.
 
-    ``tracking_error_mm`` and ``tracking_error_deg`` summarise the cameras' errors over the
-    placements they located (:func:`pbdkit.sim._metrics.tracking_summary`,
-    :func:`pbdkit.sim._metrics.yaw_summary`; None with ``--ground-truth``); ``posed`` says that
-    the task tracks objects placed as poses, whose yaw error the JSON then reports.
+    ``conditions`` are the trials' (:class:`pbdkit.sim.TrialConditions`: seed, online,
+    perturbation, cameras or ground truth). ``tracking_error_mm`` and ``tracking_error_deg``
+    summarise the cameras' errors over the placements they located
+    (:func:`pbdkit.sim._metrics.tracking_summary`, :func:`pbdkit.sim._metrics.yaw_summary`;
+    None with ``--ground-truth``); ``posed`` says that the task tracks objects placed as poses,
+    whose yaw error the JSON then reports.
     """
 
     task: str
-    seed: int
+    conditions: TrialConditions
     n_demos: int
     n_components: dict[str, int]
     constraints: list[str]
     constrain_fixed: bool
     learn_seconds: float
-    vision: bool
     controllers: dict[str, ControllerStats]
     tracking_error_mm: dict[str, Any] | None
     trials: list[Trial]
-    online: bool = False
-    perturb: str = "none"
     tracking_error_deg: dict[str, Any] | None = None
     posed: bool = False
+
+    @property
+    def vision(self) -> bool:
+        """True when the skill was told what the cameras saw (not ground truth)."""
+        return self.conditions.vision
 
     @property
     def tracking_failures(self) -> int:
@@ -96,15 +102,15 @@ class Evaluation:
         out: dict[str, Any] = {
             "task": self.task,
             "trials": len(self.trials),
-            "seed": self.seed,
+            "seed": self.conditions.seed,
             "n_demos": self.n_demos,
             "n_components": dict(self.n_components),
             "constraints": list(self.constraints),
             "constrain_fixed": self.constrain_fixed,
             "learn_seconds": self.learn_seconds,
             "vision": self.vision,
-            "online": self.online,
-            "perturb": self.perturb,
+            "online": self.conditions.online,
+            "perturb": self.conditions.perturb,
             "controllers": {
                 k: {"success_rate": v.success_rate, "successes": v.successes, "metrics": v.metrics}
                 for k, v in self.controllers.items()
@@ -132,16 +138,12 @@ class Evaluation:
 def summarize(
     ts: TaskSkill,
     trials: Sequence[Trial],
+    conditions: TrialConditions,
     *,
-    seed: int,
     n_demos: int,
-    vision: bool,
-    online: bool = False,
-    perturb: str = "none",
-    workers: int | None = None,
-    scheduler: str | None = None,
 ) -> Evaluation:
-    """The summarising half of :func:`evaluate`: success rates and metric statistics."""
+    """The summarising half of :func:`evaluate`: success rates and metric statistics of the
+    ``trials`` run under ``conditions``."""
     names = list(trials[0].runs) if trials else []
     stats: dict[str, ControllerStats] = {}
     for name in names:
@@ -167,7 +169,9 @@ def summarize(
                 if len(vals)
                 else None
             )
-        stats[name] = ControllerStats(successes / len(rows), successes, metrics)
+        stats[name] = ControllerStats(
+            success_rate=successes / len(rows), successes=successes, metrics=metrics
+        )
     errors = [t.tracking_error_mm for t in trials if t.tracking_error_mm is not None]
     # The yaw error of the tracked objects placed as poses (4x4 placements), where the
     # cameras saw them.
@@ -177,20 +181,18 @@ def summarize(
         for t in trials
         if t.observed is not None and t.tracking_error_mm is not None
     ]
+    vision = conditions.vision
     return Evaluation(
         task=ts.task.name,
-        seed=seed,
+        conditions=conditions,
         n_demos=n_demos,
         n_components=ts.skill.n_components,
         constraints=list(ts.skill.constraint_names),
         constrain_fixed=ts.constrain_fixed,
         learn_seconds=ts.learn_seconds,
-        vision=vision,
         controllers=stats,
         tracking_error_mm=tracking_summary(errors) if vision else None,
         trials=list(trials),
-        online=online,
-        perturb=perturb,
         tracking_error_deg=yaw_summary(yaws) if vision else None,
         posed=posed,
     )
@@ -216,7 +218,9 @@ def evaluate(
     """Success rate of every controller over ``trials`` random new placements.
 
     Teaches and learns (unless ``task_skill`` is given), draws the placements, runs
-    :func:`run_trials` and :func:`summarize`.
+    :func:`run_trials` and :func:`summarize`. ``seed``, ``online``, ``perturb`` and
+    ``ground_truth`` become the trials' :class:`TrialConditions`, here, once
+    (:attr:`Evaluation.conditions`).
 
     Parameters
     ----------
@@ -246,7 +250,8 @@ def evaluate(
         ``ground_truth``, the true) positions at 15 Hz (:func:`pbdkit.sim._runs.run_online`);
         default: reproduce once from the positions seen at the start and play the trajectory.
     perturb : str
-        ``"none"``, ``"move"`` or ``"push"`` (:mod:`pbdkit.sim._perturb`).
+        A registered perturbation (:func:`pbdkit.sim.perturbation_names`: ``"none"``,
+        ``"move"``, ``"push"``, ``"rotate"``, ...).
     workers, scheduler
         Run the trials in parallel (:func:`run_trials`): ``workers`` local processes, or on
         the Dask cluster at ``scheduler``. The results are those of the serial run.
@@ -259,7 +264,10 @@ def evaluate(
     spec = get_task(task)
     if trials < 1:
         raise ValueError(f"trials must be >= 1, got {trials}")
-    check_perturb(perturb, spec)
+    conditions = TrialConditions(
+        online=online, perturb=perturb, ground_truth=ground_truth, seed=seed
+    )
+    check_perturb(conditions.perturb, spec)
     # The cluster starts first: its workers import while the skill is learned here.
     with session(workers, scheduler) as client:
         ts = task_skill or learn_task(
@@ -272,20 +280,9 @@ def evaluate(
         # draws.
         rng = np.random.default_rng([seed, 1])
         placements = [spec.sample_objects(rng) for _ in range(trials)]
-        vision = not ground_truth
-        if vision and tracker is None:
+        if conditions.vision and tracker is None:
             tracker = calibrate_tracker(ts)
         done = run_trials(
-            ts,
-            placements,
-            names,
-            tracker=tracker if vision else None,
-            progress=progress,
-            online=online,
-            perturb=perturb,
-            seed=seed,
-            client=client,
+            ts, placements, names, conditions, tracker=tracker, progress=progress, client=client
         )
-    return summarize(
-        ts, done, seed=seed, n_demos=n_demos, vision=vision, online=online, perturb=perturb
-    )
+    return summarize(ts, done, conditions, n_demos=n_demos)

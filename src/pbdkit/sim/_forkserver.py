@@ -17,9 +17,17 @@ import os
 
 __all__ = ["ENVIRONMENT", "METHOD_KEY", "PRELOAD", "cores", "local_workers", "start"]
 
-#: What the server imports once, for every worker forked from it (the last one freezes what
-#: the others loaded: :mod:`pbdkit.sim._freeze`).
-PRELOAD: tuple[str, ...] = ("distributed", "pbdkit.sim.experiment", "pbdkit.sim._freeze")
+#: What the server imports once, for every worker forked from it: Dask's worker, the trials
+#: (the simulation, MuJoCo included) and the built-in tasks (a task's spec reaches a worker
+#: pickled, its functions by reference to their module); the last one freezes what the others
+#: loaded (:mod:`pbdkit.sim._freeze`). ``multiprocessing`` skips a name it cannot import
+#: without a word: ``tests/test_parallel.py`` checks that the workers have them.
+PRELOAD: tuple[str, ...] = (
+    "distributed",
+    "pbdkit.sim._trials",
+    "pbdkit.sim._taskdefs",
+    "pbdkit.sim._freeze",
+)
 
 #: Dask's setting of how a nanny starts its worker process.
 METHOD_KEY = "distributed.worker.multiprocessing-method"

@@ -1,7 +1,9 @@
-"""Choose MuJoCo's headless OpenGL backend before ``mujoco`` is first imported.
+"""MuJoCo for :mod:`pbdkit.sim`, imported once its headless OpenGL backend is chosen.
 
-MuJoCo reads ``MUJOCO_GL`` once, at import time; :mod:`pbdkit.sim` imports this module before
-``mujoco``. A value set by the user always wins. Otherwise EGL is used when ``libEGL`` can be found
+MuJoCo reads ``MUJOCO_GL`` once, at import time: every module of :mod:`pbdkit.sim` that uses
+MuJoCo imports it from here (``from ._gl import mujoco``), so that the choice is made first,
+and only when the simulation is used (``import pbdkit.sim`` imports no MuJoCo). A value set by
+the user always wins. Otherwise EGL is used when ``libEGL`` can be found
 (GPU or Mesa's software EGL, a few ms per 320x240 frame) and OSMesa when only ``libOSMesa`` is
 installed (slower, but needs no display either).
 
@@ -48,3 +50,12 @@ if "MUJOCO_GL" not in os.environ:
     _fix_up_late_import(os.environ["MUJOCO_GL"])
 
 BACKEND: str = os.environ["MUJOCO_GL"]
+
+try:
+    import mujoco
+except ImportError as exc:  # pragma: no cover - depends on the environment
+    raise ImportError(
+        "pbdkit.sim needs MuJoCo: install the 'sim' extra, e.g. pip install 'pbdkit[sim]'"
+    ) from exc
+
+__all__ = ["BACKEND", "mujoco"]

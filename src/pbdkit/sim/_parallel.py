@@ -39,7 +39,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
-from typing import Any, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 from . import _forkserver
 
@@ -62,14 +62,22 @@ WORKER_CONFIG: dict[str, Any] = {"distributed.worker.profile.enabled": False}
 _LOCAL = threading.local()
 
 
+class _ThreadCopy(NamedTuple):
+    """A payload as received, and this thread's deep copy of it."""
+
+    received: Any
+    copy: Any
+
+
 def _own_copy(shared: S) -> S:
     """This thread's copy of the shared payload: a robot's pinocchio work data must not be
     shared between threads, and a worker started with several threads (``dask worker
     --nthreads 4``) runs several jobs at once on the one payload it received."""
-    held = getattr(_LOCAL, "shared", None)
-    if held is None or held[0] is not shared:
-        _LOCAL.shared = (shared, copy.deepcopy(shared))
-    mine: S = _LOCAL.shared[1]
+    held: _ThreadCopy | None = getattr(_LOCAL, "shared", None)
+    if held is None or held.received is not shared:
+        held = _ThreadCopy(shared, copy.deepcopy(shared))
+        _LOCAL.shared = held
+    mine: S = held.copy
     return mine
 
 
@@ -178,7 +186,14 @@ def _local_config() -> AbstractContextManager[Any]:
     return dask.config.set({**WORKER_CONFIG, _forkserver.METHOD_KEY: "forkserver"})
 
 
-def _local_cluster(workers: int) -> tuple[Any, Any]:
+class _Connection(NamedTuple):
+    """A Dask client and the local cluster it was started with (None for a remote one)."""
+
+    client: Any
+    cluster: Any
+
+
+def _local_cluster(workers: int) -> _Connection:
     from distributed import Client, LocalCluster
 
     cluster = LocalCluster(  # type: ignore[no-untyped-call]
@@ -197,7 +212,7 @@ def _local_cluster(workers: int) -> tuple[Any, Any]:
     except BaseException:
         cluster.close()
         raise
-    return client, cluster
+    return _Connection(client, cluster)
 
 
 def _remote(scheduler: str | None, timeout: float) -> Any:
@@ -372,9 +387,9 @@ class Session:
     def __init__(self, workers: int | None = None, scheduler: str | None = None) -> None:
         self._workers = _check_arguments(workers, scheduler)
         self._stack = ExitStack()
-        self._result: tuple[Any, Any] | None = None
+        self._result: _Connection | None = None
         if workers is None:
-            self._result = (_remote(scheduler, SCHEDULER_TIMEOUT), None)
+            self._result = _Connection(_remote(scheduler, SCHEDULER_TIMEOUT), None)
         else:
             _forkserver.start()
 
@@ -385,7 +400,7 @@ class Session:
             assert self._workers is not None
             self._stack.enter_context(_local_config())
             self._result = _local_cluster(self._workers)
-        return self._result[0]
+        return self._result.client
 
     def close(self) -> None:
         """Close the client, and the cluster if it was started here."""

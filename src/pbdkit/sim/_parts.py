@@ -67,11 +67,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import mujoco
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from ._gl import mujoco
 from ._tasks import yaw_of
 from ._world import FINGER_HALF, SOLID, TIMESTEP, free_joint
 

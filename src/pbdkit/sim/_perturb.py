@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -158,6 +158,13 @@ class SlideObject(Disturbance):
         self.displacement = np.asarray(self.displacement, dtype=np.float64)
 
 
+class _Placed(NamedTuple):
+    """Where a turned object stood when its turn began: its point (3,) and yaw (rad)."""
+
+    point: Float
+    yaw: float
+
+
 @dataclass
 class TurnObject(Disturbance):
     """An object turns about the vertical through its reference point by ``angle`` at constant
@@ -179,7 +186,7 @@ class TurnObject(Disturbance):
     duration: float = SLIDE_DURATION
     grasp_s: float | None = None
     name: str = field(default="rotate", init=False)
-    _origin: tuple[Float, float] | None = field(default=None, init=False, repr=False)
+    _origin: _Placed | None = field(default=None, init=False, repr=False)
     _done: bool = field(default=False, init=False, repr=False)
 
     def apply(self, sim: Simulation, t: float) -> None:
@@ -187,7 +194,7 @@ class TurnObject(Disturbance):
             return
         if self._origin is None:
             pose = sim.object_poses()[self.obj]
-            self._origin = (pose[:3, 3].copy(), yaw_of(pose))
+            self._origin = _Placed(pose[:3, 3].copy(), yaw_of(pose))
         point, yaw0 = self._origin
         if t >= self.start + self.duration + 1e-12:
             sim.place_object(self.obj, point, yaw=yaw0 + self.angle)  # the end, once
@@ -197,15 +204,15 @@ class TurnObject(Disturbance):
         sim.place_object(self.obj, point, yaw=yaw0 + frac * self.angle)
 
     def as_dict(self) -> dict[str, Any]:
-        yaws = None if self._origin is None else (self._origin[1], self._origin[1] + self.angle)
+        origin = self._origin
         return {
             "name": self.name,
             "object": self.obj,
             "angle_deg": math.degrees(self.angle),
             "start_s": float(self.start),
             "duration_s": float(self.duration),
-            "initial_yaw_deg": None if yaws is None else math.degrees(yaws[0]),
-            "final_yaw_deg": None if yaws is None else math.degrees(yaws[1]),
+            "initial_yaw_deg": None if origin is None else math.degrees(origin.yaw),
+            "final_yaw_deg": None if origin is None else math.degrees(origin.yaw + self.angle),
             "grasp_s": self.grasp_s,
         }
 
@@ -286,7 +293,7 @@ def _slide_direction(
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DisturbanceSetup:
     """What a perturbation's factory knows of the trial it disturbs.
 

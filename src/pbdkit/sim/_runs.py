@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..motion._limits import MotionLimits
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import ReachWarning
 from ..skill._skill import Skill
@@ -20,7 +21,7 @@ from ._metrics import run_summary
 from ._online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
 from ._perturb import Disturbance
 from ._scene import Simulation
-from ._task_skill import TaskSkill, velocity_limit
+from ._task_skill import TaskSkill
 from ._tracking import SimTracker
 
 __all__ = ["ControllerRun", "OnlineControllerRun", "run_controller", "run_online"]
@@ -28,7 +29,7 @@ __all__ = ["ControllerRun", "OnlineControllerRun", "run_controller", "run_online
 Float = NDArray[np.float64]
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ControllerRun:
     """One controller's reproduction and its execution under physics.
 
@@ -59,7 +60,7 @@ class ControllerRun:
         return run_summary(self.execution, self.velocity_limit, self.force_window)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class OnlineControllerRun:
     """One controller run online, in the physics loop (:func:`pbdkit.sim.execute_online`).
 
@@ -90,6 +91,12 @@ class OnlineControllerRun:
         if self.online.tracking is not None:
             out["tracking"] = self.online.tracking["frames"]
         return out
+
+
+def _velocity_limit(skill: Skill) -> Float:
+    """The arm's joint velocity limits (rad/s; inf where it has none), which a run's peak
+    speed is measured against (:func:`pbdkit.sim._metrics.peak_speed_ratio`)."""
+    return MotionLimits.from_robot(skill.robot, skill.n_joints).velocity
 
 
 def _prepare_run(
@@ -154,11 +161,15 @@ def run_controller(
         )
     finally:
         sim.close()
-    messages = [str(w.message) for w in caught]
-    limit = velocity_limit(ts)
-    window = None if disturbance is None else disturbance.force_window()
     return ControllerRun(
-        controller, told, res, ex, rep_s, messages, velocity_limit=limit, force_window=window
+        controller=controller,
+        objects=told,
+        reproduction=res,
+        execution=ex,
+        reproduce_seconds=rep_s,
+        warnings=[str(w.message) for w in caught],
+        velocity_limit=_velocity_limit(skill),
+        force_window=None if disturbance is None else disturbance.force_window(),
     )
 
 
@@ -194,7 +205,11 @@ def run_online(
             )
         finally:
             sim.close()
-    messages = [str(w.message) for w in caught]
-    window = None if disturbance is None else disturbance.force_window()
-    limit = velocity_limit(ts)
-    return OnlineControllerRun(controller, told, run, limit, messages, force_window=window)
+    return OnlineControllerRun(
+        controller=controller,
+        objects=told,
+        online=run,
+        velocity_limit=_velocity_limit(skill),
+        warnings=[str(w.message) for w in caught],
+        force_window=None if disturbance is None else disturbance.force_window(),
+    )

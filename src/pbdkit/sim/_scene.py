@@ -24,15 +24,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
-import mujoco
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ..data._placement import position_of, rotation_of
-from . import _tasks as T
+from ._gl import mujoco
+from ._glass import GLASS_PATCH_CENTER
 from ._parts import block_geom
 from ._tasks import TaskSpec
 from ._world import (
@@ -96,6 +96,14 @@ def _as_slice(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
     return idx
 
 
+class _Mocap(NamedTuple):
+    """An object built as a mocap body: its mocap id and its reference point in the body's
+    frame."""
+
+    mocap_id: int
+    offset: Float
+
+
 class Simulation:
     """A MuJoCo model and its state, with the operations the experiment needs.
 
@@ -139,14 +147,14 @@ class Simulation:
         else:
             self._held_kind = "glass"
             self._held_wall = wall_prefix(self._held)
-            self._held_point_z = T.GLASS_PATCH_CENTER
+            self._held_point_z = GLASS_PATCH_CENTER
         self._glass_body = m.body(self._held).id
         self._liquid_bodies = np.array(
             [m.body(f"liquid{i}").id for i in range(info.n_liquid)], dtype=np.intp
         )
         # Objects built as mocap bodies (a disturbance may slide or turn them): body id ->
         # mocap id, and the object's reference point in the body's frame.
-        self._mocap: dict[str, tuple[int, Float]] = {}
+        self._mocap: dict[str, _Mocap] = {}
         # The other objects that are bodies (static): their orientation, for object_poses.
         self._bodies: dict[str, int] = {}
         for name, placed in info.objects.items():
@@ -156,7 +164,7 @@ class Simulation:
                 mid = int(m.body_mocapid[bid])
                 rot0 = _quat_mat(m.body_quat[bid])
                 offset = rot0.T @ (pos - m.body_pos[bid])
-                self._mocap[name] = (mid, np.asarray(offset, dtype=np.float64))
+                self._mocap[name] = _Mocap(mid, np.asarray(offset, dtype=np.float64))
             elif bid >= 0:
                 self._bodies[name] = bid
         self._glass_qadr = int(m.jnt_qposadr[m.joint(free_joint(self._held)).id])
@@ -177,12 +185,12 @@ class Simulation:
     @classmethod
     def from_task(
         cls,
-        task: str | TaskSpec,
+        spec: TaskSpec,
         objects: Mapping[str, npt.ArrayLike] | None = None,
         seed: int | None = 0,
     ) -> Simulation:
-        """Build the scene of ``task``, a name or a spec (see :func:`build_scene`), and wrap it."""
-        model, info = build_scene(task, objects, seed)
+        """Build the scene of the task ``spec`` (see :func:`build_scene`) and wrap it."""
+        model, info = build_scene(spec, objects, seed)
         return cls(model, info)
 
     # -- state -------------------------------------------------------------------------------
@@ -329,9 +337,10 @@ class Simulation:
             pose = np.eye(4)
             pose[:3, 3] = pos
             if name == self._held:
-                pose[:3, :3] = self.glass_pose()[1]
+                _, rotation = self.glass_pose()
+                pose[:3, :3] = rotation
             elif name in self._mocap:
-                pose[:3, :3] = _quat_mat(self.data.mocap_quat[self._mocap[name][0]])
+                pose[:3, :3] = _quat_mat(self.data.mocap_quat[self._mocap[name].mocap_id])
             elif name in self._bodies:
                 pose[:3, :3] = np.asarray(self.data.xmat[self._bodies[name]]).reshape(3, 3)
             else:

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ._scene import Simulation
-from ._task_skill import TaskSkill, start_posture
+from ._task_skill import TaskSkill
 from ._tasks import TaskSpec
 from ._tracking import SimTracker, observed_objects
 
@@ -44,7 +44,7 @@ def observe(
     Parameters
     ----------
     spec : TaskSpec
-        The task (:func:`pbdkit.sim.get_task` resolves a name).
+        The task.
     truth : dict str -> ndarray, shape (3,) or (4, 4)
         True placements of the objects of the task (a posed object's pose); fixed ones may be
         left out (they are added from the task's ranges).
@@ -52,7 +52,7 @@ def observe(
         Calibrated on the task.
     arm : array-like, shape (n,), optional
         Arm joint angles while the cameras look (e.g.
-        :func:`pbdkit.sim._task_skill.start_posture`); default q = 0.
+        :attr:`pbdkit.sim.TaskSkill.start_posture`); default q = 0.
 
     Returns
     -------
@@ -81,10 +81,10 @@ def observe(
 def calibrate_tracker(ts: TaskSkill) -> SimTracker:
     """The stereo tracker of a task, calibrated on its nominal placement with the arm at the
     skill's start posture (where it waits while the cameras look;
-    :func:`pbdkit.sim._task_skill.start_posture`)."""
+    :attr:`pbdkit.sim.TaskSkill.start_posture`)."""
     calib = Simulation.from_task(ts.task, ts.task.nominal_objects())
     try:
-        return SimTracker.from_simulation(calib, at_nominal=False, arm=start_posture(ts))
+        return SimTracker.from_simulation(calib, at_nominal=False, arm=ts.start_posture)
     finally:
         calib.close()
 

@@ -1,4 +1,5 @@
-"""A task's skill: taught by the simulated teacher, learned with the constraints of the paper.
+"""A task's demonstrations and skill: taught by the simulated teacher, learned with the
+constraints of the paper.
 
 Which constraints a task's skill has (:func:`constrained_objects`): the joint space and one
 task-space constraint per object that moves between placements, as in the paper (Sec. III: the
@@ -9,9 +10,8 @@ joint-space constraint, relates to it). ``constrain_fixed=True`` (``pbdkit evalu
 the simulated world and the success judge always get every object's position
 (:meth:`pbdkit.sim.TaskSpec.full_placement`), the skill only its own objects'.
 
-:class:`TaskSkill` holds the task's spec: a name is resolved once, by the entry point that takes
-it (:func:`learn_task`, :func:`constrained_objects`, :func:`pbdkit.sim.evaluate`);
-everything that takes a :class:`TaskSkill` works with its spec.
+:func:`teach` and :func:`learn_task` take a task's name (or its spec) and resolve it, once;
+:class:`TaskSkill` holds the spec, and everything that takes a :class:`TaskSkill` works with it.
 """
 
 from __future__ import annotations
@@ -27,30 +27,23 @@ from ..data._demonstration import Demonstration
 from ..robots import katana
 from ..skill._naming import FUSED_POSITION, controller_names, controller_use
 from ..skill._skill import Skill
-from ._tasks import TaskSpec, get_task
-from ._teacher import teach
+from ._task_registry import get_task
+from ._tasks import TaskSpec, check_task
+from ._teacher import teach_one
 
-__all__ = [
-    "TaskSkill",
-    "constrained_objects",
-    "learn_task",
-    "start_posture",
-    "step_seconds",
-    "velocity_limit",
-]
+__all__ = ["TaskSkill", "constrained_objects", "learn_task", "teach"]
 
 Float = NDArray[np.float64]
 
 
-def constrained_objects(task: str | TaskSpec, *, constrain_fixed: bool = False) -> list[str]:
-    """The objects of ``task`` that get a task-space constraint, in range order.
+def constrained_objects(spec: TaskSpec, *, constrain_fixed: bool = False) -> list[str]:
+    """The objects of the task ``spec`` that get a task-space constraint, in range order.
 
     Parameters
     ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster", "basin") or its spec.
+    spec : TaskSpec
     constrain_fixed : bool
-        False (the paper): only the objects that move (:func:`pbdkit.sim._tasks.tracked_objects`).
+        False (the paper): only the objects that move (:attr:`TaskSpec.tracked_objects`).
         True: every object, the fixed ones (the basin) too.
 
     Returns
@@ -58,21 +51,28 @@ def constrained_objects(task: str | TaskSpec, *, constrain_fixed: bool = False) 
     names : list of str
         The ``task_objects`` argument of :meth:`pbdkit.Skill.learn`.
     """
-    return _constrained(get_task(task), constrain_fixed)
-
-
-def _constrained(spec: TaskSpec, constrain_fixed: bool) -> list[str]:
     if constrain_fixed:
         return list(spec.ranges)
     return list(spec.tracked_objects)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class TaskSkill:
     """A skill learned from simulated demonstrations of a task.
 
-    ``task`` is the task's spec; a registered name given instead is resolved on construction
-    (for a skill built by hand: the library passes the spec).
+    Attributes
+    ----------
+    task : TaskSpec
+        The task (a registered name is resolved by the caller, :func:`pbdkit.sim.get_task`).
+    demos : list of Demonstration
+        The demonstrations it was learned from.
+    skill : Skill
+    learn_seconds, teach_seconds : float
+        Wall time of the learning and of the teaching.
+    position_skill : Skill, optional
+        For a skill with oriented constraints: the position-only skill of the same
+        demonstrations (``orientation=False``, the paper's), for the ``"fused-position"``
+        controller. None otherwise.
     """
 
     task: TaskSpec
@@ -80,13 +80,10 @@ class TaskSkill:
     skill: Skill
     learn_seconds: float
     teach_seconds: float
-    #: For a skill with oriented constraints: the position-only skill of the same
-    #: demonstrations (``orientation=False``, the paper's), for the ``"fused-position"``
-    #: controller. None otherwise.
     position_skill: Skill | None = None
 
     def __post_init__(self) -> None:
-        self.task = get_task(self.task)
+        check_task(self.task)
 
     @property
     def controllers(self) -> list[str]:
@@ -107,6 +104,61 @@ class TaskSkill:
         """True if the skill has a task-space constraint relative to a fixed object."""
         fixed = self.task.fixed_objects
         return any(k in fixed for k in self.skill.object_names)
+
+    @property
+    def start_posture(self) -> Float:
+        """The skill's start posture theta_hat_0 (n,): the GMR mean at the first step, within
+        the joint limits (where a reproduction without ``q0`` starts).
+
+        The robot waits there while the cameras locate the objects: it does not depend on them.
+        """
+        robot = self.skill.robot
+        return np.asarray(np.clip(self.skill.constraints().joint_mean[0], robot.lower, robot.upper))
+
+
+def teach(
+    task: str | TaskSpec, n_demos: int = 5, seed: int | None = None, speed: float = 1.0
+) -> list[Demonstration]:
+    """Kinesthetic-style demonstrations of ``task`` for random object placements.
+
+    Parameters
+    ----------
+    task : str or TaskSpec
+        A registered task name (e.g. "coaster", "basin") or its spec.
+    n_demos : int
+        Number of demonstrations (>= 1).
+    seed : int, optional
+        Seeds the placements and the person's variability.
+    speed : float
+        Scales every duration by 1 / speed.
+
+    Returns
+    -------
+    list of Demonstration
+        Object positions drawn uniformly in the task's placement ranges
+        (:meth:`pbdkit.sim.TaskSpec.sample_objects`); a posed object's yaws spread over
+        its yaw range, one demonstration in each of ``n_demos`` equal parts of it.
+
+    Raises
+    ------
+    ValueError
+        An unknown task name, ``n_demos`` < 1.
+    """
+    spec = get_task(task)
+    if n_demos < 1:
+        raise ValueError(f"n_demos must be >= 1, got {n_demos}")
+    rng = np.random.default_rng(seed)
+    robot = katana()
+    # A person spans the turns to be learned: each posed object's yaw range is cut in n_demos
+    # parts, one demonstration in each, in a random order per object (no draws for the
+    # paper's tasks, which have no posed object).
+    orders = {k: rng.permutation(n_demos) for k in spec.posed_objects}
+    demos = []
+    for i in range(n_demos):
+        strata = {k: (int(order[i]), n_demos) for k, order in orders.items()}
+        objects = spec.sample_objects(rng, strata or None)
+        demos.append(teach_one(spec, objects, rng, robot, speed))
+    return demos
 
 
 def learn_task(
@@ -130,7 +182,7 @@ def learn_task(
     teach_s = time.perf_counter() - start
     start = time.perf_counter()
     robot = katana()
-    names = _constrained(spec, constrain_fixed)
+    names = constrained_objects(spec, constrain_fixed=constrain_fixed)
     skill = Skill.learn(
         demos, robot, n_steps=n_steps, max_components=max_components, task_objects=names
     )
@@ -146,25 +198,11 @@ def learn_task(
             task_objects=names,
             orientation=False,
         )
-    return TaskSkill(spec, demos, skill, learn_s, teach_s, position_skill)
-
-
-def start_posture(ts: TaskSkill) -> Float:
-    """The skill's start posture theta_hat_0 (n,) (GMR mean at the first step, within limits).
-
-    The robot waits there while the cameras locate the objects: it does not depend on them.
-    """
-    robot = ts.skill.robot
-    return np.asarray(np.clip(ts.skill.constraints().joint_mean[0], robot.lower, robot.upper))
-
-
-def velocity_limit(ts: TaskSkill) -> Float:
-    """The robot's joint velocity limits (rad/s; inf where it has none)."""
-    n = ts.skill.robot.n_joints
-    limit = getattr(ts.skill.robot, "velocity_limit", None)
-    return np.full(n, np.inf) if limit is None else np.asarray(limit, dtype=np.float64)
-
-
-def step_seconds(ts: TaskSkill) -> float:
-    """Seconds per step of the skill's time grid (its duration over T - 1 steps)."""
-    return float(ts.skill.duration) / max(ts.skill.n_steps - 1, 1)
+    return TaskSkill(
+        task=spec,
+        demos=demos,
+        skill=skill,
+        learn_seconds=learn_s,
+        teach_seconds=teach_s,
+        position_skill=position_skill,
+    )

@@ -1,109 +1,18 @@
-"""Tasks as data: a :class:`TaskSpec` per task, a registry, and the geometry every task shares.
+"""Tasks as data: a :class:`TaskSpec` per task and the records it is made of.
 
-A task is one :class:`TaskSpec`: where its objects may be placed, how they are built in the
-simulated world, how the simulated teacher demonstrates it and how a run is judged. The functions
-along ``pbdkit demo``'s path take a spec, or a registered name that they resolve once with
-:func:`get_task`; nothing else knows a task by name. The paper's two tasks (Sec. III) are
-:mod:`pbdkit.sim._taskdefs.coaster` and :mod:`pbdkit.sim._taskdefs.basin`, registered when
-:mod:`pbdkit.sim` is imported.
+A task is one :class:`TaskSpec`: where its objects may be placed (:class:`PlacementRange`), how
+they are built in the simulated world, how the simulated teacher demonstrates it
+(:class:`ViaPoint`) and how a run is judged (:class:`Outcome` from :class:`RunStats`), with its
+cameras (:class:`CameraRig`) and disturbances (:class:`ObjectMove`, :class:`ObjectTurn`). Specs
+are registered by name in :mod:`pbdkit.sim._task_registry`; a name becomes its spec once, at the
+edge (the command line, :func:`pbdkit.sim.evaluate`), and everything below takes the spec.
 
-Frames and reference points
----------------------------
-All positions are in the robot's base frame (the frame of the URDF root, ``base_link``), in metres:
-x points away from the robot across the table, z up, and the table top is the plane z = 0 (the arm's
-base column stands on it). An object's position ``o`` is the point a camera measures; each task
-says which point that is for its objects. Every task has one object the gripper holds, its
-:attr:`TaskSpec.grasped` (``"glass"`` unless the task names another): a glass built by
-:func:`pbdkit.sim._world.add_glass` under that name, on which the simulation, the execution record,
-the disturbances and the teacher's grasp rely, whose point is on its axis at the height of the
-centre of its red band.
-
-The Katana holds the glass from the side with its long wrist (0.30 m from the wrist pitch joint to
-the tool point) nearly horizontal, which folds the elbow beyond its limit closer than about 0.45 m
-from the base axis: placements lie 0.45-0.58 m from it.
-
-Ranges are boxes ``(low, high)`` of shape (3,) each (:class:`PlacementRange`); a range whose low and
-high are equal is a fixed object. Demonstrations sample inside them (:func:`sample_objects`) and so
-can evaluation trials, which then stay inside the demonstrated range.
-
-Fixed and tracked objects (paper Sec. III): the ranges are the one place that says which objects
-move. Those that move (:func:`tracked_objects`) are located by the cameras and get a task-space
-constraint; a fixed one (the basin) is at a known place (:func:`fixed_objects`), carries no
-patch, and gets no constraint in the paper's configuration: its position is the same in every
-demonstration, so the hand's path relative to it is the joint-space constraint seen through the
-forward kinematics. Demonstrations still record it, as a user's recording would.
-
-How to add a task
------------------
-Write one module that builds a :class:`TaskSpec` and calls :func:`register_task`; import it
-before use (the built-in tasks are imported by :mod:`pbdkit.sim._taskdefs`). A spec needs:
-
-- ``name`` and ``description`` (the report's one-line text);
-- ``ranges``: object name -> :class:`PlacementRange`, with the grasped object (``grasped``,
-  default ``"glass"``); z is the height at which the object rests on its support (scenes refuse
-  other heights);
-- ``add_objects(world, objects, rng)``: adds the task's bodies to the MuJoCo world
-  (``world`` is the ``MjSpec``'s worldbody, ``objects`` a full placement name -> (3,)), the glass
-  included (:func:`pbdkit.sim._world.add_glass`, and :func:`pbdkit.sim._world.add_liquid` for a
-  glass that holds ``n_liquid`` spheres); objects other than the glass are static bodies, or
-  mocap bodies (``add_body(..., mocap=True)``) for one that a disturbance slides;
-- ``via_points(objects, rng, speed) -> list[ViaPoint]``: the teacher's hand path for a placement
-  (building blocks in :mod:`pbdkit.sim._teacher`: :class:`~pbdkit.sim._teacher.Person`,
-  :func:`~pbdkit.sim._teacher.grasp_via_points`);
-- ``judge(sim, run) -> Outcome``: success and metrics from the final state of the simulation and
-  what was measured during the run (:class:`RunStats`);
-- ``patches``: for each object the cameras track, the name prefix of the geoms of its colored
-  patch (default: the grasped glass's red band only), or for an object placed as a pose the
-  pair of its two end patches' prefixes (a, b: the yaw points from a to b); ``cameras``: where
-  the stereo pair stands (:class:`CameraRig`; default: the paper's rig); ``n_liquid``: spheres
-  in the glass (default 0); ``move``: the object that ``--perturb move`` slides
-  (:class:`ObjectMove`, optional); ``grasped``: the name of the glass the gripper holds
-  (default ``"glass"``; its bodies and geoms are named after it,
-  :func:`pbdkit.sim._world.add_glass`).
-
-For example, a third task, "put the glass from the table on a green mark on the table"
-(``tests/test_sim.py`` runs it from teaching to evaluation, with and without the cameras)::
-
-    def add_objects(world, objects, rng):
-        m, g = objects["mark"], objects["glass"]
-        world.add_geom(name="mark", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                       size=[0.03, 0.0005, 0.0], pos=[m[0], m[1], 0.0005],
-                       rgba=[0.1, 0.7, 0.2, 1.0], contype=0, conaffinity=0)
-        add_glass(world, np.array([g[0], g[1], 0.0]))  # bottom face on the table
-
-    def via_points(objects, rng, speed):
-        p = Person(rng, speed)
-        g, m = objects["glass"], objects["mark"]
-        place = m + UP * (GLASS_PATCH_CENTER + 0.001) + GRASP_OFFSET  # tool point on release
-        carry = between(g + GRASP_OFFSET, place) + UP * 0.08 + p.jitter(0.01)
-        return [
-            *grasp_via_points(p, g, 0.08, 2.6),  # swing, approach, close, lift 8 cm
-            ViaPoint(p.duration(1.8), carry, p.holding_pitch(), p.roll(), True),
-            ViaPoint(p.duration(1.5), place + UP * 0.05, p.holding_pitch(), 0.0, True),
-            ViaPoint(p.duration(1.0), place, p.hold_pitch, 0.0, True),
-            ViaPoint(p.duration(0.6), place, p.hold_pitch, 0.0, False),  # open
-            ...,  # retreat: back along the radius, then up (free pitch, joint space)
-        ]
-
-    def judge(sim, run):
-        bottom, _ = sim.glass_pose()
-        err = float(np.linalg.norm(bottom[:2] - sim.info.objects["mark"][:2]))
-        tilt = math.degrees(sim.glass_tilt())
-        ok = err <= 0.02 and tilt < 10.0 and sim.glass_released()
-        return Outcome(ok, {"placement_error_mm": 1e3 * err, "tilt_deg": tilt})
-
-    z = GLASS_PATCH_CENTER  # the glass stands on the table
-    register_task(TaskSpec(
-        name="mark", description="Put the glass from the table on the green mark.",
-        ranges={"glass": PlacementRange.box((0.47, 0.08, z), (0.54, 0.22, z)),
-                "mark": PlacementRange.box((0.47, -0.22, 0.001), (0.52, -0.10, 0.001))},
-        add_objects=add_objects, via_points=via_points, judge=judge,
-        patches={"glass": GLASS_PATCH_PREFIX, "mark": "mark"}))
-
-After that, ``teach("mark", 5)``, ``learn_task("mark")``, ``evaluate("mark", ...)`` and
-``run_robot_demo("mark", ...)`` work as for the paper's tasks, and so does ``--task mark`` of the
-command's ``demo``, ``teach`` and ``evaluate`` in a process that registered it (the ``pbdkit``
-script itself knows the built-in tasks only: a module of :mod:`pbdkit.sim._taskdefs` is one).
+All positions are in the robot's base frame (metres, z up, the table top at z = 0); ranges are
+boxes ``(low, high)`` and a range whose low and high are equal is a fixed object: the ranges are
+the one place that says which objects move (:attr:`TaskSpec.tracked_objects`, tracked by the
+cameras and constrained in task space) and which do not (:attr:`TaskSpec.fixed_objects`, the
+basin). Frames, reference points and how to write a task, with an example: the docs page
+"Writing a task" (``docs/tasks.md``).
 """
 
 from __future__ import annotations
@@ -119,11 +28,9 @@ from numpy.typing import NDArray
 
 from .._validation import check_positions
 from ..data._placement import check_placements, is_pose, position_of
-from ._registry import Registry
+from ._glass import patch_prefix
 
 __all__ = [
-    "GLASS_PATCH_PREFIX",
-    "GRASP_OFFSET",
     "CameraRig",
     "ObjectMove",
     "ObjectTurn",
@@ -132,46 +39,12 @@ __all__ = [
     "RunStats",
     "TaskSpec",
     "ViaPoint",
-    "fixed_objects",
-    "full_placement",
-    "get_task",
-    "nominal_objects",
-    "patch_prefix",
-    "register_task",
-    "sample_objects",
-    "task_names",
-    "tracked_objects",
-    "unregister_task",
+    "check_task",
     "yaw_of",
     "yaw_pose",
 ]
 
 Float = NDArray[np.float64]
-
-# Glass: an open cylinder (thin boxes around a disk bottom) that can hold the liquid spheres.
-GLASS_RADIUS = 0.025  # outer radius (m)
-GLASS_WALL = 0.003  # wall thickness (m)
-GLASS_HEIGHT = 0.10  # (m)
-GLASS_BOTTOM = 0.006  # thickness of the bottom disk (m)
-GLASS_PATCH_LOW = 0.065  # red band, height above the glass's bottom face (m)
-GLASS_PATCH_HIGH = 0.085
-GLASS_PATCH_CENTER = 0.5 * (GLASS_PATCH_LOW + GLASS_PATCH_HIGH)
-
-
-def patch_prefix(name: str) -> str:
-    """Name prefix of the geoms of the red band of the glass ``name`` (``NAME_patch0..11``,
-    :func:`pbdkit.sim._world.add_glass`), for the cameras."""
-    return f"{name}_patch"
-
-
-#: Name prefix of the geoms of the glass's red band (``glass_patch0..11``), for the cameras.
-GLASS_PATCH_PREFIX = patch_prefix("glass")
-# Height above the glass's bottom face at which the fingers hold it (centre of the finger pads).
-GLASS_GRASP_HEIGHT = 0.045
-# Tool point minus glass position when the glass is held upright with the tool on its axis.
-GRASP_OFFSET: Float = np.array([0.0, 0.0, GLASS_GRASP_HEIGHT - GLASS_PATCH_CENTER])
-
-LIQUID_RADIUS = 0.0055
 
 
 @dataclass(frozen=True)
@@ -634,9 +507,10 @@ class TaskSpec:
     def sample_objects(
         self, rng: np.random.Generator, yaw_strata: Mapping[str, tuple[int, int]] | None = None
     ) -> dict[str, Float]:
-        """Placements drawn uniformly inside the ranges, name -> (3,) or (4, 4) (see the
-        function); ``yaw_strata``: for some posed objects, the part (i, n) of the yaw range
-        to draw from (:meth:`PlacementRange.sample`)."""
+        """Placements drawn uniformly inside the ranges, name -> (3,) or (4, 4) (fixed objects
+        at their place; they still take their draws from ``rng``); ``yaw_strata``: for some
+        posed objects, the part (i, n) of the yaw range to draw from
+        (:meth:`PlacementRange.sample`)."""
         strata = yaw_strata or {}
         return {name: r.sample(rng, strata.get(name)) for name, r in self.ranges.items()}
 
@@ -689,7 +563,28 @@ class TaskSpec:
         return out
 
     def full_placement(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
-        """``objects`` plus the fixed objects' positions (see :func:`full_placement`)."""
+        """Every object's placement: ``objects`` plus the fixed objects' positions.
+
+        Use it where a subset of the objects is known (e.g. those of a skill that has no
+        constraint on the fixed ones) and the whole scene is needed (the simulation, the
+        success judge).
+
+        Parameters
+        ----------
+        objects : dict str -> array-like, shape (3,) or a pose
+            Placements of at least every moving object (:attr:`tracked_objects`); fixed
+            objects may be given too (they must then be at their place).
+
+        Returns
+        -------
+        placement : dict str -> ndarray, shape (3,) or (4, 4)
+            One placement per object of the task, in range order.
+
+        Raises
+        ------
+        ValueError
+            An object that is not one of the task's, or a moving object without a position.
+        """
         return self.check_placement(objects)
 
 
@@ -716,104 +611,12 @@ def _check_turn(task: str, turn: object, ranges: Mapping[str, PlacementRange]) -
         )
 
 
-_REGISTRY: Registry[TaskSpec] = Registry(
-    "task",
-    TaskSpec,
-    "spec",
-    "task",
-    " (a new task is registered with pbdkit.sim.register_task)",
-)
-
-
-def register_task(spec: TaskSpec) -> TaskSpec:
-    """Make ``spec`` known by its name (:func:`get_task`, ``--task``); returns it.
-
-    Raises
-    ------
-    ValueError
-        If ``spec`` is not a TaskSpec, or another spec has the same name.
-    """
-    return _REGISTRY.register(spec)
-
-
-def unregister_task(name: str) -> TaskSpec:
-    """Forget the task ``name`` and return its spec; ValueError if it is not registered."""
-    return _REGISTRY.unregister(name)
-
-
-def task_names() -> tuple[str, ...]:
-    """Names of the registered tasks, in registration order (the paper's first)."""
-    return _REGISTRY.names()
-
-
-def get_task(task: str | TaskSpec) -> TaskSpec:
-    """The spec of ``task``: a registered name, or a spec (returned as it is).
-
-    Raises
-    ------
-    ValueError
-        If ``task`` is not the name of a registered task.
-    """
-    if isinstance(task, TaskSpec):
-        return task
-    return _REGISTRY.get(task)
-
-
-def tracked_objects(task: str | TaskSpec) -> tuple[str, ...]:
-    """Objects of ``task`` that move between placements, in range order (the cameras track them)."""
-    return get_task(task).tracked_objects
-
-
-def fixed_objects(task: str | TaskSpec) -> tuple[str, ...]:
-    """Objects of ``task`` that never move (the basin), in range order; known without vision."""
-    return get_task(task).fixed_objects
-
-
-def full_placement(task: str | TaskSpec, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
-    """Every object's position for a placement: ``objects`` plus the fixed objects' positions.
-
-    Use it where a subset of the objects is known (e.g. those of a skill that has no constraint
-    on the fixed ones) and the whole scene is needed (the simulation, the success judge).
-
-    Parameters
-    ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster", "basin") or its spec.
-    objects : dict str -> array-like, shape (3,)
-        Positions of at least every moving object (:func:`tracked_objects`); fixed objects may
-        be given too (they are then kept as given, for :func:`pbdkit.sim.build_scene` to check).
-
-    Returns
-    -------
-    placement : dict str -> ndarray, shape (3,)
-        One position per object of the task, in range order.
-
-    Raises
-    ------
-    ValueError
-        An object that is not one of the task's, or a moving object without a position.
-    """
-    return get_task(task).full_placement(objects)
-
-
-def nominal_objects(task: str | TaskSpec) -> dict[str, Float]:
-    """Centre of every placement range of ``task``: name -> position (3,)."""
-    return get_task(task).nominal_objects()
-
-
-def sample_objects(task: str | TaskSpec, rng: np.random.Generator) -> dict[str, Float]:
-    """Draw object positions uniformly inside the placement ranges of ``task``.
-
-    Parameters
-    ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster", "basin") or its spec.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    dict str -> ndarray, shape (3,)
-        One position per object of the task (fixed objects at their fixed position; they still
-        take their draws from ``rng``).
-    """
-    return get_task(task).sample_objects(rng)
+def check_task(task: object, name: str = "task") -> TaskSpec:
+    """``task`` if it is a :class:`TaskSpec`; else a ValueError that says how to get one (a
+    registered name is resolved at the edge, :func:`pbdkit.sim.get_task`)."""
+    if not isinstance(task, TaskSpec):
+        raise ValueError(
+            f"{name} must be a TaskSpec (pbdkit.sim.get_task turns a registered name into its "
+            f"spec), got {task!r}"
+        )
+    return task

@@ -9,6 +9,8 @@ least-squares inverse kinematics on :func:`pbdkit.robots.katana` and interpolate
 minimum-jerk profiles, sampled at 100 Hz (the encoders' record): in task space where the hand's
 path matters (holding the glass: straight lines at a constant pitch), in joint space for free
 swings and for the radial approach (constant pan keeps the open fingers around the glass).
+:func:`teach_one` is one demonstration for given placements; :func:`pbdkit.sim.teach` draws the
+placements of several.
 
 Structure, so that the paper's constraints emerge (Sec. III; the via points of each task are in
 its module, :mod:`pbdkit.sim._taskdefs`):
@@ -46,7 +48,7 @@ from ..data._demonstration import Demonstration
 from ..robots import katana
 from ..robots._ik import damped_least_squares
 from ..robots._robot import Robot
-from . import _tasks as T
+from ._glass import GRASP_OFFSET
 from ._tasks import TaskSpec, ViaPoint
 
 Float = NDArray[np.float64]
@@ -353,7 +355,7 @@ def grasp_via_points(
     ----------
     person : Person
     glass : ndarray, shape (3,)
-        The glass's position (its reference point, :mod:`pbdkit.sim._tasks`).
+        The glass's position (its reference point, :mod:`pbdkit.sim._glass`).
     lift : float
         Height (m) of the lift once the glass is held.
     approach_time : float
@@ -365,7 +367,7 @@ def grasp_via_points(
         The last one holds the glass ``lift`` above its support.
     """
     u = radial(glass)
-    grasp = glass + T.GRASP_OFFSET
+    grasp = glass + GRASP_OFFSET
     p = person
     hp = p.hold_pitch
     return [
@@ -413,7 +415,7 @@ def teach_one(
     Parameters
     ----------
     spec : TaskSpec
-        The task (:func:`teach` takes a name too).
+        The task (:func:`pbdkit.sim.teach` takes a name too).
     objects : dict str -> ndarray, shape (3,)
         Object positions (see the task).
     rng : numpy.random.Generator
@@ -446,43 +448,3 @@ def teach_one(
         f"objects: no reachable demonstration for {_fmt(objects)} after {MAX_ATTEMPTS} "
         f"attempts ({error}); keep objects inside the {spec.name!r} task's placement ranges"
     )
-
-
-def teach(
-    task: str | TaskSpec, n_demos: int = 5, seed: int | None = None, speed: float = 1.0
-) -> list[Demonstration]:
-    """Kinesthetic-style demonstrations of ``task`` for random object placements.
-
-    Parameters
-    ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster", "basin") or its spec.
-    n_demos : int
-        Number of demonstrations (>= 1).
-    seed : int, optional
-        Seeds the placements and the person's variability.
-    speed : float
-        Scales every duration by 1 / speed.
-
-    Returns
-    -------
-    list of Demonstration
-        Object positions drawn uniformly in the task's placement ranges
-        (:meth:`pbdkit.sim.TaskSpec.sample_objects`); a posed object's yaws spread over
-        its yaw range, one demonstration in each of ``n_demos`` equal parts of it.
-    """
-    spec = T.get_task(task)
-    if n_demos < 1:
-        raise ValueError(f"n_demos must be >= 1, got {n_demos}")
-    rng = np.random.default_rng(seed)
-    robot = katana()
-    # A person spans the turns to be learned: each posed object's yaw range is cut in n_demos
-    # parts, one demonstration in each, in a random order per object (no draws for the
-    # paper's tasks, which have no posed object).
-    orders = {k: rng.permutation(n_demos) for k in spec.posed_objects}
-    demos = []
-    for i in range(n_demos):
-        strata = {k: (int(order[i]), n_demos) for k, order in orders.items()}
-        objects = spec.sample_objects(rng, strata or None)
-        demos.append(teach_one(spec, objects, rng, robot, speed))
-    return demos

@@ -17,7 +17,7 @@ the simulator's renders, calibrated the way a real session would be, with nothin
 Bias correction: why an offset, and not tracked positions in the demonstrations
 -------------------------------------------------------------------------------
 The cameras measure the centroid of what they see of a patch, which is not the object's reference
-point (:mod:`pbdkit.sim._tasks`): they see the front half of the glass's red band, and the top face
+point (:mod:`pbdkit.sim._glass`): they see the front half of the glass's red band, and the top face
 plus the near rim of the coaster. Measured over 100 random placements per task
 (``benchmarks/bench_tracking.py``, error = tracked - true, mm): the glass reads 11.9 low on the
 shelf (coaster task) and 16.2 low on the table (basin task, seen more from above), the coaster
@@ -94,7 +94,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import mujoco
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
@@ -103,8 +102,9 @@ from .._validation import check_array, check_int, check_positions
 from ..vision import ColorModel, PinholeCamera, PoseModel, PoseTrack, StereoTracker
 from ..vision._pose import OffsetFrame, ends_heading
 from ..vision._stereo import ObjectTrack
+from ._gl import mujoco
 from ._scene import CAMERAS, Simulation
-from ._tasks import TaskSpec, tracked_objects, yaw_of, yaw_pose
+from ._tasks import TaskSpec, yaw_of, yaw_pose
 
 __all__ = [
     "Calibration",
@@ -114,7 +114,6 @@ __all__ = [
     "observed_objects",
     "patch_geom_ids",
     "patch_models",
-    "tracked_objects",
 ]
 
 Float = NDArray[np.float64]
@@ -258,7 +257,7 @@ def label_patches(
     return {name: is_geom & np.isin(seg[..., 0], idx) for name, idx in ids.items()}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Calibration:
     """What :meth:`SimTracker.from_simulation` measured at the calibration placement.
 
@@ -357,7 +356,8 @@ class SimTracker:
         sim : Simulation
             A scene of the task to track.
         objects : sequence of str, optional
-            Objects to track; default: those of the task that move (:func:`tracked_objects`).
+            Objects to track; default: those of the task that move
+            (:attr:`TaskSpec.tracked_objects`).
         cameras : (str, str)
             Simulator camera names (a, b).
         calibrated_cameras : (PinholeCamera, PinholeCamera), optional
@@ -479,7 +479,11 @@ class SimTracker:
         placement = {
             k: np.asarray(poses[k] if k in posed else truth[k], dtype=np.float64) for k in names
         }
-        return cls(tracker, cameras, Calibration(placement, pixels, raw, raw_yaws))
+        return cls(
+            tracker,
+            cameras,
+            Calibration(placement=placement, pixels=pixels, raw_positions=raw, raw_yaws=raw_yaws),
+        )
 
     @property
     def offsets(self) -> dict[str, Float]:

@@ -27,15 +27,26 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import mujoco
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ..data._placement import position_of
 from ..robots import katana
-from . import _tasks as T
-from ._tasks import TaskSpec, yaw_of, yaw_pose
+from ._gl import mujoco
+from ._glass import (
+    GLASS_BOTTOM,
+    GLASS_HEIGHT,
+    GLASS_PATCH_CENTER,
+    GLASS_PATCH_HIGH,
+    GLASS_PATCH_LOW,
+    GLASS_RADIUS,
+    GLASS_WALL,
+    GRASP_OFFSET,
+    LIQUID_RADIUS,
+    patch_prefix,
+)
+from ._tasks import CameraRig, TaskSpec, check_task, yaw_of, yaw_pose
 
 __all__ = [
     "ARM_JOINTS",
@@ -120,7 +131,7 @@ class SceneInfo:
     cameras: tuple[str, ...] = CAMERAS
     arm_joints: tuple[str, ...] = ARM_JOINTS
     n_liquid: int = 0
-    grasp_offset: Float = field(default_factory=lambda: T.GRASP_OFFSET.copy())
+    grasp_offset: Float = field(default_factory=lambda: GRASP_OFFSET.copy())
 
     @property
     def task(self) -> str:
@@ -212,7 +223,7 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12, *, name: str = "glas
     # Body frame: centre of the bottom face, z along the glass's axis.
     body = world.add_body(name=name, pos=bottom.tolist())
     body.add_freejoint(name=free_joint(name))
-    r_out, wt, h = T.GLASS_RADIUS, T.GLASS_WALL, T.GLASS_HEIGHT
+    r_out, wt, h = GLASS_RADIUS, GLASS_WALL, GLASS_HEIGHT
     r_mid = r_out - wt / 2
     # Facets slightly wider than the polygon's side so that neighbouring boxes overlap: no gap
     # for a liquid sphere to leak through.
@@ -236,13 +247,13 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12, *, name: str = "glas
         )
         # Red band, visual only, just outside the wall.
         body.add_geom(
-            name=f"{T.patch_prefix(name)}{i}",
+            name=f"{patch_prefix(name)}{i}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.0005, width / 2, (T.GLASS_PATCH_HIGH - T.GLASS_PATCH_LOW) / 2],
+            size=[0.0005, width / 2, (GLASS_PATCH_HIGH - GLASS_PATCH_LOW) / 2],
             pos=[
                 (r_out + 0.0005) * math.cos(a),
                 (r_out + 0.0005) * math.sin(a),
-                T.GLASS_PATCH_CENTER,
+                GLASS_PATCH_CENTER,
             ],
             quat=quat,
             rgba=[0.9, 0.05, 0.05, 1.0],
@@ -253,8 +264,8 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12, *, name: str = "glas
     body.add_geom(
         name=f"{name}_bottom",
         type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-        size=[r_out - wt, T.GLASS_BOTTOM / 2, 0.0],
-        pos=[0.0, 0.0, T.GLASS_BOTTOM / 2],
+        size=[r_out - wt, GLASS_BOTTOM / 2, 0.0],
+        pos=[0.0, 0.0, GLASS_BOTTOM / 2],
         rgba=glass_rgba,
         density=2500.0,
         contype=LIQUID,
@@ -264,7 +275,7 @@ def add_glass(world: Any, bottom: Float, n_walls: int = 12, *, name: str = "glas
 
 def _liquid_layout(n: int, rng: np.random.Generator) -> Float:
     """Initial sphere centres in the glass frame, shape (n, 3): hexagonal layers of 7."""
-    r = T.LIQUID_RADIUS
+    r = LIQUID_RADIUS
     ring = 2.0 * r + 0.0006
     per_layer = [(0.0, 0.0)] + [
         (ring * math.cos(k * math.pi / 3), ring * math.sin(k * math.pi / 3)) for k in range(6)
@@ -272,7 +283,7 @@ def _liquid_layout(n: int, rng: np.random.Generator) -> Float:
     pts: list[tuple[float, float, float]] = []
     layer = 0
     while len(pts) < n:
-        z = T.GLASS_BOTTOM + r + 0.001 + layer * (2.0 * r + 0.001)
+        z = GLASS_BOTTOM + r + 0.001 + layer * (2.0 * r + 0.001)
         rot = (math.pi / 6) * (layer % 2)
         for x, y in per_layer:
             if len(pts) == n:
@@ -294,7 +305,7 @@ def add_liquid(world: Any, bottom: Float, n: int, rng: np.random.Generator) -> N
         body.add_geom(
             name=f"liquid{i}",
             type=mujoco.mjtGeom.mjGEOM_SPHERE,
-            size=[T.LIQUID_RADIUS, 0.0, 0.0],
+            size=[LIQUID_RADIUS, 0.0, 0.0],
             rgba=[0.2, 0.8, 0.3, 1.0],
             density=1000.0,
             # Frictionless (condim 1 wins through the higher priority): the spheres flow out
@@ -392,7 +403,7 @@ def _add_actuators(spec: Any) -> None:
         act.forcerange = [-FINGER_FORCE, FINGER_FORCE]
 
 
-def _add_cameras_and_lights(world: Any, rig: T.CameraRig | None) -> None:
+def _add_cameras_and_lights(world: Any, rig: CameraRig | None) -> None:
     # The task's rig, or the paper's (TaskSpec.cameras None).
     target = np.array(CAMERA_TARGET if rig is None else rig.target)
     fovy = CAMERA_FOVY if rig is None else rig.fovy
@@ -412,7 +423,7 @@ def _add_cameras_and_lights(world: Any, rig: T.CameraRig | None) -> None:
 
 
 def build_scene(
-    task: str | TaskSpec,
+    spec: TaskSpec,
     objects: Mapping[str, npt.ArrayLike] | None = None,
     seed: int | None = 0,
 ) -> tuple[Any, SceneInfo]:
@@ -420,9 +431,9 @@ def build_scene(
 
     Parameters
     ----------
-    task : str or TaskSpec
-        A registered task name (e.g. "coaster": glass on a shelf, coaster on the table;
-        "basin": glass on the table with the liquid, fixed basin) or its spec.
+    spec : TaskSpec
+        The task (e.g. ``get_task("coaster")``: glass on a shelf, coaster on the table;
+        ``get_task("basin")``: glass on the table with the liquid, fixed basin).
     objects : dict str -> array-like, shape (3,), optional
         Object positions (base frame; see the task). Missing objects, or all of them if None,
         are put at the centre of their placement range. Objects rest on their support, so z
@@ -440,11 +451,11 @@ def build_scene(
     Raises
     ------
     ValueError
-        Unknown task or object name, a position that is not a finite (3,) vector, a fixed object
-        moved, or a height off its support; a task whose ``add_objects`` built no glass, or not
-        its ``n_liquid`` spheres.
+        ``spec`` not a TaskSpec, an unknown object name, a position that is not a finite (3,)
+        vector, a fixed object moved, or a height off its support; a task whose
+        ``add_objects`` built no glass, or not its ``n_liquid`` spheres.
     """
-    spec = T.get_task(task)
+    spec = check_task(spec, "spec")
     objs = _check_objects(spec, objects)
     rng = np.random.default_rng(seed)
 

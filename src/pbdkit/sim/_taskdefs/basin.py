@@ -2,7 +2,7 @@
 
 The glass moves between placements (tracked, with a task-space constraint); the basin is fixed
 (known without vision, no constraint in the paper's configuration: the pouring gesture is a
-joint-space constraint). Reference points: the glass's (:mod:`.._tasks`); the basin's is the
+joint-space constraint). Reference points: the glass's (:mod:`.._glass`); the basin's is the
 centre of its floor's top face. The glass holds :data:`N_LIQUID` liquid spheres.
 
 Success: the glass is still held at the end of the trajectory and at least 90 % of the liquid
@@ -18,17 +18,17 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _tasks as T
+from .._gl import mujoco
+from .._glass import GLASS_HEIGHT, GLASS_PATCH_CENTER, GLASS_RADIUS, GRASP_OFFSET
 from .._scene import Simulation
 from .._tasks import ObjectMove, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint
 from .._teacher import UP, Person, between, grasp_via_points, radial
 from .._world import LIQUID, SOLID, add_glass, add_liquid
 
-__all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -45,7 +45,7 @@ MIN_LIQUID_FRACTION = 0.9
 POUR_ROLL = 2.0
 POUR_SHIFT = 0.06  # m, hand position behind the basin's centre, against the pouring direction
 
-_GLASS_ON_TABLE_Z = T.GLASS_PATCH_CENTER
+_GLASS_ON_TABLE_Z = GLASS_PATCH_CENTER
 _BASIN_POS = (BASIN_CENTER_XY[0], BASIN_CENTER_XY[1], BASIN_FLOOR)
 
 #: Placement ranges: the glass stands on the table (z fixed); the basin is fixed.
@@ -113,7 +113,7 @@ def via_points(
     person = Person(rng, speed)
     p = person
     g, b = objects["glass"], objects["basin"]
-    grasp = g + T.GRASP_OFFSET
+    grasp = g + GRASP_OFFSET
     # A positive roll tips the glass's mouth towards the tangential direction d (the roll axis
     # points back along the tool). The liquid slides out along the wall and flies ~10 cm further
     # (it leaves at ~0.7 m/s): pour low, from behind the basin's centre.
@@ -150,9 +150,9 @@ def judge(sim: Simulation, run: RunStats) -> Outcome:
     # Spheres that left the glass: farther from its axis than its radius, or below its bottom.
     rel = (liquid - bottom) @ rot
     out = (
-        (np.hypot(rel[:, 0], rel[:, 1]) > T.GLASS_RADIUS)
+        (np.hypot(rel[:, 0], rel[:, 1]) > GLASS_RADIUS)
         | (rel[:, 2] < 0)
-        | (rel[:, 2] > T.GLASS_HEIGHT)
+        | (rel[:, 2] > GLASS_HEIGHT)
     )
     pour_err = (
         float(np.linalg.norm(liquid[out, :2].mean(axis=0) - basin[:2])) if np.any(out) else math.nan
@@ -178,8 +178,3 @@ SPEC = TaskSpec(
     # --perturb move: the glass slides 4 cm on the table before the grasp.
     move=ObjectMove("glass", 0.04, "before_grasp"),
 )
-
-
-def register() -> TaskSpec:
-    """Register :data:`SPEC` (done when :mod:`pbdkit.sim` is imported)."""
-    return T.register_task(SPEC)

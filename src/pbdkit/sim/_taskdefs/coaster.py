@@ -1,7 +1,7 @@
 """Task 1 of the paper (Sec. III), set the table: grasp the glass on a shelf, put it on a coaster.
 
 Both objects move between placements, so both are tracked by the cameras and both get a
-task-space constraint. Reference points: the glass's (:mod:`.._tasks`); the coaster's is the
+task-space constraint. Reference points: the glass's (:mod:`.._glass`); the coaster's is the
 centre of its top face.
 
 Success: the glass stands upright (tilt < 10 deg) and rests on the coaster (its bottom within
@@ -17,17 +17,17 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _tasks as T
+from .._gl import mujoco
+from .._glass import GLASS_PATCH_CENTER, GLASS_PATCH_PREFIX, GRASP_OFFSET
 from .._scene import Simulation
 from .._tasks import ObjectMove, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint
 from .._teacher import APPROACH, UP, Person, between, grasp_via_points, radial
 from .._world import add_glass
 
-__all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -43,7 +43,7 @@ MAX_TILT_DEG = 10.0
 MAX_PLACEMENT_ERROR = 0.015  # m, horizontal
 MAX_REST_HEIGHT = 0.005  # m, glass bottom above the coaster top
 
-_GLASS_ON_SHELF_Z = SHELF_HEIGHT + T.GLASS_PATCH_CENTER
+_GLASS_ON_SHELF_Z = SHELF_HEIGHT + GLASS_PATCH_CENTER
 
 #: Placement ranges: the glass stands on the shelf (z fixed), the coaster lies on the table.
 RANGES: dict[str, PlacementRange] = {
@@ -122,8 +122,8 @@ def via_points(
     g, c = objects["glass"], objects["coaster"]
     uc = radial(c)
     # Glass bottom 2 mm above the coaster's top when released: it drops onto it.
-    place = c + UP * (T.GLASS_PATCH_CENTER + 0.002) + T.GRASP_OFFSET
-    grasp = g + T.GRASP_OFFSET
+    place = c + UP * (GLASS_PATCH_CENTER + 0.002) + GRASP_OFFSET
+    grasp = g + GRASP_OFFSET
     carry = between(grasp, place) + UP * rng.uniform(0.10, 0.15) + p.jitter(0.015)
     return [
         *grasp_via_points(person, g, 0.06, 1.6),
@@ -184,12 +184,7 @@ SPEC = TaskSpec(
     add_objects=add_objects,
     via_points=via_points,
     judge=judge,
-    patches={"glass": T.GLASS_PATCH_PREFIX, "coaster": "coaster"},
+    patches={"glass": GLASS_PATCH_PREFIX, "coaster": "coaster"},
     # --perturb move: the coaster slides 5 cm while the glass is carried.
     move=ObjectMove("coaster", 0.05, "while_carried"),
 )
-
-
-def register() -> TaskSpec:
-    """Register :data:`SPEC` (done when :mod:`pbdkit.sim` is imported)."""
-    return T.register_task(SPEC)

@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _tasks as T
 from .._parts import (
     BLOCK_GRASP_HEIGHT,
     BLOCK_HEIGHT,
@@ -65,7 +64,7 @@ from .._tasks import (
 )
 from .._teacher import UP, Person
 
-__all__ = ["SPEC", "add_objects", "judge", "register", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -204,8 +203,3 @@ SPEC = TaskSpec(
     # staying inside YAW_RANGE (pbdkit.sim._perturb).
     rotate=ObjectTurn("tray", (20.0, 30.0), "while_carried"),
 )
-
-
-def register() -> TaskSpec:
-    """Register :data:`SPEC` (done when :mod:`pbdkit.sim` is imported)."""
-    return T.register_task(SPEC)

@@ -1,0 +1,278 @@
+"""What the ``pbdkit`` command prints: the console, one-line errors, the progress bar, and the
+tables and summaries of the commands' results.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar, cast
+
+import typer
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+if TYPE_CHECKING:
+    from ..data._demonstration import Demonstration
+    from ..reproduction._result import ReproductionResult
+    from ..sim._evaluation import Evaluation
+    from ..sim._tasks import TaskSpec
+    from ..skill._skill import Skill
+
+__all__ = [
+    "USER_ERRORS",
+    "closest_approach_text",
+    "console",
+    "error_message",
+    "fail",
+    "print_components",
+    "print_evaluation",
+    "print_lasa_demo",
+    "print_oriented",
+    "print_robot_demo",
+    "print_study",
+    "print_tracking",
+    "progress_bar",
+    "reports_errors",
+]
+
+#: The console of every message (standard error: standard output stays for data).
+console = Console(stderr=True)
+
+# Errors a command reports in one line with exit status 2 (bad input from the library, and the
+# file-system and memory failures a user can fix), instead of a traceback.
+USER_ERRORS = (
+    ValueError,
+    FileNotFoundError,
+    PermissionError,
+    IsADirectoryError,
+    NotADirectoryError,
+    FileExistsError,
+    MemoryError,
+)
+_Command = TypeVar("_Command", bound=Callable[..., Any])
+
+
+def fail(message: str) -> NoReturn:
+    """Print ``error: message`` on one line (no wrapping, no markup) and exit with status 2."""
+    console.print(Text.assemble(("error: ", "bold red"), message), soft_wrap=True)
+    raise typer.Exit(2)
+
+
+def error_message(exc: BaseException) -> str:
+    """One line for a user error, naming the path of an OS error when it has one."""
+    if isinstance(exc, MemoryError):
+        return f"out of memory: {exc}" if str(exc) else "out of memory"
+    if isinstance(exc, OSError) and exc.filename is not None:
+        where = f"{exc.filename} -> {exc.filename2}" if exc.filename2 is not None else exc.filename
+        return f"{exc.strerror or type(exc).__name__}: {where}"
+    return " ".join(str(exc).split())
+
+
+def reports_errors(command: _Command) -> _Command:
+    """Run a command body; a user error (:data:`USER_ERRORS`) becomes a one-line message."""
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except USER_ERRORS as exc:
+            fail(error_message(exc))
+
+    return cast(_Command, run)
+
+
+def progress_bar() -> Any:
+    """The progress bar of the long commands (evaluate, study): task, bar, count, time left."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    )
+
+
+def print_lasa_demo(shape: str, metrics: dict[str, Any], out: Path) -> None:
+    """The table of ``pbdkit demo --task lasa``."""
+    table = Table(title=f"pbdkit demo: LASA {shape}")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for key in ("n_components", "rmse_gmr_to_demos", "rmse_pointwise_mean_to_demos"):
+        value = metrics[key]
+        table.add_row(key, f"{value:.3f}" if isinstance(value, float) else str(value))
+    table.add_row("learn time", f"{metrics['learn_seconds']:.2f} s")
+    console.print(table)
+    console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
+
+
+def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Path) -> None:
+    """The tables and lines of ``pbdkit demo`` for a robot task (``metrics``: its
+    metrics.json)."""
+    table = Table(title=f"pbdkit demo: {spec.name} task, new situation (seed {seed})")
+    table.add_column("controller")
+    table.add_column("success")
+    # In metrics.json and the report: the measured speed and following error, and the servo
+    # stream's peaks (here one column: the worst of the three ratios to the limits).
+    peaks = tuple(
+        f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("", "_ratio")
+    )
+    extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks)
+    keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
+    for k in keys:
+        table.add_column(k, justify="right")
+    table.add_column("limits used", justify="right")
+    for name, row in metrics["controllers"].items():
+        cells = [("[green]yes" if row["success"] else "[red]no")]
+        cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
+        worst = max(
+            (row.get(f"peak_{k}_ratio") or 0.0) for k in ("velocity", "acceleration", "jerk")
+        )
+        cells.append(f"{worst:.3f}")
+        table.add_row(name, *cells)
+    console.print(table)
+    console.print(
+        "limits used: the largest of the servo stream's peak velocity, acceleration and jerk "
+        "over the arm's limits (<= 1: a real drive accepts it)"
+    )
+    if metrics["online"] is not None:
+        on = metrics["online"]
+        t2 = Table(title=f"the fused controller under perturb {on['perturb']['name']}")
+        t2.add_column("run")
+        t2.add_column("success")
+        first = next(iter(k for k in on["online"] if k not in extra))
+        t2.add_column(first, justify="right")
+        t2.add_column("peak speed / limit", justify="right")
+        t2.add_column("following error (rad)", justify="right")
+        for label in ("online", "offline"):
+            row = on[label]
+            t2.add_row(
+                label,
+                "[green]yes" if row["success"] else "[red]no",
+                "-" if row[first] is None else f"{row[first]:.1f}",
+                f"{row['peak_speed_ratio']:.2f}",
+                f"{row['following_error_rad']:.3f}",
+            )
+        console.print(t2)
+    print_components(spec, metrics["n_components"])
+    tracking = metrics["tracking"]
+    deg = tracking.get("tracking_error_deg") if tracking else None
+    print_tracking(
+        metrics["vision"],
+        tracking["tracking_error_mm"] if tracking else None,
+        None if deg is None else {"mean": deg["mean"], "sd": deg["std"]},
+    )
+    secs = metrics["seconds"]
+    console.print(
+        f"teach {secs['teach']:.1f} s, learn {secs['learn']:.2f} s, reproduce "
+        f"{1000 * secs['reproduce_fused']:.0f} ms, whole demo {secs['total']:.1f} s"
+    )
+    console.print(f"open {out / 'report.html'} (video: {out / 'reproduction.mp4'})")
+
+
+def print_evaluation(spec: TaskSpec, result: Evaluation) -> None:
+    """The table and lines of ``pbdkit evaluate`` for the task ``spec``."""
+    conditions = result.conditions
+    task, trials = result.task, len(result.trials)
+    seed, online, perturb = conditions.seed, conditions.online, conditions.perturb
+    how = "online" if online else "offline"
+    title = f"{task}: {trials} new placements (seed {seed}), {how}, perturb {perturb}"
+    table = Table(title=title)
+    table.add_column("controller")
+    table.add_column("success rate", justify="right")
+    table.add_column("median errors", justify="left")
+    for name, row in result.controllers.items():
+        med = ", ".join(f"{k} {v['median']:.1f}" for k, v in row.metrics.items() if v is not None)
+        table.add_row(name, f"{100 * row.success_rate:.0f}%", med)
+    console.print(table)
+    print_components(spec, result.n_components)
+    print_tracking(result.vision, result.tracking_error_mm, result.tracking_error_deg)
+    if result.tracking_failures:
+        console.print(
+            f"[red]{result.tracking_failures} placement(s) where the cameras did not locate "
+            "every object (counted as failures)"
+        )
+
+
+def print_study(result: dict[str, Any], out: Path) -> None:
+    """The lines of ``pbdkit study`` (``result``: its study.json)."""
+    for obj, m in result["maps"].items():
+        rates = ", ".join(f"{k} {100 * v:.0f}%" for k, v in m["overall"].items())
+        console.print(f"map of the {obj} (grid twice the demonstrated range): {rates}")
+    curve = ", ".join(
+        f"{c['n_demos']}: {100 * c['success_rate']:.0f}%" for c in result["learning_curve"]
+    )
+    console.print(f"fused success by number of demonstrations: {curve}")
+    noise = ", ".join(
+        f"{c['noise_mm']:g} mm: {100 * c['success_rate']:.0f}%" for c in result["noise"]
+    )
+    console.print(f"fused success by tracking noise: {noise}")
+    console.print(f"open {out / 'report.html'} ({result['seconds']:.0f} s)")
+
+
+def print_components(spec: TaskSpec, n_components: dict[str, int]) -> None:
+    """K per space, the fixed objects of ``spec`` marked (learned with --constrain-fixed)."""
+    ks = ", ".join(f"{k}: {v}" for k, v in n_components.items())
+    fixed = [k for k in n_components if k in spec.fixed_objects]
+    note = f" ({', '.join(fixed)}: fixed, learned with --constrain-fixed)" if fixed else ""
+    console.print(f"K per space (chosen by leaving one demonstration out): {ks}{note}")
+
+
+def print_tracking(
+    vision: bool, stats: dict[str, Any] | None, yaw: dict[str, Any] | None = None
+) -> None:
+    """Where the object positions came from, and the cameras' error (``stats``: mean and std
+    in mm; ``yaw``: mean and sd in degrees, for objects placed as poses)."""
+    if not vision:
+        console.print("object positions: ground truth (--ground-truth)")
+        return
+    if stats is None:
+        console.print("object positions: stereo cameras, no object located")
+        return
+    # The yaw of the objects placed as poses (evaluate's "tracking_error_deg"), when there are.
+    turn = "" if yaw is None else f", yaw {yaw['mean']:.2f} +- {yaw['sd']:.2f} deg"
+    console.print(
+        f"object positions: stereo cameras, error {stats['mean']:.1f} +- {stats['std']:.1f} mm"
+        f"{turn} (paper: 5.9 +- 2.8 mm)"
+    )
+
+
+def print_oriented(skill: Skill, demos: Sequence[Demonstration]) -> None:
+    """Say which objects the skill learned with orientation (those the demonstrations give as
+    poses, unless --no-orientation); nothing when every object is a position (the paper's)."""
+    from ..data._placement import is_pose
+
+    posed = [k for k in skill.object_names if is_pose(demos[0].objects[k])]
+    if not posed:
+        return
+    if skill.oriented:
+        console.print(
+            f"oriented (the hand's position in the object's frame and its orientation "
+            f"relative to it): {', '.join(skill.oriented)}",
+            soft_wrap=True,
+        )
+    flat = [k for k in posed if k not in skill.oriented]
+    if flat:
+        console.print(
+            f"given as poses, learned as positions only (--no-orientation): {', '.join(flat)}",
+            soft_wrap=True,
+        )
+
+
+def closest_approach_text(res: ReproductionResult) -> str:
+    """How close the hand came to where each object's constraint expects it: the smallest
+    distance (mm) and, for an oriented object, the angle (degrees) to the orientation it
+    expects at that sample."""
+    from ._report import closest_approach
+
+    parts = []
+    for k, (mm, deg) in closest_approach(res).items():
+        parts.append(f"{k} {mm:.1f} mm" + ("" if deg is None else f" and {deg:.1f} deg"))
+    what = "closest approach"
+    if res.orientation_errors:
+        what += " (distance, and the angle to the expected orientation there)"
+    return f"{what}: {', '.join(parts)}"
