@@ -5,7 +5,7 @@ wall time of one offline playback (:func:`pbdkit.sim.execute`: 0.3 s settling, t
 trajectory over the demonstrations' duration, 1 s of settling; no camera), against:
 
 - the playback loop as it was before it was tuned (servo targets written by index arrays at
-  every physics step, the glass's tilt through ``glass_pose()`` and numpy), replicated here
+  every physics step, the glass's tilt through ``grasped_frame()`` and numpy), replicated here
   and measured in the same run: the "current one" the issue compares with;
 - the same number of bare ``mj_step`` calls with the arm following the same targets set once
   per segment (no Python per physics step beyond the call): the floor MuJoCo itself sets;
@@ -54,7 +54,7 @@ def legacy_execute(sim: Simulation, t: np.ndarray, q: np.ndarray, g: np.ndarray)
         ctrl[sim._vel_act] = dqt[k]
         ctrl[sim._finger_act] = 0.0 if gt[k] else 0.04
         rec.record(k, s[k], qt[k], bool(gt[k]))
-        _, rot = sim.glass_pose()
+        _, rot = sim.grasped_frame()
         rec.max_tilt = max(rec.max_tilt, float(np.arccos(np.clip(rot[2, 2], -1.0, 1.0))))
         if k == n_play:
             rec.end_of_trajectory()

@@ -127,7 +127,10 @@ def test_skill_reproduction_as_documented(
     assert all(isinstance(g, pbdkit.GMM) for g in skill.gmms.values())
     assert skill.n_steps == 120 and skill.robot is katana
     assert set(skill.selection_) == set(skill.constraint_names)
-    assert dict(skill.n_components) == {k: g.n_components_ for k, g in skill.gmms.items()}
+    assert skill.n_components_ == {k: g.n_components_ for k, g in skill.gmms.items()}
+    assert skill.n_components == skill.n_components_  # the read-only alias
+    with pytest.raises(AttributeError):
+        skill.n_components = {}  # type: ignore[misc]
     objects = {k: demos[0].objects[k] for k in names}
     res = skill.reproduce(objects, q0=None, use=None, alpha=0.5)
     assert isinstance(res, pbdkit.ReproductionResult)

@@ -54,7 +54,7 @@ def test_a_slow_move_is_followed_and_an_occlusion_a_jump_and_a_grasp_are_held() 
     # The estimates: the glass where it was before the grasp, the coaster where it slid to.
     assert np.linalg.norm(f.estimates["glass"] - glass) < 4e-3
     assert np.linalg.norm(f.estimates["coaster"] - (coaster + np.array([0.05, 0.0, 0.0]))) < 4e-3
-    frames = f.summary()["frames"]
+    frames = f.as_dict()["frames"]
     assert frames["glass"] == {"ok": 20, "held": 40}
     assert frames["coaster"] == {"ok": n - 9, "occluded": 5, "jump": 1, "not_visible_a": 3}
     # Events are status changes, in order, with the reason.

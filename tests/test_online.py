@@ -121,7 +121,7 @@ def test_a_pushed_arm_yields_and_is_steered_back_while_offline_snaps_back(
         ts, placement, "fused", disturbance=_disturbance(ts, "push", placement)
     )
     assert online.success
-    on, off = online.summary(), offline.summary()
+    on, off = online.as_dict(), offline.as_dict()
     # The push was felt: the phase held while the arm was shoved, and the plan restarted.
     assert on["phase_held_steps"] > 0 and online.online.replans > 0
     # Outside the push, online: within the velocity limits (5 % for the servos), a small
@@ -279,7 +279,7 @@ def test_objects_slide_and_static_ones_refuse() -> None:
     now = sim.object_positions()
     np.testing.assert_allclose(now["coaster"], start["coaster"] - d, atol=1e-12)
     np.testing.assert_allclose(now["glass"], start["glass"] + d, atol=1e-3)  # stays where it slid
-    assert sim.glass_tilt() < 0.02
+    assert sim.grasped_tilt() < 0.02
     with pytest.raises(ValueError, match="cannot move"):
         Simulation.from_task(get_task("basin")).place_object("basin", [0.3, 0.0, 0.0])
     with pytest.raises(ValueError, match="finite"):

@@ -173,7 +173,7 @@ def test_a_hidden_mark_means_not_seen(slot_tracker: SimTracker) -> None:
         sim.model.geom_rgba[gid] = (0.85, 0.10, 0.70, 1.0)
         held = observer(sim, 2.0 / 15.0, True)
         assert "block" not in held and observer.filter.status["block"] == "held"
-    summary = observer.summary()
+    summary = observer.as_dict()
     assert set(summary["accepted_error_deg"]) == {"block", "tray"}
 
 
@@ -267,7 +267,7 @@ def test_coaster_tracking_is_unchanged() -> None:
     with Simulation.from_task(spec, nominal_objects(spec)) as sim:
         tracker = SimTracker.from_simulation(sim, at_nominal=False, arm=_arm(0))
         assert tracker.objects == ("glass", "coaster") and tracker.pose_models == {}
-        assert "poses" not in tracker.tracker.to_dict()
+        assert "poses" not in tracker.tracker.as_dict()
         img_a, img_b = tracker.images(sim)
         plain = tracker.tracker.track(img_a, img_b)
         tracks = tracker.tracker.track_objects(img_a, img_b)

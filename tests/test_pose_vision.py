@@ -79,8 +79,8 @@ def test_pose_model_yaw_offset_and_averaged_views() -> None:
     yaw = math.atan2(got[1, 0], got[0, 0])
     assert math.degrees(yaw) == pytest.approx(math.degrees(2.0), abs=0.5)
     # Plain data round trip.
-    again = PoseModel.from_dict(json.loads(json.dumps(model.to_dict())))
-    assert again.to_dict() == model.to_dict()
+    again = PoseModel.from_dict(json.loads(json.dumps(model.as_dict())))
+    assert again.as_dict() == model.as_dict()
 
 
 def test_pose_model_errors() -> None:
@@ -163,8 +163,8 @@ def test_tracker_gives_a_pose_from_two_discs() -> None:
     # Without poses, track_objects is track.
     plain = StereoTracker(*cams, models)
     assert plain.objects == tuple(models)
-    data = tracker.to_dict()
-    assert "poses" in data and "poses" not in plain.to_dict()
+    data = tracker.as_dict()
+    assert "poses" in data and "poses" not in plain.as_dict()
     again = StereoTracker.from_dict(json.loads(json.dumps(data)))
     assert again.objects == tracker.objects
     assert again.poses["obj"].ends == ("red", "blue")

@@ -228,7 +228,7 @@ def test_basin_run_without_a_basin_constraint_is_judged_on_the_scene_basin(
     )
     assert m["liquid_fraction"] == pytest.approx(inside.mean(), abs=1e-12)
     assert run.success == (m["held"] == 1.0 and m["liquid_fraction"] >= 0.9)
-    assert run.summary()["success"] is run.success
+    assert run.as_dict()["success"] is run.success
     # A moving object the robot does not know is an error, not a guess.
     with pytest.raises(ValueError, match=r"missing position\(s\) for \['glass'\]"):
         run_controller(basin_skill, {"basin": basin}, "fused")
@@ -417,7 +417,7 @@ def test_outcome_detects_a_failed_grasp() -> None:
     (d,) = teach("coaster", n_demos=1, seed=12)
     with Simulation.from_task(get_task("coaster"), d.objects) as sim:
         res = execute(sim, d.t, d.joints, np.zeros_like(d.t), settle=0.2, record_rate=10.0)
-        glass_xy = sim.glass_pose()[0][:2]
+        glass_xy = sim.grasped_frame()[0][:2]
     assert not res.outcome.success
     assert not res.grasped.any()
     assert np.all(res.objects["glass"][:, 2] < d.objects["glass"][2] + 0.005)
@@ -587,7 +587,7 @@ def test_playback_servo_stream_is_within_the_limits(
     assert old.acceleration > 10.0
     assert ex.servo_peaks.acceleration_abs < old.acceleration_abs / 10.0
     # evaluate's JSON per trial.
-    summary = run.summary()
+    summary = run.as_dict()
     for k in KINDS:
         assert 0.0 < summary[f"peak_{k}_ratio"] <= 1.0
         assert summary[f"peak_{k}"] == pytest.approx(getattr(ex.servo_peaks, f"{k}_abs"))
@@ -622,7 +622,7 @@ def test_playback_servos_follow_the_samples(
     assert off.max() < 0.06
     assert off.mean() < 2e-3
     # The measured joints follow the targets (a glass may hold a finger back a little).
-    assert run.summary()["following_error_rad"] < 0.03
+    assert run.as_dict()["following_error_rad"] < 0.03
 
 
 # ----------------------------------------------------------------------------- tasks as data
@@ -724,10 +724,10 @@ def _mark_via_points(
 
 
 def _mark_judge(sim: Simulation, run: RunStats) -> Outcome:
-    bottom, _ = sim.glass_pose()
+    bottom, _ = sim.grasped_frame()
     err = float(np.linalg.norm(bottom[:2] - sim.info.objects["mark"][:2]))
-    tilt = math.degrees(sim.glass_tilt())
-    released = sim.glass_released()
+    tilt = math.degrees(sim.grasped_tilt())
+    released = sim.grasped_released()
     ok = err <= MARK_MAX_ERROR and tilt < 10.0 and released and abs(bottom[2]) < 0.005
     metrics = {"placement_error_mm": 1e3 * err, "tilt_deg": tilt, "released": float(released)}
     return Outcome(bool(ok), metrics)
@@ -788,7 +788,7 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
     placement = sample_objects("mark", np.random.default_rng(24))
     run = run_controller(ts, placement, "fused")
     assert set(run.execution.objects) == {"glass", "mark"}
-    assert set(run.summary()) == {
+    assert set(run.as_dict()) == {
         "success",
         "placement_error_mm",
         "tilt_deg",
@@ -797,7 +797,7 @@ def test_a_registered_task_runs_from_teaching_to_evaluation(mark_task: TaskSpec)
         "following_error_rad",
         *(f"peak_{k}{suffix}" for k in KINDS for suffix in ("_ratio", "")),
     }
-    assert all(0.0 < run.summary()[f"peak_{k}_ratio"] <= 1.0 for k in KINDS)
+    assert all(0.0 < run.as_dict()[f"peak_{k}_ratio"] <= 1.0 for k in KINDS)
     assert run.success == (run.execution.outcome.metrics["placement_error_mm"] <= 20.0)
     # Measured: 11-20 mm with 3 fast demonstrations on a 200-step grid (fused, 3 placements).
     assert run.success

@@ -210,9 +210,9 @@ def test_block_rests_on_the_table_at_its_pose() -> None:
             now = sim.object_poses()["block"]
             np.testing.assert_allclose(now[:3, 3], pose[:3, 3], atol=1e-3)
             assert abs(_wrap(yaw_of(now) - yaw_of(pose))) < math.radians(0.5)
-            assert sim.glass_tilt() < math.radians(0.1)
+            assert sim.grasped_tilt() < math.radians(0.1)
             np.testing.assert_allclose(sim.grasped_pose(), now, atol=1e-12)
-            assert sim.glass_released() and not sim.glass_grasped()
+            assert sim.grasped_released() and not sim.grasped_held()
 
 
 def _drop(sim: Simulation, dx: float, dy: float, yaw_off: float, height: float = 0.005) -> Float:
@@ -235,7 +235,7 @@ def test_block_dropped_at_the_pockets_yaw_goes_in(scene: Simulation, turn: float
         block = _drop(scene, dx, dy, yaw, height)
         assert abs(_bottom_above_floor(block)) < 5e-4  # on the pocket's floor
         assert P.footprint_margin(block, tray) > 0  # inside the walls
-        assert scene.glass_tilt() < math.radians(1.0)
+        assert scene.grasped_tilt() < math.radians(1.0)
 
 
 @pytest.mark.parametrize("yaw_deg", [10.0, -10.0, 15.0, 190.0])
@@ -319,13 +319,13 @@ def test_grasp_checks_for_a_block_closed_between_the_fingers() -> None:
         sim.step(300)  # the fingers open
         np.testing.assert_allclose(sim.finger_opening(), [0.04, 0.04], atol=1e-3)
         move(grasp + 0.04, grasp)
-        assert sim.glass_released() and not sim.glass_grasped()  # open around the block
+        assert sim.grasped_released() and not sim.grasped_held()  # open around the block
         sim.set_gripper(True)
         sim.step(300)
-        assert sim.glass_grasped() and not sim.glass_released()
+        assert sim.grasped_held() and not sim.grasped_released()
         np.testing.assert_allclose(sim.finger_opening(), [P.BLOCK_WIDTH / 2] * 2, atol=2e-4)
         move(grasp, grasp + 0.04)  # lift 4 cm
-        assert sim.glass_grasped()
+        assert sim.grasped_held()
         now = sim.object_positions()["block"]
         np.testing.assert_allclose(now, start + np.array([0.0, 0.0, 0.04]), atol=1e-3)
         sim.refresh()
@@ -333,17 +333,17 @@ def test_grasp_checks_for_a_block_closed_between_the_fingers() -> None:
             sim.tool_position() - now, [0.0, 0.0, P.BLOCK_GRASP_HEIGHT], atol=1e-3
         )
         assert abs(_wrap(yaw_of(sim.grasped_pose()) - yaw)) < math.radians(0.5)
-        assert sim.glass_tilt() < math.radians(1.0)
+        assert sim.grasped_tilt() < math.radians(1.0)
         sim.set_gripper(False)
         sim.step(500)
-        assert sim.glass_released() and not sim.glass_grasped()
+        assert sim.grasped_released() and not sim.grasped_held()
         np.testing.assert_allclose(sim.object_positions()["block"], start, atol=1e-3)
 
 
 def test_a_glass_is_still_the_grasped_object_of_the_papers_tasks() -> None:
     with Simulation.from_task(get_task("coaster")) as sim:
         assert sim.grasped_kind == "glass"
-        bottom, rot = sim.glass_pose()
+        bottom, rot = sim.grasped_frame()
         pose = sim.grasped_pose()
         np.testing.assert_array_equal(pose[:3, 3], bottom)
         np.testing.assert_array_equal(pose[:3, :3], rot)

@@ -185,7 +185,7 @@ def test_default_threshold_is_chi2_99() -> None:
 def test_color_model_dict_roundtrip_through_json() -> None:
     rng = np.random.default_rng(4)
     model = ColorModel.from_samples(rng.normal([100, 160], [5, 3], (50, 2)))
-    back = ColorModel.from_dict(json.loads(json.dumps(model.to_dict())))
+    back = ColorModel.from_dict(json.loads(json.dumps(model.as_dict())))
     np.testing.assert_array_equal(back.mean, model.mean)
     np.testing.assert_array_equal(back.covariance, model.covariance)
     assert back.n_samples == 50
@@ -322,7 +322,7 @@ def test_from_fovy_axis_conventions() -> None:
 
 def test_camera_validation_and_roundtrip() -> None:
     cam, _ = stereo_pair()
-    back = PinholeCamera.from_dict(json.loads(json.dumps(cam.to_dict())))
+    back = PinholeCamera.from_dict(json.loads(json.dumps(cam.as_dict())))
     np.testing.assert_array_equal(back.projection_matrix, cam.projection_matrix)
     assert back.image_size == (320, 240)
     with pytest.raises(ValueError, match="R must be a rotation matrix"):
@@ -712,7 +712,7 @@ def test_tracker_dict_roundtrip_through_json() -> None:
     rng = np.random.default_rng(24)
     cams = stereo_pair()
     tracker = StereoTracker(*cams, calibrated_models(rng, cams[0], n_frames=1), min_area=15)
-    back = StereoTracker.from_dict(json.loads(json.dumps(tracker.to_dict())))
+    back = StereoTracker.from_dict(json.loads(json.dumps(tracker.as_dict())))
     assert back.min_area == 15 and list(back.models) == list(COLORS)
     discs = random_scene(rng, cams, COLORS)
     imgs = [render_discs(c, discs, rng)[0] for c in cams]

@@ -41,7 +41,8 @@ constraint            one space's GMR Gaussians along the steps, named like the 
 controller            which constraints are fused (``use=``): ``"fused"``, ``"fused-position"``
                       (poses given, orientation ignored), ``"joint"``, ``"task:OBJECT"``
 task                  a scenario of the experiment (:class:`pbdkit.sim.TaskSpec`: coaster,
-                      basin, slot), never the task space
+                      basin, slot); a "task constraint" and a "task-only controller" are the
+                      paper's words for task-space ones
 placement             where an object is: a position (3,) or a pose (4x4, or position and
                       quaternion w first); ``objects`` maps names to placements
 oriented              of an object placed by a pose, whose constraint includes orientation

@@ -293,7 +293,7 @@ def learn(
         )
         seconds = time.perf_counter() - t_start
     skill.save(out)
-    ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components.items())
+    ks = ", ".join(f"{k}: {v}" for k, v in skill.n_components_.items())
     console.print(f"learned in {seconds:.2f} s; K per space: {ks}; wrote {out}")
     print_oriented(skill, items)
 

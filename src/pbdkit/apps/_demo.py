@@ -319,20 +319,20 @@ def _run_robot_demo(
         "vision": vision is not None,
         "observed_objects": {k: v.tolist() for k, v in objects.items()},
         "tracking": vision,
-        "n_components": ts.skill.n_components,
+        "n_components": ts.skill.n_components_,
         "selection": {k: s.as_dict() for k, s in ts.skill.selection_.items()},
         "constraints": list(ts.skill.constraint_names),
         "constrain_fixed": ts.constrain_fixed,
         "success": fused.success,
-        "controllers": {name: run.summary() for name, run in runs.items()},
+        "controllers": {name: run.as_dict() for name, run in runs.items()},
         "motion_limits": fused.execution.servo_limits.as_dict(),
         "mean_influence_fused": influence,
         "online": None
         if not online_runs
         else {
             "perturb": online_runs["online"].online.disturbance,
-            "online": online_runs["online"].summary(),
-            "offline": online_runs["offline"].summary(),
+            "online": online_runs["online"].as_dict(),
+            "offline": online_runs["offline"].as_dict(),
             "tracking": online_runs["online"].online.tracking,
         },
         "seconds": {
@@ -393,9 +393,9 @@ def _online_sections(demo: DemoRun) -> list[Section]:
     perturb = info["perturb"]
     what = _perturbation_words(perturb)
     absolute = ("peak_velocity", "peak_acceleration", "peak_jerk")  # the limits section has them
-    keys = [k for k in on.summary() if k not in ("success", "tracking", *absolute)]
+    keys = [k for k in on.as_dict() if k not in ("success", "tracking", *absolute)]
     rows = [
-        [label, run.success, *(run.summary().get(k, "-") for k in keys)]
+        [label, run.success, *(run.as_dict().get(k, "-") for k in keys)]
         for label, run in (("online (in the loop)", on), ("offline (played open loop)", off))
     ]
     fig = demo.figures["fig_online.png"]
@@ -440,11 +440,11 @@ _PEAK_KINDS = ("velocity", "acceleration", "jerk")
 def _limits_section(demo: DemoRun) -> Section:
     """What the servos were sent against the arm's limits: every run's peaks and a figure."""
     runs: list[tuple[str, dict[str, Any]]] = [
-        (name, run.summary()) for name, run in demo.runs.items()
+        (name, run.as_dict()) for name, run in demo.runs.items()
     ]
     if demo.online:
         runs += [
-            (f"fused, {label} ({demo.metrics['online']['perturb']['name']})", run.summary())
+            (f"fused, {label} ({demo.metrics['online']['perturb']['name']})", run.as_dict())
             for label, run in (
                 ("online", demo.online["online"]),
                 ("offline", demo.online["offline"]),

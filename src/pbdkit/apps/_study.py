@@ -351,7 +351,7 @@ def _run(
         "seed": seed,
         "size": asdict(size),
         "controllers": names,
-        "n_components": ts.skill.n_components,
+        "n_components": ts.skill.n_components_,
         "maps": {},
     }
     # 1. Generalization maps.
@@ -386,7 +386,7 @@ def _run(
         trials = run_trials(ts_n, curve_places, ["fused"], conditions, client=client)
         tick(f"learning curve, {n} demonstrations", len(curve_places))
         curve.append({"n_demos": n, "success_rate": _rate(trials, "fused"),
-                      "n_components": ts_n.skill.n_components})  # fmt: skip
+                      "n_components": ts_n.skill.n_components_})  # fmt: skip
     result["learning_curve"] = curve
     atomic_write_bytes(out / "learning_curve.png", figure_png(_plot_curve(spec, curve, size)))
     # 3. Noise tolerance (fused).

@@ -164,7 +164,7 @@ class ViewApp:
         if missing:
             raise ValueError(f"objects: no placement for {missing} (the skill's objects)")
         oriented = task_skill is not None and task_skill.position_skill is not None
-        self.controllers = controller_names(skill.object_names, oriented=oriented)
+        self.controllers = controller_names(skill.object_names, has_oriented=oriented)
         self.controller = "fused"
         self.colors = constraint_colors([JOINT, *skill.object_names])
         self.plan: Plan | None = None

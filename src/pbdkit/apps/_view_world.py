@@ -222,7 +222,7 @@ class Sampler(Disturbance):
         if self.moves:
             with self.lock:
                 moves, self.moves = self.moves, {}
-            held = sim.glass_grasped()
+            held = sim.grasped_held()
             for name, value in moves.items():
                 if held and name == sim.info.spec.grasped:
                     continue  # in the hand: the hand decides where it is

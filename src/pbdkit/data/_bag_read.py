@@ -15,7 +15,7 @@ import contextlib
 import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from .._rotations import as_pose, mean_rotation, pose_matrix
 from .._validation import check_array, check_positive_float
-from ..robots._protocols import check_robot
+from ..robots._protocols import BagRobot, check_robot
 from ._bag_stream import _PASSED_THROUGH, _Bag, _open_reader, _unreadable
 from ._demonstration import Demonstration
 from ._ros import (
@@ -44,24 +44,13 @@ from ._tf import _TfTree
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection
 
-__all__ = ["BagRobot", "read_bag"]
+__all__ = ["read_bag"]
 
 Float = NDArray[np.float64]
 TF_PREFIX = "tf:"
 #: Consecutive joint states may be at most this far apart (ns): no data about the motion for
 #: longer means a paused recording or a lost driver (a gap of 1e8 s was once accepted).
 MAX_JOINT_GAP_NS = 1_000_000_000
-
-
-class BagRobot(Protocol):
-    """What :func:`read_bag` needs from an arm (:class:`pbdkit.Robot` has it): the names that
-    order the joints, and the base frame (the URDF root link) the objects are placed in."""
-
-    @property
-    def joint_names(self) -> list[str]: ...
-
-    @property
-    def base(self) -> str: ...
 
 
 def read_bag(

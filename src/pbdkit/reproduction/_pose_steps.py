@@ -87,7 +87,7 @@ class PoseFusedStep(ControllerStep):
             p_sum, h = np.zeros((c.n_steps, 3, 3)), np.zeros((c.n_steps, 3))
         self.p_sum_list, self.h_list = list(p_sum), list(h)
         self.world = {k: c.world_task(k, objs[k]) for k in self.tasks}
-        self.oriented = [
+        self.oriented_terms = [
             (list(w.position), list(w.rotation), list(w.precision))
             for k in self.oriented_tasks
             for w in (self.world[k],)
@@ -108,7 +108,7 @@ class PoseFusedStep(ControllerStep):
         lam = a.dot(jp)
         grad = jp.T.dot(px - h)
         energy = 0.5 * x.dot(px) - h.dot(x)
-        for pos, rots, precs in self.oriented:
+        for pos, rots, precs in self.oriented_terms:
             e = log3(rot.dot(rots[j].T))
             g = np.concatenate([jp, left_jacobian_inverse3(e).dot(jw)])
             r = np.concatenate([x - pos[j], e])
@@ -122,7 +122,7 @@ class PoseFusedStep(ControllerStep):
         e_joint = 0.5 * theta.dot(self.prec_list[j].dot(theta)) - self.eta_list[j].dot(theta)
         p_sum, h = self.p_sum_list[j], self.h_list[j]
         energy = float(e_joint + 0.5 * x.dot(p_sum.dot(x)) - h.dot(x))
-        for pos, rots, precs in self.oriented:
+        for pos, rots, precs in self.oriented_terms:
             r = np.concatenate([x - pos[j], log3(rot.dot(rots[j].T))])
             energy += 0.5 * float(r.dot(precs[j].dot(r)))
         return energy

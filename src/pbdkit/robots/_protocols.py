@@ -10,7 +10,8 @@ kinematics library, a test arm) implements the members of the Protocol its use n
 - :class:`PoseKinematicModel`: constraints on orientation too (objects given as poses): the tip's
   pose and 6-D Jacobian;
 - :class:`RobotDescription`: saving a skill (``Skill.save``): the URDF text and tip frame it
-  is rebuilt from.
+  is rebuilt from;
+- :class:`BagRobot`: reading a ROS bag (``read_bag``): joint names and the base frame.
 
 Unchecked fast paths (the ``_unchecked`` suffix) take a finite, contiguous float64 array of
 shape (n,) and skip validation; anything else gives undefined results.
@@ -24,7 +25,14 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-__all__ = ["KinematicModel", "PoseKinematicModel", "RobotDescription", "check_robot", "missing"]
+__all__ = [
+    "BagRobot",
+    "KinematicModel",
+    "PoseKinematicModel",
+    "RobotDescription",
+    "check_robot",
+    "missing",
+]
 
 Float = NDArray[np.float64]
 
@@ -116,6 +124,18 @@ class RobotDescription(Protocol):
 
     @property
     def tip(self) -> str: ...
+
+
+@runtime_checkable
+class BagRobot(Protocol):
+    """What reading a ROS bag needs (:func:`pbdkit.read_bag`): the names that order the joints,
+    and the base frame (the URDF's root link) the objects are placed in."""
+
+    @property
+    def joint_names(self) -> list[str]: ...
+
+    @property
+    def base(self) -> str: ...
 
 
 def _members(protocol: type) -> list[str]:

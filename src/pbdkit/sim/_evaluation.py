@@ -186,7 +186,7 @@ def summarize(
         task=ts.task.name,
         conditions=conditions,
         n_demos=n_demos,
-        n_components=ts.skill.n_components,
+        n_components=ts.skill.n_components_,
         constraints=list(ts.skill.constraint_names),
         constrain_fixed=ts.constrain_fixed,
         learn_seconds=ts.learn_seconds,

@@ -57,7 +57,7 @@ class ExecutionResult:
         Tool point (base frame).
     objects : dict str -> ndarray, shape (S, 3)
         Object positions (ground truth) over time.
-    glass_tilt : ndarray, shape (S,)
+    grasped_tilt : ndarray, shape (S,)
         Angle of the glass's axis from the vertical (rad).
     grasped : ndarray of bool, shape (S,)
         Both fingers touch the glass.
@@ -88,7 +88,7 @@ class ExecutionResult:
     targets: Float
     tool: Float
     objects: dict[str, Float]
-    glass_tilt: Float
+    grasped_tilt: Float
     grasped: NDArray[np.bool_]
     gripper: NDArray[np.bool_]
     liquid: Float
@@ -491,19 +491,19 @@ class Recorder:
             rec["q"].append(sim.joints())
             rec["target"].append(np.array(target, dtype=np.float64))
             rec["tool"].append(sim.tool_position())
-            rec["tilt"].append(sim.glass_tilt())
-            rec["grasped"].append(sim.glass_grasped())
+            rec["tilt"].append(sim.grasped_tilt())
+            rec["grasped"].append(sim.grasped_held())
             rec["gripper"].append(gripper)
             for name, p in sim.object_positions().items():
                 self.objects[name].append(p)
         if self.camera is not None and k % self.frame_every == 0:
             self.frames.append(sim.render(self.camera))
             self.frame_times.append(t)
-        self.max_tilt = max(self.max_tilt, sim.glass_tilt())
+        self.max_tilt = max(self.max_tilt, sim.grasped_tilt())
 
     def end_of_trajectory(self) -> None:
         """The last target is reached now: note whether the glass is held."""
-        self.held_at_end = self.sim.glass_grasped()
+        self.held_at_end = self.sim.grasped_held()
 
     def result(self) -> ExecutionResult:
         """The record and the task's judgement of the current state."""
@@ -521,7 +521,7 @@ class Recorder:
             targets=np.array(rec["target"], dtype=np.float64),
             tool=np.array(rec["tool"], dtype=np.float64),
             objects={k: np.array(v, dtype=np.float64) for k, v in self.objects.items()},
-            glass_tilt=np.array(rec["tilt"], dtype=np.float64),
+            grasped_tilt=np.array(rec["tilt"], dtype=np.float64),
             grasped=np.array(rec["grasped"], dtype=bool),
             gripper=np.array(rec["gripper"], dtype=bool),
             liquid=sim.liquid_positions(),

@@ -90,7 +90,7 @@ class Observer:
     def observe(self, sim: Simulation, t: float, held: tuple[str, ...]) -> dict[str, Float]:
         raise NotImplementedError
 
-    def summary(self) -> dict[str, Any] | None:
+    def as_dict(self) -> dict[str, Any] | None:
         """JSON-ready account of the observations (None: nothing to report)."""
         return None
 
@@ -152,11 +152,11 @@ class VisionObserver(Observer):
                 self.errors_mm[k].append(1e3 * float(np.linalg.norm(p - truth[k])))
         return {k: v for k, v in accepted.items() if k in self.names}
 
-    def summary(self) -> dict[str, Any]:
-        """Frames per status and status changes (:meth:`TrackFilter.summary`), and the error
+    def as_dict(self) -> dict[str, Any]:
+        """Frames per status and status changes (:meth:`TrackFilter.as_dict`), and the error
         of the accepted estimates against the truth (mm): mean and max per object; for posed
         objects also their yaw error (degrees, ``"accepted_error_deg"``)."""
-        out = self.filter.summary()
+        out = self.filter.as_dict()
         out["accepted_error_mm"] = {
             k: {"mean": float(np.mean(v)), "max": float(np.max(v)), "n": len(v)}
             for k, v in self.errors_mm.items()
@@ -355,7 +355,7 @@ def execute_online(
         held=np.array(held, dtype=bool),
         replans=controller.replans,
         objects={k_: np.array(v, dtype=np.float64) for k_, v in used.items()},
-        tracking=None if observer is None else observer.summary(),
+        tracking=None if observer is None else observer.as_dict(),
         disturbance=act.as_dict(),
         dt=dt,
     )

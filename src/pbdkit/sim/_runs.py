@@ -49,7 +49,7 @@ class ControllerRun:
     def success(self) -> bool:
         return bool(self.execution.outcome.success)
 
-    def summary(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: success, the task's metrics, ``peak_speed_ratio`` and
         ``following_error_rad`` (:func:`pbdkit.sim._metrics.peak_speed_ratio`,
         :func:`pbdkit.sim._metrics.following_error`), and the peaks of the servo targets over
@@ -82,8 +82,8 @@ class OnlineControllerRun:
     def success(self) -> bool:
         return bool(self.execution.outcome.success)
 
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready: as :meth:`ControllerRun.summary`, plus ``phase_held_steps`` (commands
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: as :meth:`ControllerRun.as_dict`, plus ``phase_held_steps`` (commands
         that re-targeted the previous step) and, with vision, ``tracking`` (frames per status
         of the :class:`pbdkit.vision.TrackFilter`, per object)."""
         out = run_summary(self.execution, self.velocity_limit, self.force_window)

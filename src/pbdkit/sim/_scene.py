@@ -8,7 +8,7 @@ truth), stepping, rendering and the cameras' OpenCV parameters.
 The grasped object (:attr:`pbdkit.sim.TaskSpec.grasped`) is a glass
 (:func:`pbdkit.sim._world.add_glass`) or a block (:func:`pbdkit.sim._parts.add_block`); the
 simulation tells which from the scene (a block has a geom ``NAME_box``) and handles both alike:
-its pose (:meth:`Simulation.grasped_pose`, :meth:`Simulation.glass_pose`), tilt, grasp and
+its pose (:meth:`Simulation.grasped_pose`, :meth:`Simulation.grasped_frame`), tilt, grasp and
 release checks (finger contacts with the glass's walls or the block's box), its point
 (:meth:`Simulation.object_positions`: on the glass's axis at its red band's height, the centre
 of the block's top face) and :meth:`Simulation.place_object`. The ``glass_*`` methods keep their
@@ -275,11 +275,11 @@ class Simulation:
         """What the grasped object is: ``"glass"`` or ``"block"`` (module docstring)."""
         return self._held_kind
 
-    def glass_pose(self) -> tuple[Float, Float]:
-        """Glass bottom centre (3,) and rotation (3, 3) in the base frame.
+    def grasped_frame(self) -> tuple[Float, Float]:
+        """The grasped object's body frame in the base frame: its origin (3,) and rotation (3, 3).
 
-        For a grasped block: its body frame, whose origin is the centre of its top face
-        (:func:`pbdkit.sim._parts.add_block`), as :meth:`grasped_pose` gives it.
+        A glass's origin is the centre of its bottom face, a block's the centre of its top face
+        (:func:`pbdkit.sim._parts.add_block`); :meth:`grasped_pose` is the same as a 4x4.
         """
         b = self._glass_body
         return (
@@ -294,16 +294,16 @@ class Simulation:
         centre of its top face, x along the block from mark a to mark b, z up
         (:mod:`pbdkit.sim._parts`). Its yaw is :func:`pbdkit.sim._tasks.yaw_of` of it.
         """
-        pos, rot = self.glass_pose()
+        pos, rot = self.grasped_frame()
         out = np.eye(4)
         out[:3, :3] = rot
         out[:3, 3] = pos
         return out
 
-    def glass_tilt(self) -> float:
+    def grasped_tilt(self) -> float:
         """Angle between the glass's axis (a block's vertical, its z axis) and the vertical
         (rad)."""
-        # rot[2, 2] of glass_pose(), read in place: this runs at every physics step.
+        # rot[2, 2] of grasped_frame(), read in place: this runs at every physics step.
         c = float(self.data.xmat[self._glass_body, 8])
         return math.acos(min(1.0, max(-1.0, c)))
 
@@ -319,7 +319,7 @@ class Simulation:
         for name, (mid, offset) in self._mocap.items():
             rot = _quat_mat(self.data.mocap_quat[mid])
             out[name] = np.asarray(self.data.mocap_pos[mid] + rot @ offset, dtype=np.float64)
-        bottom, rot = self.glass_pose()
+        bottom, rot = self.grasped_frame()
         out[self._held] = bottom + rot[:, 2] * self._held_point_z
         return out
 
@@ -337,7 +337,7 @@ class Simulation:
             pose = np.eye(4)
             pose[:3, 3] = pos
             if name == self._held:
-                _, rotation = self.glass_pose()
+                _, rotation = self.grasped_frame()
                 pose[:3, :3] = rotation
             elif name in self._mocap:
                 pose[:3, :3] = _quat_mat(self.data.mocap_quat[self._mocap[name].mocap_id])
@@ -444,15 +444,15 @@ class Simulation:
         hits = (a[pairs[:, 0]] & b[pairs[:, 1]]) | (b[pairs[:, 0]] & a[pairs[:, 1]])
         return int(np.count_nonzero(hits))
 
-    def glass_grasped(self) -> bool:
-        """True if both fingers touch the grasped glass (its walls; a grasped block: its box)."""
+    def grasped_held(self) -> bool:
+        """True if both fingers touch the grasped object (a glass's walls, a block's box)."""
         return (
             self.contacts("finger_left", self._held_wall) > 0
             and self.contacts("finger_right", self._held_wall) > 0
         )
 
-    def glass_released(self) -> bool:
-        """True if no finger touches the grasped glass (or block)."""
+    def grasped_released(self) -> bool:
+        """True if no finger touches the grasped object (a glass or a block)."""
         left = self.contacts("finger_left", self._held_wall)
         return not (left or self.contacts("finger_right", self._held_wall))
 

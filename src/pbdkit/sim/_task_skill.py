@@ -89,12 +89,14 @@ class TaskSkill:
     def controllers(self) -> list[str]:
         """The controllers of this skill, by name
         (:func:`pbdkit.skill.controller_names`)."""
-        return controller_names(self.skill.object_names, oriented=self.position_skill is not None)
+        return controller_names(
+            self.skill.object_names, has_oriented=self.position_skill is not None
+        )
 
     def skill_for(self, controller: str) -> tuple[Skill, list[str] | None]:
         """The skill a controller reproduces and its ``use`` (ValueError for an unknown name)."""
         oriented = self.position_skill is not None
-        use = controller_use(controller, self.skill.object_names, oriented=oriented)
+        use = controller_use(controller, self.skill.object_names, has_oriented=oriented)
         if controller == FUSED_POSITION and self.position_skill is not None:
             return self.position_skill, use
         return self.skill, use

@@ -118,7 +118,7 @@ class Trial:
     tracking_error_mm : dict str -> float or None
         Distance from the observed to the true position, per tracked object (vision only).
     runs : dict str -> dict
-        Per controller, :meth:`pbdkit.sim._runs.ControllerRun.summary` (JSON-ready), or
+        Per controller, :meth:`pbdkit.sim._runs.ControllerRun.as_dict` (JSON-ready), or
         ``{"success": False, "tracking_status": ...}`` when the objects were not located.
     perturb : dict
         The trial's disturbance (:meth:`pbdkit.sim.Disturbance.as_dict`;
@@ -156,7 +156,7 @@ class TrialObservation:
 @dataclass(frozen=True, kw_only=True)
 class ControllerOutcome:
     """One controller's run in a trial (:func:`run_trial_controller`): its name, its summary
-    (:meth:`pbdkit.sim._runs.ControllerRun.summary`) and the trial's disturbance as it acted
+    (:meth:`pbdkit.sim._runs.ControllerRun.as_dict`) and the trial's disturbance as it acted
     (:meth:`pbdkit.sim.Disturbance.as_dict`; None if nothing ran)."""
 
     controller: str
@@ -215,11 +215,11 @@ def run_trial_controller(
     if conditions.online:
         summary = run_online(
             ts, seen.told, controller, tracker=tracker, sim_objects=truth, disturbance=act
-        ).summary()
+        ).as_dict()
     else:
         summary = run_controller(
             ts, seen.told, controller, sim_objects=truth, disturbance=act
-        ).summary()
+        ).as_dict()
     return ControllerOutcome(controller=controller, summary=summary, disturbance=act.as_dict())
 
 

@@ -26,25 +26,25 @@ __all__ = ["FUSED_POSITION", "controller_names", "controller_use"]
 FUSED_POSITION = "fused-position"
 
 
-def controller_names(object_names: Sequence[str], *, oriented: bool = False) -> list[str]:
+def controller_names(object_names: Sequence[str], *, has_oriented: bool = False) -> list[str]:
     """``["fused", "joint", "task:OBJ", ...]`` for a skill's objects, with
     ``"fused-position"`` after ``"fused"`` for a skill with oriented constraints."""
-    extra = [FUSED_POSITION] if oriented else []
+    extra = [FUSED_POSITION] if has_oriented else []
     return ["fused", *extra, "joint", *(f"task:{k}" for k in object_names)]
 
 
 def controller_use(
-    controller: str, object_names: Sequence[str], *, oriented: bool = False
+    controller: str, object_names: Sequence[str], *, has_oriented: bool = False
 ) -> list[str] | None:
     """The ``use`` argument of :meth:`pbdkit.Skill.reproduce` for a controller name
     (``"fused-position"``: None, of the position-only skill)."""
-    if controller == "fused" or (oriented and controller == FUSED_POSITION):
+    if controller == "fused" or (has_oriented and controller == FUSED_POSITION):
         return None
     if controller == "joint":
         return ["joint"]
     if controller.startswith("task:") and controller[5:] in object_names:
         return [controller[5:]]
     raise ValueError(
-        f"controller must be one of {controller_names(object_names, oriented=oriented)}, "
+        f"controller must be one of {controller_names(object_names, has_oriented=has_oriented)}, "
         f"got {controller!r}"
     )

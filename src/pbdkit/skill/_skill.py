@@ -130,9 +130,15 @@ class Skill:
         return [k for k in self.object_names if k in self.rotation_base]
 
     @property
-    def n_components(self) -> dict[str, int]:
-        """K of each constraint space's GMM."""
+    def n_components_(self) -> dict[str, int]:
+        """The learned K of each constraint space's GMM, name -> K."""
         return {k: int(g.n_components_) for k, g in self.gmms.items()}
+
+    @property
+    def n_components(self) -> dict[str, int]:
+        """The learned K of each space: :attr:`n_components_` (a read-only alias of it, the
+        name of evaluate's JSON and of the checks that read it)."""
+        return self.n_components_
 
     @property
     def selection_(self) -> dict[str, ModelSelection]:

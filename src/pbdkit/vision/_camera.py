@@ -236,7 +236,7 @@ class PinholeCamera:
         c = self.center + dc
         return PinholeCamera(self.K, r, -r @ c, self.width, self.height)
 
-    def to_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """Plain-data form (lists of floats), for JSON or ``np.savez`` files; no pickle."""
         return {
             "K": self.K.tolist(),
@@ -248,12 +248,12 @@ class PinholeCamera:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PinholeCamera:
-        """Inverse of :meth:`to_dict`; validates every field."""
+        """Inverse of :meth:`as_dict`; validates every field."""
         if not isinstance(data, dict):
-            raise ValueError(f"data must be a dict from PinholeCamera.to_dict, got {type(data)}")
+            raise ValueError(f"data must be a dict from PinholeCamera.as_dict, got {type(data)}")
         missing = {"K", "R", "t", "width", "height"} - set(data)
         if missing:
-            raise ValueError(f"data is missing keys {sorted(missing)} (from PinholeCamera.to_dict)")
+            raise ValueError(f"data is missing keys {sorted(missing)} (from PinholeCamera.as_dict)")
         return cls(data["K"], data["R"], data["t"], data["width"], data["height"])
 
 

@@ -338,7 +338,7 @@ class ColorModel:
             out &= ((cbcr - CBCR_OFFSET) ** 2).sum(axis=-1) >= self.min_chroma**2
         return np.asarray(out)
 
-    def to_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """Plain-data form (lists of floats), for JSON or ``np.savez`` files; no pickle."""
         return {
             "mean": self.mean.tolist(),
@@ -349,13 +349,13 @@ class ColorModel:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ColorModel:
-        """Inverse of :meth:`to_dict`; validates every field."""
+        """Inverse of :meth:`as_dict`; validates every field."""
         if not isinstance(data, dict):
-            raise ValueError(f"data must be a dict from ColorModel.to_dict, got {type(data)}")
+            raise ValueError(f"data must be a dict from ColorModel.as_dict, got {type(data)}")
         missing = {"mean", "covariance"} - set(data)
         if missing:
             raise ValueError(
-                f"data must have keys 'mean' and 'covariance' (from ColorModel.to_dict), "
+                f"data must have keys 'mean' and 'covariance' (from ColorModel.as_dict), "
                 f"missing {sorted(missing)}"
             )
         return cls(

@@ -29,7 +29,7 @@ reads 0.82 of its first area with its centroid already 5 mm off (measured): a lo
 would let that pose through.
 
 Refused frames keep the last good estimate; every change of an object's status is logged as a
-:class:`TrackEvent`, and frames are counted per reason (:meth:`TrackFilter.summary`).
+:class:`TrackEvent`, and frames are counted per reason (:meth:`TrackFilter.as_dict`).
 """
 
 from __future__ import annotations
@@ -238,7 +238,7 @@ class TrackFilter:
             out.extend(areas)
         return tuple(out)
 
-    def summary(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: per object, frames per status, and the status changes (events)."""
         return {
             "frames": {k: dict(v) for k, v in self._counts.items()},

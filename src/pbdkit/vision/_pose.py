@@ -209,7 +209,7 @@ class PoseModel:
             return PoseTrack(name, "inconsistent", None, end_a, end_b, span)
         return PoseTrack(name, "ok", self.pose(pa, pb), end_a, end_b, span)
 
-    def to_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """Plain-data form (:meth:`from_dict` inverts it)."""
         return {
             "ends": list(self.ends),
@@ -222,9 +222,9 @@ class PoseModel:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PoseModel:
-        """Inverse of :meth:`to_dict`; validates every field."""
+        """Inverse of :meth:`as_dict`; validates every field."""
         if not isinstance(data, dict) or "ends" not in data:
-            raise ValueError(f"data must be a dict from PoseModel.to_dict, got {data!r}")
+            raise ValueError(f"data must be a dict from PoseModel.as_dict, got {data!r}")
         ends = data["ends"]
         if not isinstance(ends, (list, tuple)) or len(ends) != 2:
             raise ValueError(f"data['ends'] must be two patch names, got {ends!r}")

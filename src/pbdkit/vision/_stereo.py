@@ -252,13 +252,13 @@ class StereoTracker:
                 (a, b, -(a * m.mean[0] + b * m.mean[1]), d, -d * m.mean[1], m.min_chroma**2)
             )
 
-    def to_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Any]:
         """Plain-data form of the whole vision calibration (cameras, color models, settings;
         ``"poses"`` only when some object is posed)."""
         out = {
-            "cam_a": self.cam_a.to_dict(),
-            "cam_b": self.cam_b.to_dict(),
-            "models": {name: m.to_dict() for name, m in self.models.items()},
+            "cam_a": self.cam_a.as_dict(),
+            "cam_b": self.cam_b.as_dict(),
+            "models": {name: m.as_dict() for name, m in self.models.items()},
             "threshold": self.threshold,
             "min_area": self.min_area,
             "ambiguity_ratio": self.ambiguity_ratio,
@@ -267,17 +267,17 @@ class StereoTracker:
             "offsets": {name: o.tolist() for name, o in self.offsets.items()},
         }
         if self.poses:
-            out["poses"] = {name: m.to_dict() for name, m in self.poses.items()}
+            out["poses"] = {name: m.as_dict() for name, m in self.poses.items()}
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> StereoTracker:
-        """Inverse of :meth:`to_dict`; validates every field."""
+        """Inverse of :meth:`as_dict`; validates every field."""
         if not isinstance(data, dict):
-            raise ValueError(f"data must be a dict from StereoTracker.to_dict, got {type(data)}")
+            raise ValueError(f"data must be a dict from StereoTracker.as_dict, got {type(data)}")
         missing = {"cam_a", "cam_b", "models"} - set(data)
         if missing:
-            raise ValueError(f"data is missing keys {sorted(missing)} (from StereoTracker.to_dict)")
+            raise ValueError(f"data is missing keys {sorted(missing)} (from StereoTracker.as_dict)")
         models = data["models"]
         if not isinstance(models, dict):
             raise ValueError(

@@ -136,7 +136,7 @@ def via_points(
 
 def judge(sim: Simulation, run: RunStats) -> Outcome:
     """Success and metrics (module docstring) of the state after a run."""
-    bottom, rot = sim.glass_pose()
+    bottom, rot = sim.grasped_frame()
     basin = sim.info.objects["basin"]
     liquid = sim.liquid_positions()
     half = BASIN_INNER / 2

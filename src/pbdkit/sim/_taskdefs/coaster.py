@@ -156,12 +156,12 @@ def via_points(
 
 def judge(sim: Simulation, run: RunStats) -> Outcome:
     """Success and metrics (module docstring) of the state after a run."""
-    bottom, _ = sim.glass_pose()
-    tilt = math.degrees(sim.glass_tilt())
+    bottom, _ = sim.grasped_frame()
+    tilt = math.degrees(sim.grasped_tilt())
     coaster = sim.object_positions()["coaster"]  # where it is now (it may have slid)
     err = float(np.linalg.norm(bottom[:2] - coaster[:2]))
     height = float(bottom[2] - coaster[2])
-    released = sim.glass_released()
+    released = sim.grasped_released()
     ok = (
         tilt < MAX_TILT_DEG
         and err <= MAX_PLACEMENT_ERROR

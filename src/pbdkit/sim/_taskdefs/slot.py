@@ -177,7 +177,7 @@ def judge(sim: Simulation, run: RunStats) -> Outcome:
     floor = tray[2, 3] - TRAY_DEPTH
     height = float(block[2, 3] - BLOCK_HEIGHT - floor)
     err = float(np.linalg.norm(block[:2, 3] - tray[:2, 3]))
-    released = sim.glass_released()
+    released = sim.grasped_released()
     ok = margin > 0.0 and abs(height) <= MAX_HEIGHT_ERROR and released
     metrics = {
         "yaw_error_deg": yaw_err,
