@@ -203,7 +203,7 @@ def test_evaluation_reports_the_yaw_error_for_posed_tasks() -> None:
     ]
     ts: Any = SimpleNamespace(
         task=spec,
-        skill=SimpleNamespace(n_components={"joint": 1}, constraint_names=["joint"]),
+        skill=SimpleNamespace(n_components_={"joint": 1}, constraint_names=["joint"]),
         constrain_fixed=False,
         learn_seconds=0.0,
     )

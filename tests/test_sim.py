@@ -964,7 +964,7 @@ def test_summarize_counts_successes_and_metric_statistics() -> None:
     from types import SimpleNamespace
 
     skill = SimpleNamespace(
-        n_components={"joint": 3, "glass": 4}, constraint_names=["joint", "glass"]
+        n_components_={"joint": 3, "glass": 4}, constraint_names=["joint", "glass"]
     )
     ts = SimpleNamespace(
         task=SimpleNamespace(name="basin"), skill=skill, constrain_fixed=False, learn_seconds=0.5
