@@ -20,6 +20,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from pbdkit import GMM
 from pbdkit._defaults import MAX_COMPONENTS
+from pbdkit.prob import SelectionWarning
 
 
 def _known_model() -> GMM:
@@ -318,7 +319,8 @@ def test_max_components_default_is_the_module_cap() -> None:
     x = trajectories(np.random.default_rng(30), n_demos=3, n_steps=40)
     gmm = GMM("auto", min_time_spread=0.0).fit(x)
     assert max(gmm.selection_.candidates) == MAX_COMPONENTS
-    capped = GMM("auto", max_components=5, min_time_spread=0.0).fit(x)
+    with pytest.warns(SelectionWarning, match="K is at the cap, max_components=5"):
+        capped = GMM("auto", max_components=5, min_time_spread=0.0).fit(x)
     assert max(capped.selection_.candidates) == 5
 
 

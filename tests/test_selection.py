@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from mixture_data import piecewise_demos, trajectories
@@ -11,6 +13,7 @@ from pbdkit.datasets import lasa, lasa_names
 from pbdkit.prob._selection import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
+    SelectionWarning,
     count_sequences,
     effective_bic,
     local_spread,
@@ -95,7 +98,8 @@ def _exact_loo_errors(x: np.ndarray, k: int, floor: float, cv_scale: str) -> np.
 @pytest.mark.parametrize("cv_scale", ["local", "pooled"])
 def test_auto_cv_scores_match_exact_leave_one_out_refits(cv_scale: str) -> None:
     x = piecewise_demos(np.random.default_rng(10))
-    gmm = GMM("auto", max_components=8, reg_covar=1e-5, cv_scale=cv_scale).fit(x)
+    with pytest.warns(SelectionWarning, match="K is at the cap"):  # 8 is too few here
+        gmm = GMM("auto", max_components=8, reg_covar=1e-5, cv_scale=cv_scale).fit(x)
     sel = gmm.selection_
     assert sel.method == "cv" and sel.n_folds == 5 and sel.fold_scores.shape == (8, 5)
     for k in (2, 4, 6, 8):
@@ -196,7 +200,8 @@ def test_auto_bad_input() -> None:
         GMM("auto", score_dims=[0]).fit(two)
     # Explicit groups make any layout work (here: 2 interleaved sequences).
     g = np.tile([0, 1], len(two) // 2)
-    assert GMM("auto", max_components=4).fit(two, groups=g).selection_.n_folds == 2
+    with pytest.warns(SelectionWarning, match="K is at the cap, max_components=4"):
+        assert GMM("auto", max_components=4).fit(two, groups=g).selection_.n_folds == 2
 
 
 @pytest.mark.slow
@@ -222,3 +227,33 @@ def test_auto_on_lasa_tracks_the_demonstrations_without_reaching_the_cap() -> No
     gmr_rmse, floor = np.mean(rows, axis=0)
     assert gmr_rmse <= 1.02 * floor
     assert min(ks) >= 2 and max(ks) < 30
+
+
+def test_a_k_at_the_cap_is_said_with_what_to_do() -> None:
+    # Five sharp segments need about eight components; capped at 3, every K below the cap
+    # scores worse than it by more than the tolerance: K = 3 is chosen and a warning says so.
+    x = piecewise_demos(np.random.default_rng(21))
+    with pytest.warns(SelectionWarning, match=r"K is at the cap, max_components=3: .*larger"):
+        capped = GMM("auto", max_components=3).fit(x)
+    assert capped.selection_.chosen == 3 == max(capped.selection_.candidates)
+    # Without a cap in the way, no warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SelectionWarning)
+        free = GMM("auto", max_components=12).fit(x)
+    assert free.selection_.chosen < 12
+
+
+def test_a_given_k_records_its_cross_validated_score() -> None:
+    x = piecewise_demos(np.random.default_rng(22))
+    auto = GMM("auto", max_components=10).fit(x)
+    k = auto.selection_.chosen
+    fixed = GMM(k).fit(x)
+    sel = fixed.selection_
+    assert sel.method == "fixed" and sel.candidates == (k,) and sel.chosen == k
+    assert sel.n_folds == 5 and sel.fold_scores.shape == (1, 5)
+    # The score "auto" gave the same K, from the same fit (the sweep's looser tolerance aside).
+    auto_score = auto.selection_.scores[auto.selection_.candidates.index(k)]
+    assert sel.scores[0] == pytest.approx(auto_score, rel=0.05)
+    # One sequence: nothing to leave out, the score is not a number.
+    one = GMM(k, time_dim=0).fit(x[:100])
+    assert one.selection_.n_folds == 0 and np.isnan(one.selection_.scores[0])

@@ -32,6 +32,7 @@ import pbdkit
 from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.data._demonstration import Demonstration, LimitWarning, save_demonstrations
 from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.prob import SelectionWarning
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.reproduction._setup import ReachWarning
 from pbdkit.robots._robot import Robot
@@ -559,13 +560,15 @@ def test_learn_warns_about_joint_angles_outside_the_limits(
         r"outside its limits \[-0.135228, 2.16857\] by 0.01",
     ) as record:
         Skill.learn(bad, robot, n_steps=50, max_components=2)
-    assert len(record) == 1
+    limits = [w for w in record if w.category is LimitWarning]  # (K=2 is at its cap too)
+    assert len(limits) == 1
     under = float(robot.lower[4]) - 0.2
     worse = [_with_joint(demos[0], 3, 4, under), *demos[1:3], _with_joint(demos[3], 5, 1, over)]
     with pytest.warns(LimitWarning) as record:
         Skill.learn(worse, robot, n_steps=50, max_components=2)
-    assert [str(w.message)[:8] for w in record] == ["demos[0]", "demos[3]"]
-    assert "joint 'wrist_roll'" in str(record[0].message)
+    limits = [w for w in record if w.category is LimitWarning]
+    assert [str(w.message)[:8] for w in limits] == ["demos[0]", "demos[3]"]
+    assert "joint 'wrist_roll'" in str(limits[0].message)
     # Recorded encoders may graze a limit: within LIMIT_TOLERANCE (1e-6 rad), no warning
     # (pytest turns any warning into an error).
     graze = float(robot.upper[1]) + 0.5e-6
@@ -777,3 +780,13 @@ def test_line_search_keeps_the_fused_loop_from_oscillating(robot: Robot) -> None
 
     rises = [energy(j, j) - energy(j, j - 1) for j in range(1, skill.n_steps)]
     assert max(rises) <= 1e-9 * max(1.0, max(abs(r) for r in rises))
+
+
+def test_learn_says_which_space_sits_at_the_cap(robot: Robot, demos: list[Demonstration]) -> None:
+    # Two components cannot model the reach; cross-validation asks for more in every space.
+    with pytest.warns(SelectionWarning) as record:
+        skill = Skill.learn(demos, robot, n_steps=50, max_components=2)
+    said = sorted(str(w.message).split(":")[0] for w in record if w.category is SelectionWarning)
+    capped = sorted(f"space {k!r}" for k, s in skill.selection_.items() if s.chosen == 2)
+    assert said == capped and capped
+    assert all("K is at the cap, max_components=2" in str(w.message) for w in record)

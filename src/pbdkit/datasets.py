@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import importlib.util
 import itertools
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -115,6 +114,10 @@ class ReachGraspReturn:
     demos: list[Demonstration]
     boxes: Float
     object_name: str
+    #: Where the box was put down in each demonstration (M, 3), with ``place_center``.
+    places: Float | None = None
+    #: The place's name in ``demos``' objects, with ``place_center``.
+    place_name: str | None = None
 
     def placements(self, n: int, seed: int = 0) -> Float:
         """``n`` new box positions inside the convex hull of the demonstrated ones: (n, 3).
@@ -126,6 +129,25 @@ class ReachGraspReturn:
         weights = np.random.default_rng(seed).dirichlet(np.ones(self.boxes.shape[0]), n)
         return np.asarray(weights @ self.boxes, dtype=np.float64)
 
+    def scenes(self, n: int, seed: int = 0) -> list[dict[str, Float]]:
+        """``n`` new placements of every object, inside the hull of the demonstrated ones.
+
+        The box as :meth:`placements` gives it (the same weights) and, with a place, the place
+        by the same convex combination of the demonstrated places.
+
+        Returns
+        -------
+        scenes : list of dict str -> ndarray, shape (3,)
+        """
+        n = check_int(n, "n", minimum=1)
+        weights = np.random.default_rng(seed).dirichlet(np.ones(self.boxes.shape[0]), n)
+        boxes = weights @ self.boxes
+        out = [{self.object_name: np.asarray(b, dtype=np.float64)} for b in boxes]
+        if self.places is not None and self.place_name is not None:
+            for scene, p in zip(out, weights @ self.places, strict=True):
+                scene[self.place_name] = np.asarray(p, dtype=np.float64)
+        return out
+
 
 #: Per-joint standard deviation (rad) of the home posture across demonstrations, and of the
 #: detour point the hand passes on its way (m): demonstrations that differ everywhere but at
@@ -133,6 +155,7 @@ class ReachGraspReturn:
 HOME_SD = 0.2
 DETOUR_SD = 0.12
 _UP = np.array([0.0, 0.0, 1.0])
+_OPEN, _CLOSED = (0.0, 0.0, 0.0), (1.0, 1.0, 0.0)  # a segment's gripper: (before, after, at)
 _LIMIT_MARGIN = 0.02  # rad: the generated postures keep this far from the joint limits
 
 
@@ -166,6 +189,13 @@ def reach_grasp_return(
     detour_sd: float = DETOUR_SD,
     rate: float = 50.0,
     object_name: str = "box",
+    posture_spread: float = 0.0,
+    segment_timing: float = 0.0,
+    pauses: float = 0.0,
+    pause_seconds: tuple[float, float] = (0.5, 1.0),
+    place_center: npt.ArrayLike | None = None,
+    place_spread: float = 0.15,
+    place_name: str = "place",
 ) -> ReachGraspReturn:
     """Demonstrations of reaching for a box, grasping it and returning, on any arm.
 
@@ -180,6 +210,22 @@ def reach_grasp_return(
     by up to 40 %; where a joint would exceed 90 % of the robot's velocity limit
     (``robot.velocity_limit``) the whole demonstration is slower, so that its phases keep their
     place in time. The demonstrations agree only at the grasp: the phase a skill must keep.
+
+    Harder teachers (all off by default; their draws come from a second stream of ``seed``, so
+    the default demonstrations do not change):
+
+    - ``posture_spread``: the posture the arm reaches the box with varies: every joint of the
+      inverse kinematics' start near the box is moved by up to +-``posture_spread`` (rad), and
+      the approach, grasp and lift postures follow it (a redundant arm's null space, a 6-DOF
+      arm's wrist);
+    - ``segment_timing``: each segment's duration is scaled on its own by up to
+      +-``segment_timing`` (0.1: +-10 %), so that the phases come at different fractions of the
+      demonstrations;
+    - ``pauses``: the probability that a demonstration holds still for ``pause_seconds``
+      (drawn uniformly) at a random via point (the start and the end included);
+    - ``place_center``: pick and place: the box is carried to a second object, the place
+      (anywhere in a square of side ``place_spread`` at ``place_center``'s height), put down
+      2 cm above it and released, before the arm returns home.
 
     Parameters
     ----------
@@ -200,6 +246,21 @@ def reach_grasp_return(
         Samples per second.
     object_name : str
         The box's name in the demonstrations.
+    posture_spread : float
+        Half-width (rad) of the variation of the posture near the box, per joint.
+    segment_timing : float
+        Half-width of each segment's relative duration variation, in [0, 1).
+    pauses : float
+        Probability, in [0, 1], that a demonstration pauses once.
+    pause_seconds : (float, float)
+        Range of a pause's duration (s).
+    place_center : array-like, shape (3,), optional
+        Centre of the places the box is put down at (base frame, m); None: the box is held
+        until the arm is home (reach, grasp, return).
+    place_spread : float
+        Side of the square of places (m).
+    place_name : str
+        The place's name in the demonstrations.
 
     Returns
     -------
@@ -222,10 +283,28 @@ def reach_grasp_return(
     home_sd = check_positive_float(home_sd, "home_sd", allow_zero=True)
     detour_sd = check_positive_float(detour_sd, "detour_sd", allow_zero=True)
     rate = check_positive_float(rate, "rate")
+    posture_spread = check_positive_float(posture_spread, "posture_spread", allow_zero=True)
+    if not segment_timing < 1.0:
+        raise ValueError(f"segment_timing must be in [0, 1), got {segment_timing!r}")
+    segment_timing = check_positive_float(segment_timing, "segment_timing", allow_zero=True)
+    if not 0.0 <= pauses <= 1.0:  # NaN too
+        raise ValueError(f"pauses must be a probability in [0, 1], got {pauses!r}")
+    dwell = check_array(pause_seconds, "pause_seconds", shape=(2,))
+    if not 0.0 <= dwell[0] <= dwell[1]:
+        raise ValueError(f"pause_seconds must be (low, high), 0 <= low <= high, got {dwell}")
+    place_c = (
+        None if place_center is None else check_array(place_center, "place_center", shape=(3,))
+    )
+    place_spread = check_positive_float(place_spread, "place_spread", allow_zero=True)
+    if place_c is not None and place_name == object_name:
+        raise ValueError(f"place_name must differ from object_name, both are {place_name!r}")
     vlim = np.asarray(robot.velocity_limit, dtype=np.float64)
     rng = np.random.default_rng(seed)
+    # The harder teachers' draws: a stream of their own, so that the default ones are unchanged.
+    extra = np.random.default_rng([seed, 34])
     demos: list[Demonstration] = []
     boxes: list[Float] = []
+    places: list[Float] = []
     for _ in range(n_demos):
         error: ValueError | None = None
         for _attempt in range(20):
@@ -233,20 +312,38 @@ def reach_grasp_return(
             start = np.clip(q_home + rng.normal(0.0, home_sd, n), lower, upper)
             hand = np.asarray(robot.fk(start), dtype=np.float64)
             detour = 0.5 * (hand + box + _UP * 0.1) + rng.normal(0.0, detour_sd, 3)
-            # (target, seconds, gripper: 0 open, 1 closed, 0.25: closes a quarter in)
-            plan: Sequence[tuple[Float | None, float, float]] = (
-                (detour, rng.uniform(1.0, 1.4), 0.0),
-                (box + _UP * 0.10, rng.uniform(0.8, 1.1), 0.0),
-                (box, rng.uniform(0.6, 0.8), 0.0),
-                (box, rng.uniform(0.5, 0.7), 0.25),
-                (box + _UP * 0.12, rng.uniform(0.6, 0.8), 1.0),
-                (None, rng.uniform(1.6, 2.2), 1.0),
-            )
+            # (target, seconds, the gripper: (before, after, the fraction of the segment where
+            # it changes); open 0, closed 1)
+            plan: list[tuple[Float | None, float, tuple[float, float, float]]] = [
+                (detour, rng.uniform(1.0, 1.4), _OPEN),
+                (box + _UP * 0.10, rng.uniform(0.8, 1.1), _OPEN),
+                (box, rng.uniform(0.6, 0.8), _OPEN),
+                (box, rng.uniform(0.5, 0.7), (0.0, 1.0, 0.25)),
+                (box + _UP * 0.12, rng.uniform(0.6, 0.8), _CLOSED),
+                (None, rng.uniform(1.6, 2.2), _CLOSED),
+            ]
+            place = None
+            if place_c is not None:
+                place = place_c + np.r_[extra.uniform(-place_spread / 2, place_spread / 2, 2), 0]
+                home_seconds = plan.pop()[1]
+                plan += [
+                    (place + _UP * 0.14, extra.uniform(1.0, 1.4), _CLOSED),
+                    (place + _UP * 0.02, extra.uniform(0.6, 0.8), _CLOSED),
+                    (place + _UP * 0.02, extra.uniform(0.5, 0.7), (1.0, 0.0, 0.5)),
+                    (place + _UP * 0.14, extra.uniform(0.6, 0.8), _OPEN),
+                    (None, home_seconds, _OPEN),
+                ]
             try:
                 vias = [start]
-                for target, _seconds, _closed in plan:
+                for k, (target, _seconds, _grip) in enumerate(plan):
+                    from_q = vias[-1]
+                    if k == 1 and posture_spread > 0.0:
+                        # the posture near the box: the approach's start moves, the grasp and
+                        # the lift follow it
+                        shift = extra.uniform(-posture_spread, posture_spread, n)
+                        from_q = np.clip(from_q + shift, lower, upper)
                     vias.append(
-                        start if target is None else _via(robot, target, vias[-1], lower, upper)
+                        start if target is None else _via(robot, target, from_q, lower, upper)
                     )
             except ValueError as exc:
                 error = exc
@@ -255,34 +352,49 @@ def reach_grasp_return(
             # phases stay where they are): a minimum-jerk move's peak speed is 1.875 times
             # its mean.
             seconds = np.array([p[1] for p in plan])
+            if segment_timing > 0.0:
+                low, high = 1.0 - segment_timing, 1.0 + segment_timing
+                seconds = seconds * extra.uniform(low, high, len(plan))
             needed = np.array(
                 [float(np.max(np.abs(y - x) / vlim)) for x, y in itertools.pairwise(vias)]
             )
             seconds *= max(1.0, float(np.max(needed * 1.875 / 0.9 / seconds)))
+            pause_at, pause_steps = -1, 0
+            if pauses > 0.0 and extra.uniform() < pauses:
+                pause_at = int(extra.integers(0, len(plan) + 1))  # before segment k; k = end
+                pause_steps = max(1, round(extra.uniform(dwell[0], dwell[1]) * rate))
             joints, grip = [start[None]], [np.zeros(1)]
-            for (x, y), (_target, _s, closed), dur in zip(
-                itertools.pairwise(vias), plan, seconds, strict=True
+            for k, ((x, y), (_target, _s, (before, after, at)), dur) in enumerate(
+                zip(itertools.pairwise(vias), plan, seconds, strict=True)
             ):
+                if k == pause_at:
+                    joints.append(np.repeat(x[None], pause_steps, axis=0))
+                    grip.append(np.full(pause_steps, before))
                 steps = max(2, round(dur * rate))
                 joints.append(_min_jerk(x, y, steps))
-                g = np.full(steps, 1.0 if closed >= 1.0 else 0.0)
-                if 0.0 < closed < 1.0:
-                    g[round(closed * steps) :] = 1.0
+                g = np.full(steps, before)
+                if at > 0.0:
+                    g[round(at * steps) :] = after
                 grip.append(g)
+            if pause_at == len(plan):
+                joints.append(np.repeat(vias[-1][None], pause_steps, axis=0))
+                grip.append(np.full(pause_steps, plan[-1][2][1]))
             path = np.concatenate(joints)
+            objects = {object_name: box}
+            if place is not None:
+                objects[place_name] = place
             demos.append(
-                Demonstration(
-                    np.arange(path.shape[0]) / rate,
-                    path,
-                    {object_name: box},
-                    np.concatenate(grip),
-                )
+                Demonstration(np.arange(path.shape[0]) / rate, path, objects, np.concatenate(grip))
             )
             boxes.append(box)
+            if place is not None:
+                places.append(place)
             break
         else:
             raise ValueError(
                 f"center: a demonstration failed 20 times; the last: {error}. Choose a center "
                 "and home posture from which the arm reaches the whole square"
             )
-    return ReachGraspReturn(demos, np.array(boxes), object_name)
+    if place_c is None:
+        return ReachGraspReturn(demos, np.array(boxes), object_name)
+    return ReachGraspReturn(demos, np.array(boxes), object_name, np.array(places), place_name)

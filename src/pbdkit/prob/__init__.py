@@ -9,6 +9,6 @@ from __future__ import annotations
 from . import gaussian
 from ._frames import FrameModel
 from ._gmm import GMM
-from ._selection import ModelSelection
+from ._selection import ModelSelection, SelectionWarning
 
-__all__ = ["GMM", "FrameModel", "ModelSelection", "gaussian"]
+__all__ = ["GMM", "FrameModel", "ModelSelection", "SelectionWarning", "gaussian"]

@@ -14,6 +14,7 @@ math behind both: ``docs/math.md``, "Gaussian mixtures and EM" and "Choosing K".
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Literal
 
@@ -44,10 +45,12 @@ from ._gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step,
 from ._selection import (
     SWEEP_TOL,
     ModelSelection,
+    SelectionWarning,
     _cv_errors,
     _cv_scale,
     _select_by_bic,
     _select_by_cv,
+    cap_warning,
     n_parameters,
     sequences_from_time,
 )
@@ -341,6 +344,9 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     return _cv_errors(x, x2, fit_k(k).resp, grp, floor, td, score_dims, scale)
 
                 self.selection_ = _select_by_cv(candidates, cv, n_seq)
+                message = cap_warning(self.selection_, max(candidates))
+                if message is not None:
+                    warnings.warn(message, SelectionWarning, stacklevel=2)
             elif method == "bic":
                 n_eff = self._n_eff(n, n_seq)
 
@@ -351,9 +357,16 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             else:
                 k = candidates[0]
                 fit_k(k)
-                self.selection_ = ModelSelection(
-                    method, (k,), np.asarray([float("nan")]), np.zeros((0, 0)), k, k, 0
-                )
+                # K given: its cross-validated error is still recorded (the score "auto" would
+                # give it), where there are sequences to leave out.
+                scores, folds, n_folds = np.asarray([float("nan")]), np.zeros((0, 0)), 0
+                if self.time_dim is not None and n_seq >= 2 and k <= n:
+                    td = int(self.time_dim)
+                    score_dims = self._check_score_dims(d, td)
+                    scale = _cv_scale(x, grp, td, score_dims, diag, self.cv_scale)
+                    errors = _cv_errors(x, x2, fits[k].resp, grp, floor, td, score_dims, scale)
+                    scores, folds, n_folds = np.asarray([errors.mean()]), errors[None], n_seq
+                self.selection_ = ModelSelection(method, (k,), scores, folds, k, k, n_folds)
         chosen = self.selection_.chosen
         fit = fits[chosen]
         if sweep_tol > tol:

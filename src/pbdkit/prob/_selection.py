@@ -33,6 +33,7 @@ __all__ = [
     "LOCAL_SPREAD_FLOOR",
     "SWEEP_TOL",
     "ModelSelection",
+    "SelectionWarning",
     "candidate_grid",
     "count_sequences",
     "effective_bic",
@@ -56,6 +57,28 @@ CV_TOLERANCE = 0.03
 #: spread pooled over time (a phase weighs at most 100 times the average): one time step where
 #: every demonstration is exactly alike (LASA's shared end point) would otherwise decide K alone.
 LOCAL_SPREAD_FLOOR = 0.01
+
+
+class SelectionWarning(UserWarning):
+    """K was chosen at the cap (``max_components``): every smaller K scored worse by more than
+    :data:`CV_TOLERANCE`, so the error may still fall beyond the cap."""
+
+
+def cap_warning(selection: ModelSelection, max_components: int) -> str | None:
+    """The message of a :class:`SelectionWarning` for ``selection``, or None: the K chosen by
+    cross-validation is the cap itself."""
+    top = max(selection.candidates)
+    if selection.method != "cv" or selection.chosen != top or top < max_components:
+        return None
+    scores = dict(zip(selection.candidates, selection.scores.tolist(), strict=True))
+    below = max((k for k in scores if k < top), default=top)
+    return (
+        f"K is at the cap, max_components={top}: the cross-validated error is still falling "
+        f"there (K={below}: {scores[below]:.3g}, K={top}: {scores[top]:.3g}, more than "
+        f"{CV_TOLERANCE:.0%} apart), so a larger K may model the demonstrations better: pass a "
+        "larger max_components, or, if the demonstrations differ in timing, align them "
+        "(pbdkit.align)"
+    )
 
 
 def n_parameters(n_components: int, n_dims: int) -> int:

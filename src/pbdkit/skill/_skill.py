@@ -22,6 +22,7 @@ file's keys: :doc:`/reproduction`.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Literal, cast
@@ -36,7 +37,7 @@ from .._validation import check_int
 from ..data._demonstration import Demonstration, check_demonstrations
 from ..data._placement import is_pose
 from ..motion._limits import LimitSpec, MotionLimits
-from ..prob import GMM, ModelSelection
+from ..prob import GMM, ModelSelection, SelectionWarning
 from ..prob._gmr import CovarianceMode
 from ..reproduction._constraints import JOINT, Constraints
 from ..reproduction._controller import Controller
@@ -315,8 +316,9 @@ class Skill:
         data = {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
         groups = np.repeat(np.arange(len(items)), steps.shape[0])  # the demonstration of a row
         space_floor = space_floors(floors, n, has_gripper, names, bases)
-        gmms = {
-            k: GMM(
+        gmms: dict[str, GMM] = {}
+        for k, X in data.items():
+            gmm = GMM(
                 n_components=n_components,
                 max_components=max_components,
                 reg_covar=space_floor[k],
@@ -324,9 +326,13 @@ class Skill:
                 # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
                 score_dims=list(range(1, n + 1)) if k == JOINT else None,
                 bic_samples_per_sequence=bic_samples_per_sequence,
-            ).fit(X, groups=groups)
-            for k, X in data.items()
-        }
+            )
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", SelectionWarning)
+                gmms[k] = gmm.fit(X, groups=groups)
+            for w in caught:  # said again with the space it is about
+                text = f"space {k!r}: {w.message}" if w.category is SelectionWarning else w.message
+                warnings.warn(text, w.category, stacklevel=2)
         theta = data[JOINT][:, 1 : n + 1]
         reach = reach_from_samples(robot, theta)
         return cls(
