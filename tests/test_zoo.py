@@ -148,3 +148,89 @@ def test_reach_grasp_return_refuses_bad_input() -> None:
     x = np.column_stack([np.tile(np.arange(10.0), 2), np.arange(20.0)])
     with pytest.raises(ValueError, match="cv_scale must be 'local' or 'pooled'"):
         GMM("auto", cv_scale="median").fit(x)  # type: ignore[arg-type]
+
+
+# ----------------------------------------------------------------------------- harder teachers
+_UP2 = np.array([0.0, 0.0, 0.02])
+
+
+def _grasp_postures(data: object, robot: Robot) -> np.ndarray:
+    demos = data.demos  # type: ignore[attr-defined]
+    return np.array([d.joints[int(np.argmax(d.gripper > 0.5))] for d in demos])
+
+
+def test_a_wider_posture_spread_varies_the_grasp_posture_not_the_grasp() -> None:
+    arm = ARMS["panda"]
+    robot = arm.robot()
+    plain = reach_grasp_return(robot, arm.center, arm.home, seed=2, n_demos=6)
+    wide = reach_grasp_return(robot, arm.center, arm.home, seed=2, n_demos=6, posture_spread=0.35)
+    np.testing.assert_array_equal(wide.boxes, plain.boxes)  # the default draws are untouched
+    # The same boxes, reached with other postures: each demonstration's grasp posture moved by
+    # up to about posture_spread on its joints.
+    moved = np.abs(_grasp_postures(wide, robot) - _grasp_postures(plain, robot))
+    assert np.all(moved.max(axis=1) > 0.1) and 0.2 < moved.max() < 0.6
+    for demo, box in zip(wide.demos, wide.boxes, strict=True):
+        first = int(np.argmax(demo.gripper > 0.5))
+        assert np.linalg.norm(robot.fk(demo.joints[first]) - box) < 1e-5
+        assert robot.within_limits(demo.joints).all()
+
+
+def test_segment_timing_moves_the_phases_on_their_own() -> None:
+    arm = ARMS["ur5"]
+    robot = arm.robot()
+    plain = reach_grasp_return(robot, arm.center, arm.home, seed=4)
+    timed = reach_grasp_return(robot, arm.center, arm.home, seed=4, segment_timing=0.3)
+    for a, b in zip(plain.demos, timed.demos, strict=True):
+        np.testing.assert_array_equal(a.joints[0], b.joints[0])
+        # the grasp comes at another fraction of the demonstration
+        assert a.gripper is not None and b.gripper is not None
+        fa = np.argmax(a.gripper > 0.5) / len(a.t)
+        fb = np.argmax(b.gripper > 0.5) / len(b.t)
+        assert abs(fa - fb) > 1e-3
+    fractions = [np.argmax(d.gripper > 0.5) / len(d.t) for d in timed.demos]  # type: ignore[operator]
+    assert np.ptp(fractions) > np.ptp(
+        [np.argmax(d.gripper > 0.5) / len(d.t) for d in plain.demos]  # type: ignore[operator]
+    )
+
+
+def test_a_pause_holds_the_arm_still() -> None:
+    arm = ARMS["ur5"]
+    robot = arm.robot()
+    plain = reach_grasp_return(robot, arm.center, arm.home, seed=5, rate=50.0)
+    paused = reach_grasp_return(
+        robot, arm.center, arm.home, seed=5, rate=50.0, pauses=1.0, pause_seconds=(0.5, 1.0)
+    )
+    for a, b in zip(plain.demos, paused.demos, strict=True):
+        extra = len(b.t) - len(a.t)
+        assert 25 <= extra <= 50  # 0.5-1 s at 50 Hz
+        still = np.all(np.diff(b.joints, axis=0) == 0.0, axis=1)
+        assert np.count_nonzero(still) >= extra
+    with pytest.raises(ValueError, match=r"pauses must be a probability in \[0, 1\]"):
+        reach_grasp_return(robot, arm.center, arm.home, pauses=1.5)
+    with pytest.raises(ValueError, match="pause_seconds must be"):
+        reach_grasp_return(robot, arm.center, arm.home, pause_seconds=(1.0, 0.5))
+    with pytest.raises(ValueError, match=r"segment_timing must be in \[0, 1\)"):
+        reach_grasp_return(robot, arm.center, arm.home, segment_timing=1.0)
+
+
+def test_pick_and_place_puts_the_box_down_at_the_place() -> None:
+    arm = ARMS["panda"]
+    robot = arm.robot()
+    place = (0.45, -0.25, 0.1)
+    data = reach_grasp_return(
+        robot, arm.center, arm.home, seed=1, place_center=place, place_name="tray"
+    )
+    assert data.places is not None and data.place_name == "tray"
+    for demo, box, spot in zip(data.demos, data.boxes, data.places, strict=True):
+        assert demo.gripper is not None
+        closed = demo.gripper > 0.5
+        grasp, release = int(np.argmax(closed)), int(len(closed) - np.argmax(closed[::-1]))
+        np.testing.assert_allclose(robot.fk(demo.joints[grasp]), box, atol=1e-5)
+        np.testing.assert_allclose(robot.fk(demo.joints[release]), spot + _UP2, atol=1e-5)
+        np.testing.assert_array_equal(demo.objects["tray"], spot)
+        assert abs(spot[2] - place[2]) < 1e-12
+    scenes = data.scenes(4, seed=0)
+    np.testing.assert_array_equal([s["box"] for s in scenes], data.placements(4, seed=0))
+    assert all(set(s) == {"box", "tray"} for s in scenes)
+    with pytest.raises(ValueError, match="place_name must differ from object_name"):
+        reach_grasp_return(robot, arm.center, arm.home, place_center=place, place_name="box")
