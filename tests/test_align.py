@@ -168,6 +168,10 @@ def test_t_strictly_increasing_start_duration_and_data_kept() -> None:
         demos.append(Demonstration(t, joints, {"glass": rng.normal(size=3)}, gripper))
     for reference in ("medoid", "mean"):
         out = align(demos, band=0.2, reference=reference)
+        moved = [
+            float(np.abs(a.t - d.t).max()) / d.duration for d, a in zip(demos, out, strict=True)
+        ]
+        assert sum(m > 0.01 for m in moved) >= 2  # all but the medoid's time change
         for d, a in zip(demos, out, strict=True):
             assert np.all(np.diff(a.t) > 0)
             assert a.t[0] == d.t[0] and a.t[-1] == d.t[-1]
@@ -175,7 +179,6 @@ def test_t_strictly_increasing_start_duration_and_data_kept() -> None:
             assert a.gripper is not None and d.gripper is not None
             assert np.array_equal(a.gripper, d.gripper)
             assert np.array_equal(a.objects["glass"], d.objects["glass"])
-            assert not np.array_equal(a.t, d.t)  # only t changes, and it does
 
 
 @pytest.mark.parametrize("where", ["start", "middle", "end"])

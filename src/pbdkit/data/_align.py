@@ -66,7 +66,7 @@ SPREAD_FLOOR = 0.1
 #: first and last samples kept) and the warped times of the samples in between are interpolated.
 MAX_SAMPLES = 1000
 #: The medoid is chosen on the series resampled at this many uniform normalized times.
-MEDOID_POINTS = 256
+MEDOID_POINTS = 128
 #: The mean reference: at most this many refinements, stopping earlier when the mean moves by
 #: less than MEAN_TOLERANCE (RMS, in normalized feature units).
 MEAN_ITERATIONS = 5
