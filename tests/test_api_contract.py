@@ -43,7 +43,14 @@ def test_the_top_level_names_and_sub_modules() -> None:
         "Command",
     ):
         assert isinstance(getattr(pbdkit, name), type), name
-    for name in ("save_demonstrations", "load_demonstrations", "read_bag", "write_trajectory_bag"):
+    for name in (
+        "save_demonstrations",
+        "load_demonstrations",
+        "read_bag",
+        "write_trajectory_bag",
+        "align",
+        "align_trajectories",
+    ):
         assert callable(getattr(pbdkit, name)), name
     for module in ("robots", "datasets", "gaussian"):
         assert getattr(pbdkit, module).__name__.startswith("pbdkit."), module
@@ -168,6 +175,18 @@ def test_the_controller_as_documented(
     assert isinstance(cmd.held, bool) and set(cmd.influence) == set(skill.constraint_names)
     stream = skill.controller(objects).stream(500.0)
     assert stream.step(q).shape == (q.shape[0],) and not stream.done
+
+
+def test_alignment_as_documented(demos: list[pbdkit.Demonstration], katana: pbdkit.Robot) -> None:
+    aligned = pbdkit.align(demos, katana, band=0.3, reference="medoid")
+    assert len(aligned) == len(demos) and all(isinstance(d, pbdkit.Demonstration) for d in aligned)
+    assert all(np.array_equal(a.joints, d.joints) for a, d in zip(aligned, demos, strict=True))
+    trajs = [np.column_stack([d.t, d.joints]) for d in demos]
+    out = pbdkit.align_trajectories(trajs, band=0.3, reference="medoid")
+    assert [o.shape for o in out] == [x.shape for x in trajs]
+    skill = pbdkit.Skill.learn(demos, katana, n_steps=60, n_components=3, align=True)
+    assert skill.aligned_ and skill.aligned_.applied
+    assert not pbdkit.Skill.learn(demos, katana, n_steps=60, n_components=3, align=False).aligned_
 
 
 def test_frame_model_as_documented() -> None:

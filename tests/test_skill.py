@@ -790,3 +790,27 @@ def test_learn_says_which_space_sits_at_the_cap(robot: Robot, demos: list[Demons
     capped = sorted(f"space {k!r}" for k, s in skill.selection_.items() if s.chosen == 2)
     assert said == capped and capped
     assert all("K is at the cap, max_components=2" in str(w.message) for w in record)
+
+
+# ----------------------------------------------------------------------------- alignment
+def test_learn_aligns_in_time_when_asked_and_says_so(
+    robot: Robot, demos: list[Demonstration], tmp_path: Path
+) -> None:
+    plain = Skill.learn(demos, robot, n_steps=60, n_components=4)
+    assert not plain.aligned_ and plain.aligned_.requested == "no"
+    aligned = Skill.learn(demos, robot, n_steps=60, n_components=4, align=True)
+    record = aligned.aligned_
+    assert record and record.requested == "yes" and record.reference == "medoid"
+    assert 0.0 < record.spread_aligned <= record.spread_linear
+    # What it was fitted on is the demonstrations aligned, and training_data says so.
+    data = aligned.training_data(demos)
+    assert not np.array_equal(data["joint"], plain.training_data(demos)["joint"])
+    auto = Skill.learn(demos, robot, n_steps=60, n_components=4, align="auto")
+    assert auto.aligned_.requested == "auto"
+    assert auto.aligned_.applied == (
+        auto.aligned_.spread_aligned <= 0.8 * auto.aligned_.spread_linear
+    )
+    aligned.save(tmp_path / "aligned.npz")
+    assert Skill.load(tmp_path / "aligned.npz").aligned_ == record
+    with pytest.raises(ValueError, match=r"align must be True, False or 'auto', got 'yes'"):
+        Skill.learn(demos, robot, align="yes")  # type: ignore[arg-type]

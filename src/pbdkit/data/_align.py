@@ -50,6 +50,7 @@ __all__ = [
     "SPREAD_FLOOR",
     "align",
     "align_trajectories",
+    "alignment_spreads",
 ]
 
 Float = NDArray[np.float64]
@@ -586,3 +587,40 @@ def _times_from_path(path: tuple[Index, Index], ref_u: Float) -> Float:
         w[s:] = tau + np.arange(1, c + 1) / c * (1.0 - tau)
     w[0] = 0.0
     return w
+
+
+def alignment_spreads(
+    demos: Sequence[Demonstration],
+    aligned: Sequence[Demonstration],
+    robot: KinematicModel | None = None,
+) -> tuple[float, float]:
+    """How much aligning helped: the demonstrations' spread in linear time and in warped time.
+
+    The spread is the mean over MEDOID_POINTS uniform normalized times and over the normalized
+    features (those :func:`align` pairs on) of their variance across the demonstrations: 1 is
+    as spread as the features are over the whole motion, 0 all alike at every moment.
+
+    Parameters
+    ----------
+    demos : sequence of Demonstration
+        As recorded.
+    aligned : sequence of Demonstration
+        The same, aligned (:func:`align`): only their ``t`` differs.
+    robot : KinematicModel, optional
+        As given to :func:`align`.
+
+    Returns
+    -------
+    linear, warped : float
+    """
+    items = check_demonstrations(demos)
+    features = _demo_features(items, robot)
+    grid = np.linspace(0.0, 1.0, MEDOID_POINTS)
+
+    def spread(times: Sequence[Float]) -> float:
+        at = np.stack(
+            [_resampled(x, _normalized(t), grid) for x, t in zip(features, times, strict=True)]
+        )
+        return float(at.var(axis=0).mean())
+
+    return spread([d.t for d in items]), spread([d.t for d in aligned])

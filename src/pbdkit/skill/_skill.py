@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from .._defaults import MAX_COMPONENTS
 from .._io import open_npz, save_npz_atomic
 from .._validation import check_int
+from ..data._align import align as align_demos
 from ..data._demonstration import Demonstration, check_demonstrations
 from ..data._placement import is_pose
 from ..motion._limits import LimitSpec, MotionLimits
@@ -48,6 +49,8 @@ from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
 from ._skill_file import FORMAT_NAME, MAX_FILE_BYTES, read_skill, skill_arrays
 from ._spaces import (
     MAX_STEPS,
+    Alignment,
+    aligned_demonstrations,
     duration_problem,
     mean_relative_rotation,
     space_data,
@@ -56,7 +59,10 @@ from ._spaces import (
     warn_outside_limits,
 )
 
-__all__ = ["Skill"]
+__all__ = ["DEFAULT_ALIGN", "Skill"]
+
+#: ``Skill.learn``'s ``align`` default, chosen on evidence (:doc:`/alignment`, "In Skill.learn").
+DEFAULT_ALIGN: bool | Literal["auto"] = False
 
 Float = NDArray[np.float64]
 
@@ -103,6 +109,7 @@ class Skill:
         reach: float,
         duration: float = float("nan"),
         rotation_base: Mapping[str, npt.ArrayLike] | None = None,
+        aligned: Alignment | None = None,
     ) -> None:
         self.rotation_base: dict[str, Float] = {
             k: np.asarray(v, dtype=np.float64) for k, v in (rotation_base or {}).items()
@@ -118,6 +125,9 @@ class Skill:
         self.has_gripper = bool(has_gripper)
         self.reach = float(reach)
         self._constraints: dict[str, Constraints] = {}
+        #: What learning did about the demonstrations' timing (:class:`Alignment`; true when
+        #: they were aligned in time).
+        self.aligned_ = Alignment("no", False) if aligned is None else aligned
 
     @property
     def constraint_names(self) -> list[str]:
@@ -196,6 +206,7 @@ class Skill:
         bic_samples_per_sequence: float = 20.0,
         task_objects: Sequence[str] | None = None,
         orientation: bool = True,
+        align: bool | Literal["auto"] = DEFAULT_ALIGN,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
 
@@ -259,6 +270,13 @@ class Skill:
             (``benchmarks/README.md``, "Skill learning and reproduction"). The GMMs still
             model time in steps 0 .. n_steps-1.
 
+        align : bool or "auto"
+            Align the demonstrations in time before encoding them (:func:`pbdkit.align`:
+            dynamic time warping onto the medoid within a band of 0.3 of the duration; their
+            data stay as recorded): True, False (linear rescaling, the paper's), or ``"auto"``
+            (aligned when that makes their spread at least 20 % smaller than in linear time).
+            What was done is :attr:`aligned_`. The default: :doc:`/alignment`, "In Skill.learn".
+
         Returns
         -------
         skill : Skill
@@ -280,6 +298,7 @@ class Skill:
         if problem:
             raise ValueError(f"demos: {problem} (are the time stamps t in seconds?)")
         warn_outside_limits(items, robot)
+        items, alignment = aligned_demonstrations(items, robot, align)
         floors = variability_floor(reg_covar)
         recorded = list(items[0].object_names)
         if task_objects is None:
@@ -344,6 +363,7 @@ class Skill:
             reach=reach,
             duration=duration,
             rotation_base=bases,
+            aligned=alignment,
         )
 
     def training_data(self, demos: Sequence[Demonstration]) -> dict[str, Float]:
@@ -364,6 +384,10 @@ class Skill:
             T = :attr:`n_steps` steps.
         """
         items = check_demonstrations(demos, min_demos=1)
+        if self.aligned_.applied and len(items) > 1:  # aligned as they were when learned
+            items = align_demos(
+                items, self.robot, band=self.aligned_.band, reference=self.aligned_.reference
+            )
         return space_data(
             items, self.robot, self.object_names, self.n_steps, rotation_base=self.rotation_base
         )
@@ -641,6 +665,7 @@ class Skill:
             reach=self.reach,
             duration=self.duration,
             rotation_base=self.rotation_base,
+            aligned=self.aligned_,
         )
         save_npz_atomic(path, arrays)
 
@@ -687,4 +712,5 @@ class Skill:
             reach=stored.reach,
             duration=stored.duration,
             rotation_base=stored.rotation_base,
+            aligned=stored.aligned,
         )

@@ -21,7 +21,7 @@ from .._rotations import check_rotation
 from ..prob import GMM, ModelSelection
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import KinematicModel, PoseKinematicModel, RobotDescription, check_robot
-from ._spaces import MAX_STEPS, duration_problem
+from ._spaces import MAX_STEPS, Alignment, duration_problem
 
 __all__ = [
     "FORMAT_NAME",
@@ -54,6 +54,7 @@ def skill_arrays(
     reach: float,
     duration: float,
     rotation_base: Mapping[str, Float],
+    aligned: Alignment,
 ) -> dict[str, Any]:
     """The arrays of a skill's file, by key (:meth:`pbdkit.Skill.save`).
 
@@ -91,6 +92,12 @@ def skill_arrays(
         "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
         "robot_tip": np.array(tip if isinstance(tip, str) else ""),
         **limits,
+        # What learning did about timing (optional: files of before it have none).
+        "aligned_requested": np.array(aligned.requested),
+        "aligned_applied": np.array(aligned.applied),
+        "aligned_band": np.array(aligned.band),
+        "aligned_reference": np.array(aligned.reference),
+        "aligned_spreads": np.array([aligned.spread_linear, aligned.spread_aligned]),
     }
     for i, k in enumerate([JOINT, *object_names]):
         key = "joint" if k == JOINT else str(i - 1)
@@ -121,6 +128,7 @@ class StoredSkill:
     reach: float
     duration: float
     rotation_base: dict[str, Float]
+    aligned: Alignment
 
 
 def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> StoredSkill:
@@ -225,7 +233,30 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         reach=reach,
         duration=duration,
         rotation_base=rotation_base,
+        aligned=_read_alignment(data, p),
     )
+
+
+def _read_alignment(data: NpzArchive, p: Path) -> Alignment:
+    """The file's :class:`Alignment` (a file of before alignment: not aligned)."""
+    if "aligned_applied" not in data:
+        return Alignment("no", False)
+    try:
+        requested = str(data["aligned_requested"])
+        reference = str(data["aligned_reference"])
+        applied = bool(data["aligned_applied"])
+        band = float(data["aligned_band"])
+        spreads = np.asarray(data["aligned_spreads"], dtype=np.float64).reshape(2)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: its alignment: {exc}") from exc
+    if requested not in ("auto", "yes", "no") or reference not in ("medoid", "mean"):
+        raise ValueError(
+            f"{p} is not a valid {FORMAT_NAME} file: its alignment is {requested!r} onto "
+            f"{reference!r}"
+        )
+    if not 0.0 < band <= 1.0:
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: alignment band {band!r}")
+    return Alignment(requested, applied, band, reference, float(spreads[0]), float(spreads[1]))
 
 
 _BASE_KEYS = frozenset(
@@ -243,6 +274,11 @@ _BASE_KEYS = frozenset(
         "robot_velocity_limit",
         "robot_acceleration_limit",
         "robot_jerk_limit",
+        "aligned_requested",
+        "aligned_applied",
+        "aligned_band",
+        "aligned_reference",
+        "aligned_spreads",
     }
 )
 # gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.

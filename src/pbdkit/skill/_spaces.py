@@ -15,8 +15,9 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass
 from types import MappingProxyType
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +25,8 @@ from numpy.typing import NDArray
 
 from .._rotations import log_map, mean_rotation
 from .._validation import check_positive_float
+from ..data._align import align as align_demos
+from ..data._align import alignment_spreads
 from ..data._demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning
 from ..data._placement import position_of
 from ..reproduction._constraints import JOINT
@@ -225,3 +228,79 @@ def mean_relative_rotation(
         hand = np.asarray(robot.fk_pose(q), dtype=np.float64)[:, :3, :3]
         rels.append(d.objects[name][:3, :3].T @ hand)
     return mean_rotation(np.concatenate(rels))
+
+
+#: Skill.learn's alignment in time (pbdkit.align): the Sakoe-Chiba band and the reference.
+ALIGN_BAND = 0.3
+ALIGN_REFERENCE = "medoid"
+#: ``align="auto"`` aligns when that makes the demonstrations' spread at least this much
+#: smaller than in linear time (:func:`pbdkit.data._align.alignment_spreads`).
+AUTO_ALIGN_GAIN = 0.8
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """What :meth:`pbdkit.Skill.learn` did about the demonstrations' timing
+    (:attr:`pbdkit.Skill.aligned_`): true when it aligned them.
+
+    Attributes
+    ----------
+    requested : str
+        ``"auto"``, ``"yes"`` (``align=True``) or ``"no"`` (``align=False``).
+    applied : bool
+        Whether the demonstrations were aligned by dynamic time warping (:func:`pbdkit.align`)
+        before they were encoded.
+    band, reference : float, str
+        The alignment's band and reference.
+    spread_linear, spread_aligned : float
+        The demonstrations' spread in linear time and aligned
+        (:func:`pbdkit.data._align.alignment_spreads`); NaN where not measured (``"no"``).
+    """
+
+    requested: str
+    applied: bool
+    band: float = ALIGN_BAND
+    reference: str = ALIGN_REFERENCE
+    spread_linear: float = float("nan")
+    spread_aligned: float = float("nan")
+
+    def __bool__(self) -> bool:
+        return self.applied
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready copy (NaN as None)."""
+
+        def num(v: float) -> float | None:
+            return None if v != v else float(v)
+
+        return {
+            "requested": self.requested,
+            "applied": self.applied,
+            "band": self.band,
+            "reference": self.reference,
+            "spread_linear": num(self.spread_linear),
+            "spread_aligned": num(self.spread_aligned),
+        }
+
+
+def aligned_demonstrations(
+    demos: Sequence[Demonstration], robot: KinematicModel, align: object
+) -> tuple[list[Demonstration], Alignment]:
+    """The demonstrations as ``Skill.learn(..., align=align)`` encodes them, and what it did.
+
+    ``True`` aligns them (:func:`pbdkit.align`, :data:`ALIGN_BAND`, :data:`ALIGN_REFERENCE`),
+    ``False`` keeps them in linear time, ``"auto"`` aligns when that reduces their spread to at
+    most :data:`AUTO_ALIGN_GAIN` of the linear one.
+    """
+    items = list(demos)
+    if align is False:
+        return items, Alignment("no", False)
+    if align is not True and align != "auto":
+        raise ValueError(f"align must be True, False or 'auto', got {align!r}")
+    warped = align_demos(items, robot, band=ALIGN_BAND, reference=ALIGN_REFERENCE)
+    linear, aligned = alignment_spreads(items, warped, robot)
+    if align is True:
+        return warped, Alignment("yes", True, spread_linear=linear, spread_aligned=aligned)
+    use = aligned <= AUTO_ALIGN_GAIN * linear
+    record = Alignment("auto", use, spread_linear=linear, spread_aligned=aligned)
+    return (warped if use else items), record
