@@ -20,6 +20,7 @@ __all__ = [
     "check_object_names",
     "check_positions",
     "check_positive_float",
+    "check_trajectories",
     "shape_str",
 ]
 
@@ -216,3 +217,46 @@ def check_object_names(
             )
         keys = list(expected)
     return keys
+
+
+def check_trajectories(
+    value: object, name: str, *, what: str, why: str = "", increasing_time: bool = False
+) -> list[NDArray[np.float64]]:
+    """Trajectories as (T_i, 1 + D) float64 arrays, time in column 0: at least 2, each of at
+    least 2 rows, finite, all with the same D >= 1; with ``increasing_time`` the time strictly
+    increasing. ``what`` names one of them in messages ("demonstration", "trajectory"), ``why``
+    (" (...)") says why two are needed."""
+    expected = f"a list of (T_i, 1 + D) arrays, one per {what}, time in column 0"
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        raise ValueError(f"{name} must be {expected}, got a single array of shape {value.shape}")
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name} must be {expected}, got a string")
+    try:
+        items = list(value)  # type: ignore[call-overload]
+    except TypeError:
+        raise ValueError(f"{name} must be {expected}, got {type(value).__name__}") from None
+    if len(items) < 2:
+        plural = what[:-1] + "ies" if what.endswith("y") else what + "s"
+        raise ValueError(f"{name} must hold at least 2 {plural}{why}, got {len(items)}")
+    out: list[NDArray[np.float64]] = []
+    for i, item in enumerate(items):
+        x = check_array(item, f"{name}[{i}]", ndim=2, min_rows=2, allow_bool=False)
+        if x.shape[1] < 2:
+            raise ValueError(
+                f"{name}[{i}] must have shape (T, 1 + D) with D >= 1 (time in column 0, then "
+                f"the D coordinates), got {x.shape}"
+            )
+        if out and x.shape[1] != out[0].shape[1]:
+            raise ValueError(
+                f"{name}[{i}] must have {out[0].shape[1]} columns (time and D = "
+                f"{out[0].shape[1] - 1} coordinates, as {name}[0]), got {x.shape[1]}"
+            )
+        dt = np.diff(x[:, 0])
+        if increasing_time and np.any(dt <= 0):
+            k = int(np.argmax(dt <= 0))
+            raise ValueError(
+                f"{name}[{i}][:, 0] (time) must be strictly increasing, got "
+                f"t[{k}]={float(x[k, 0])!r} >= t[{k + 1}]={float(x[k + 1, 0])!r}"
+            )
+        out.append(x)
+    return out

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_trajectories
 from ..robots._protocols import KinematicModel, check_robot
 from ._demonstration import Demonstration, check_demonstrations
 from ._placement import position_of
@@ -156,7 +156,7 @@ def align_trajectories(
         different D, NaN or infinite values, a time column that is not strictly increasing,
         ``band`` outside (0, 1], an unknown ``reference``.
     """
-    xs = _check_trajectories(trajs)
+    xs = check_trajectories(trajs, "trajs", what="trajectory", increasing_time=True)
     band_ = _check_band(band)
     warp = _check_reference(reference)
     features = _normalize([x[:, 1:] for x in xs], [xs[0].shape[1] - 1])
@@ -189,40 +189,6 @@ def _check_reference(reference: object) -> Warp:
     if not isinstance(reference, str) or reference not in REFERENCES:
         raise ValueError(f"reference must be one of {sorted(REFERENCES)}, got {reference!r}")
     return REFERENCES[reference]
-
-
-def _check_trajectories(trajs: object) -> list[Float]:
-    """The trajectories as (T_i, 1 + D) float arrays: at least 2, the same D, time increasing."""
-    expected = "a list of (T_i, 1 + D) arrays, time in column 0"
-    if isinstance(trajs, np.ndarray) and trajs.ndim == 2:
-        raise ValueError(f"trajs must be {expected}, got a single array of shape {trajs.shape}")
-    if isinstance(trajs, (str, bytes)) or not isinstance(trajs, (Sequence, np.ndarray)):
-        raise ValueError(f"trajs must be {expected}, got {type(trajs).__name__}")
-    items = list(trajs)
-    if len(items) < 2:
-        raise ValueError(f"trajs must hold at least 2 trajectories, got {len(items)}")
-    out: list[Float] = []
-    for i, item in enumerate(items):
-        x = check_array(item, f"trajs[{i}]", ndim=2, min_rows=2, allow_bool=False)
-        if x.shape[1] < 2:
-            raise ValueError(
-                f"trajs[{i}] must have shape (T, 1 + D) with D >= 1 (time in column 0, then "
-                f"the D coordinates), got {x.shape}"
-            )
-        if out and x.shape[1] != out[0].shape[1]:
-            raise ValueError(
-                f"trajs[{i}] must have {out[0].shape[1]} columns (time and D = "
-                f"{out[0].shape[1] - 1} coordinates, as trajs[0]), got {x.shape[1]}"
-            )
-        dt = np.diff(x[:, 0])
-        if np.any(dt <= 0):
-            k = int(np.argmax(dt <= 0))
-            raise ValueError(
-                f"trajs[{i}][:, 0] (time) must be strictly increasing, got "
-                f"t[{k}]={float(x[k, 0])!r} >= t[{k + 1}]={float(x[k + 1, 0])!r}"
-            )
-        out.append(x)
-    return out
 
 
 # ----------------------------------------------------------------------------- features and time

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from .._defaults import MAX_COMPONENTS
 from .._io import NpzArchive, check_format, open_npz, save_npz_atomic
-from .._validation import check_array, check_int
+from .._validation import check_array, check_int, check_trajectories
 from ._gmm import GMM
 from ._gmr import CovarianceMode
 from .gaussian import precision_from_covariance, product_information
@@ -175,44 +175,6 @@ def _check_frames(
     return a, b
 
 
-def _check_trajectories(trajectories: object) -> list[Float]:
-    """The demonstrations as (T_i, 1 + D) float arrays: at least 2, the same D, finite."""
-    if isinstance(trajectories, np.ndarray) and trajectories.ndim == 2:
-        raise ValueError(
-            "trajectories must be a list of (T_i, 1 + D) arrays, one per demonstration, "
-            f"got a single array of shape {trajectories.shape}"
-        )
-    if isinstance(trajectories, (str, bytes)):
-        raise ValueError("trajectories must be a list of (T_i, 1 + D) arrays, got a string")
-    try:
-        items = list(trajectories)  # type: ignore[call-overload]
-    except TypeError:
-        raise ValueError(
-            "trajectories must be a list of (T_i, 1 + D) arrays, one per demonstration, "
-            f"got {type(trajectories).__name__}"
-        ) from None
-    if len(items) < 2:
-        raise ValueError(
-            "trajectories must hold at least 2 demonstrations (what varies between them is "
-            f"what the model learns), got {len(items)}"
-        )
-    out: list[Float] = []
-    for i, item in enumerate(items):
-        x = check_array(item, f"trajectories[{i}]", ndim=2, min_rows=2)
-        if x.shape[1] < 2:
-            raise ValueError(
-                f"trajectories[{i}] must have shape (T, 1 + D) with D >= 1 (time in column 0, "
-                f"then the D coordinates), got {x.shape}"
-            )
-        if out and x.shape[1] != out[0].shape[1]:
-            raise ValueError(
-                f"trajectories[{i}] must have {out[0].shape[1]} columns (time and D = "
-                f"{out[0].shape[1] - 1} coordinates, as trajectories[0]), got {x.shape[1]}"
-            )
-        out.append(x)
-    return out
-
-
 class FrameModel:
     """A task-parameterized model: one GMM per frame, the product of the frames at reproduction.
 
@@ -321,7 +283,12 @@ class FrameModel:
             singular A, frames of different P, or a GMM that cannot be fitted (the message names
             the frame).
         """
-        xs = _check_trajectories(trajectories)
+        xs = check_trajectories(
+            trajectories,
+            "trajectories",
+            what="demonstration",
+            why=" (what varies between them is what the model learns)",
+        )
         d = xs[0].shape[1] - 1
         given: object = frames
         per_demo = None if isinstance(given, (str, bytes, np.ndarray)) else given
