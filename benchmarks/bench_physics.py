@@ -30,8 +30,9 @@ from threadpoolctl import threadpool_limits
 
 from pbdkit.sim._execute import Recorder, execute, start_at
 from pbdkit.sim._online import TruthObserver, execute_online
-from pbdkit.sim._scene import TIMESTEP, Simulation
+from pbdkit.sim._scene import Simulation
 from pbdkit.sim._task_skill import learn_task
+from pbdkit.sim._world import TIMESTEP
 
 TARGET = 20.0  # design.md: >= 20x real time per core (coaster task)
 

@@ -20,12 +20,13 @@ from pbdkit.sim._metrics import peak_speed_ratio
 from pbdkit.sim._online import OnlineRun, TruthObserver, execute_online
 from pbdkit.sim._perturb import Disturbance, DisturbanceSetup, PushArm, SlideObject, grasp_time
 from pbdkit.sim._runs import run_controller, run_online
-from pbdkit.sim._scene import TIMESTEP, Simulation
+from pbdkit.sim._scene import Simulation
 from pbdkit.sim._sensing import calibrate_tracker, observe
 from pbdkit.sim._task_registry import get_task
 from pbdkit.sim._task_skill import TaskSkill
 from pbdkit.sim._tasks import TaskSpec
 from pbdkit.sim._trials import TrialConditions, trial_disturbance
+from pbdkit.sim._world import TIMESTEP
 
 
 @pytest.fixture(scope="module")

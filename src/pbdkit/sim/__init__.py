@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from ._execute import ExecutionResult, execute
     from ._online import execute_online
     from ._perturb import Disturbance, Perturbation, perturbation_names, register_perturbation
-    from ._scene import Simulation, build_scene
+    from ._scene import Simulation
     from ._task_registry import (
         get_task,
         nominal_objects,
@@ -56,6 +56,7 @@ if TYPE_CHECKING:
     )
     from ._trials import TrialConditions
     from ._video import save_video
+    from ._world import build_scene
 
 _WHERE = {
     "Disturbance": "_perturb",
@@ -71,7 +72,7 @@ _WHERE = {
     "TaskSpec": "_tasks",
     "TrialConditions": "_trials",
     "ViaPoint": "_tasks",
-    "build_scene": "_scene",
+    "build_scene": "_world",
     "evaluate": "_evaluation",
     "execute": "_execute",
     "execute_online": "_online",

@@ -35,8 +35,9 @@ from ..motion._limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_pea
 from ..motion._otg import follow
 from ..robots import katana
 from ._perturb import Disturbance, NoDisturbance
-from ._scene import TIMESTEP, Simulation
+from ._scene import Simulation
 from ._tasks import Outcome, RunStats
+from ._world import TIMESTEP
 
 Float = NDArray[np.float64]
 

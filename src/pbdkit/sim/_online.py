@@ -44,8 +44,9 @@ from ..vision import TrackFilter
 from ._execute import ExecutionResult, Recorder, start_at
 from ._metrics import yaw_errors
 from ._perturb import Disturbance, NoDisturbance
-from ._scene import TIMESTEP, Simulation
+from ._scene import Simulation
 from ._tracking import SimTracker
+from ._world import TIMESTEP
 
 __all__ = [
     "OBSERVE_RATE",

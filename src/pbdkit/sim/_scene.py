@@ -36,35 +36,18 @@ from ._glass import GLASS_PATCH_CENTER
 from ._parts import block_geom
 from ._tasks import TaskSpec
 from ._world import (
-    ARM_JOINTS,
-    CAMERA_POSITIONS,
-    CAMERA_TARGET,
-    CAMERAS,
     FINGER_CLOSED,
     FINGER_JOINTS,
     FINGER_OPEN,
     IMAGE_HEIGHT,
     IMAGE_WIDTH,
-    TIMESTEP,
     SceneInfo,
     build_scene,
     free_joint,
     wall_prefix,
 )
 
-__all__ = [
-    "ARM_JOINTS",
-    "CAMERAS",
-    "CAMERA_POSITIONS",
-    "CAMERA_TARGET",
-    "FINGER_JOINTS",
-    "IMAGE_HEIGHT",
-    "IMAGE_WIDTH",
-    "TIMESTEP",
-    "SceneInfo",
-    "Simulation",
-    "build_scene",
-]
+__all__ = ["Simulation"]
 
 Float = NDArray[np.float64]
 

@@ -103,8 +103,9 @@ from ..vision import ColorModel, PinholeCamera, PoseModel, PoseTrack, StereoTrac
 from ..vision._pose import OffsetFrame, ends_heading
 from ..vision._stereo import ObjectTrack
 from ._gl import mujoco
-from ._scene import CAMERAS, Simulation
+from ._scene import Simulation
 from ._tasks import TaskSpec, yaw_of, yaw_pose
+from ._world import CAMERAS
 
 __all__ = [
     "Calibration",
