@@ -115,10 +115,11 @@ def test_fed_its_own_commands_it_plays_the_reproduction(
     expected = motion.sample(ctrl.dt * np.arange(joints.shape[0]))[0]
     np.testing.assert_allclose(joints, expected, rtol=0, atol=1e-12)
     assert ctrl.replans == 0 and not any(c.held for c in cmds)
-    # ... which passes the reproduction's samples on time (measured: 0.017 rad at worst, where
-    # a time-optimal stretch meets the spline's acceleration estimate; 3.5e-4 rad on average).
+    # ... which passes the reproduction's samples on time (measured: 0.016 rad at worst, where
+    # a time-optimal stretch meets the spline's acceleration estimate; 1.2e-3 rad on average,
+    # 3.5e-4 before calibration made the skill's path follow the glass more closely).
     off = np.abs(motion.sample(offline.times)[0] - offline.joints).max(axis=1)
-    assert off.max() < 0.03 and off.mean() < 1e-3
+    assert off.max() < 0.03 and off.mean() < 2e-3
     phases = np.array([c.phase for c in cmds])
     assert np.all(np.diff(phases) >= 0) and phases[-1] == N_STEPS - 1
     i = int(np.argmin(np.abs(phases - REACH_STEP)))

@@ -250,6 +250,9 @@ def plot_constraints(
     for col, name in enumerate(names):
         gmm = skill.gmms[name]
         mean, cov = gmm.regress(t[:, None], in_dims=[0], covariance=covariance)  # type: ignore[arg-type]
+        # The covariance the reproduction uses: widened by the calibration (not the gripper's).
+        n_scaled = skill.n_joints if name == "joint" else cov.shape[1]
+        cov[:, :n_scaled, :n_scaled] *= skill.calibration_[name][:, None, None]
         labels = _dim_labels(skill, name)
         color = _space_color(skill, name)
         d_out = mean.shape[1]
@@ -273,7 +276,9 @@ def plot_constraints(
                 )
             if row == d_out - 1:
                 ax.set_xlabel("time step", fontsize=8)
-    fig.suptitle("Constraints extracted from the demonstrations (GMM, and GMR mean +- 2 sd)")
+    fig.suptitle(
+        "Constraints extracted from the demonstrations (GMM, and GMR mean +- 2 sd, calibrated)"
+    )
     fig.tight_layout()
     figure: Figure = fig
     return figure

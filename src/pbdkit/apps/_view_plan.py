@@ -274,6 +274,11 @@ def coarse_skill(skill: Skill, n_steps: int) -> Skill:
         reach=skill.reach,
         duration=skill.duration,
         rotation_base=skill.rotation_base,
+        # The factors at the same moments: linear between the full grid's steps.
+        calibration={
+            k: np.interp(np.arange(n_steps) / scale, np.arange(skill.n_steps), c)
+            for k, c in skill.calibration_.items()
+        },
     )
 
 

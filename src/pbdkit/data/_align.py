@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._threads import one_blas_thread
 from .._validation import check_trajectories
 from ..robots._protocols import KinematicModel, check_robot
 from ._demonstration import Demonstration, check_demonstrations
@@ -222,7 +223,9 @@ def _demo_features(demos: list[Demonstration], robot: KinematicModel | None) -> 
 
 def _normalize(parts: list[Float], groups: list[int]) -> list[Float]:
     """Each feature centred and divided by its spread over all samples of all series, floored
-    at SPREAD_FLOOR times the largest spread of its group (and at a tiny absolute value)."""
+    at SPREAD_FLOOR times the largest spread of its group (and at a tiny absolute value), and
+    by the square root of its group's size: each group (the joints, the gripper, the hand
+    relative to one object) weighs in the distance as much as one feature."""
     stacked = np.concatenate(parts)
     mean = stacked.mean(axis=0)
     spread = stacked.std(axis=0)
@@ -232,6 +235,13 @@ def _normalize(parts: list[Float], groups: list[int]) -> list[Float]:
         floor[start : start + size] = SPREAD_FLOOR * spread[start : start + size].max()
         start += size
     scale = np.maximum(np.maximum(spread, floor), 1e-12)
+    # Every group weighs as one feature: seven joints would otherwise outvote the hand's
+    # position relative to the box, and postures that differ would be matched instead of
+    # phases.
+    start = 0
+    for size in groups:
+        scale[start : start + size] *= np.sqrt(size)
+        start += size
     return [np.ascontiguousarray((p - mean) / scale) for p in parts]
 
 
@@ -334,11 +344,10 @@ def _mean_per_instant(x: Float, path: tuple[Index, Index], n: int) -> Float:
 def _warped_times(warp: Warp, features: list[Float], us: list[Float], band: float) -> list[Float]:
     """Warped normalized times of every series: ``warp`` on the series decimated to at most
     MAX_SAMPLES samples, the skipped samples interpolated in their own time."""
-    from threadpoolctl import threadpool_limits
 
     keeps = [_decimation(u.size, MAX_SAMPLES) for u in us]
     # Many small products: BLAS threads only contend (design.md, "Threads")
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         warped = warp(
             [x[k] for x, k in zip(features, keeps, strict=True)],
             [u[k] for u, k in zip(us, keeps, strict=True)],

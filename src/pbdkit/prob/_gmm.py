@@ -23,10 +23,11 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from sklearn.base import BaseEstimator, DensityMixin
 from sklearn.exceptions import NotFittedError
-from threadpoolctl import threadpool_limits
 
 from .._defaults import MAX_COMPONENTS
+from .._threads import one_blas_thread
 from .._validation import check_array, check_int, check_positive_float
+from ._calibration import normalized_residuals
 from ._em import (
     MIN_TIME_SPREAD,
     _check_covariances,
@@ -44,6 +45,7 @@ from ._em import (
 from ._gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
 from ._selection import (
     SWEEP_TOL,
+    FitRows,
     ModelSelection,
     SelectionWarning,
     _cv_errors,
@@ -137,6 +139,12 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         much as it is tight; ``"pooled"``: their variance pooled over time
         (:func:`pooled_spread`; pbdkit's earlier default, which lost such phases where the
         demonstrations differ elsewhere). ``docs/math.md``, "Choosing K".
+    loo_residuals : bool
+        With a time column and at least 2 sequences: keep, for every row, how far it falls
+        outside the regression of the model fitted without its sequence, in that model's own
+        covariance (``loo_residuals_``; :mod:`pbdkit.prob._calibration`). About 1 where the
+        model's covariance describes demonstrations it has not seen; much more where it is
+        confident and they differ. Default False.
 
     Attributes
     ----------
@@ -158,6 +166,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         ``"bic"``: effective BIC of every K tried; empty otherwise.
     bic_effective_samples_ : float
         ``"bic"``: n_eff used in the BIC; NaN otherwise.
+    loo_residuals_ : ndarray, shape (N,)
+        With ``loo_residuals``: z of every row of X, in X's order (empty otherwise).
     """
 
     def __init__(
@@ -176,6 +186,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         bic_samples: int | None = None,
         min_time_spread: float = MIN_TIME_SPREAD,
         cv_scale: Literal["local", "pooled"] = "local",
+        loo_residuals: bool = False,
     ) -> None:
         self.n_components = n_components
         self.max_components = max_components
@@ -190,6 +201,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self.bic_samples = bic_samples
         self.min_time_spread = min_time_spread
         self.cv_scale = cv_scale
+        self.loo_residuals = loo_residuals
 
     # ------------------------------------------------------------------ fitting
     def _check_params(self, x: Float) -> tuple[str, list[int], Float]:
@@ -333,7 +345,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             return fits[k]
 
         n_eff = float("nan")
-        with threadpool_limits(limits=1, user_api="blas"):
+        with one_blas_thread():
             if method == "auto":
                 assert self.time_dim is not None
                 td = int(self.time_dim)
@@ -341,7 +353,9 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                 scale = _cv_scale(x, grp, td, score_dims, diag, self.cv_scale)
 
                 def cv(k: int) -> Float:
-                    return _cv_errors(x, x2, fit_k(k).resp, grp, floor, td, score_dims, scale)
+                    return _cv_errors(
+                        FitRows(x, x2, fit_k(k).resp, grp, floor, td), score_dims, scale
+                    )
 
                 self.selection_ = _select_by_cv(candidates, cv, n_seq)
                 message = cap_warning(self.selection_, max(candidates))
@@ -364,16 +378,25 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     td = int(self.time_dim)
                     score_dims = self._check_score_dims(d, td)
                     scale = _cv_scale(x, grp, td, score_dims, diag, self.cv_scale)
-                    errors = _cv_errors(x, x2, fits[k].resp, grp, floor, td, score_dims, scale)
+                    rows = FitRows(x, x2, fits[k].resp, grp, floor, td)
+                    errors = _cv_errors(rows, score_dims, scale)
                     scores, folds, n_folds = np.asarray([errors.mean()]), errors[None], n_seq
                 self.selection_ = ModelSelection(method, (k,), scores, folds, k, k, n_folds)
         chosen = self.selection_.chosen
         fit = fits[chosen]
         if sweep_tol > tol:
-            with threadpool_limits(limits=1, user_api="blas"):
+            with one_blas_thread():
                 more = _em(x, fit.resp, floor, max_iter, tol)
             fit = more._replace(n_iter=fit.n_iter + more.n_iter)
         weights, means, cov = fit.params
+        self.loo_residuals_ = np.zeros(0)
+        if self.loo_residuals and self.time_dim is not None and n_seq >= 2:
+            td = int(self.time_dim)
+            score_dims = self._check_score_dims(d, td)
+            with one_blas_thread():
+                z = normalized_residuals(FitRows(x, x2, fit.resp, grp, floor, td), score_dims)
+            self.loo_residuals_ = np.empty_like(z)
+            self.loo_residuals_[order if order is not None else slice(None)] = z
         self.weights_ = np.asarray(weights, dtype=np.float64)
         self.means_ = np.asarray(means + center, dtype=np.float64)
         self.covariances_ = 0.5 * (cov + np.swapaxes(cov, -1, -2))
@@ -440,6 +463,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         gmm.n_iter_ = 0
         gmm.bic_scores_ = {}
         gmm.bic_effective_samples_ = float("nan")
+        gmm.loo_residuals_ = np.zeros(0)
         gmm.selection_ = ModelSelection(
             "fixed", (k,), np.full(1, np.nan), np.zeros((0, 0)), k, k, 0
         )

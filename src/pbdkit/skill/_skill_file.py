@@ -21,6 +21,7 @@ from .._rotations import check_rotation
 from ..prob import GMM, ModelSelection
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import KinematicModel, PoseKinematicModel, RobotDescription, check_robot
+from ._calibration import check_calibration
 from ._spaces import MAX_STEPS, Alignment, duration_problem
 
 __all__ = [
@@ -55,6 +56,7 @@ def skill_arrays(
     duration: float,
     rotation_base: Mapping[str, Float],
     aligned: Alignment,
+    calibration: Mapping[str, Float],
 ) -> dict[str, Any]:
     """The arrays of a skill's file, by key (:meth:`pbdkit.Skill.save`).
 
@@ -113,6 +115,8 @@ def skill_arrays(
         arrays[f"sel_{key}_best_chosen"] = np.array([sel.best, sel.chosen], dtype=np.int64)
         if k in rotation_base:
             arrays[f"rot_base_{key}"] = rotation_base[k]
+        if k in calibration and np.any(calibration[k] != 1.0):  # optional: ones without it
+            arrays[f"calib_{key}"] = calibration[k]
     return arrays
 
 
@@ -129,6 +133,7 @@ class StoredSkill:
     duration: float
     rotation_base: dict[str, Float]
     aligned: Alignment
+    calibration: dict[str, Float]
 
 
 def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> StoredSkill:
@@ -159,6 +164,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         tip = str(data["robot_tip"])
         gmms: dict[str, GMM] = {}
         rotation_base: dict[str, Float] = {}
+        calibration: dict[str, Float] = {}
         for i, k in enumerate([JOINT, *names]):
             key = "joint" if k == JOINT else str(i - 1)
             gmms[k] = GMM.from_params(
@@ -170,6 +176,8 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
                 gmms[k].selection_ = _selection_from_arrays(data, key, k)
             if version >= 2 and f"rot_base_{key}" in data:
                 rotation_base[k] = check_rotation(data[f"rot_base_{key}"], f"rot_base_{key}")
+            if f"calib_{key}" in data:
+                calibration[k] = np.asarray(data[f"calib_{key}"], dtype=np.float64)
     except KeyError as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
     except (TypeError, ValueError) as exc:
@@ -234,7 +242,17 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         duration=duration,
         rotation_base=rotation_base,
         aligned=_read_alignment(data, p),
+        calibration=_checked_calibration(calibration, [JOINT, *names], n_steps, p),
     )
+
+
+def _checked_calibration(
+    calibration: dict[str, Float], names: list[str], n_steps: int, p: Path
+) -> dict[str, Float]:
+    try:
+        return check_calibration(calibration, names, n_steps)
+    except ValueError as exc:
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
 
 
 def _read_alignment(data: NpzArchive, p: Path) -> Alignment:
@@ -285,7 +303,8 @@ _BASE_KEYS = frozenset(
 _SPACE_KEY = re.compile(
     r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
     r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen)"
-    r"|rot_base_(0|[1-9][0-9]{0,8}))"
+    r"|rot_base_(0|[1-9][0-9]{0,8})"
+    r"|calib_(?:joint|(0|[1-9][0-9]{0,8})))"
 )
 
 
@@ -296,7 +315,7 @@ def _is_skill_key(key: str, n_objects: int) -> bool:
     match = _SPACE_KEY.fullmatch(key)
     if match is None:
         return False
-    index = match.group(1) or match.group(2) or match.group(3)
+    index = match.group(1) or match.group(2) or match.group(3) or match.group(4)
     return index is None or int(index) < n_objects
 
 
