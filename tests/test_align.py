@@ -323,8 +323,8 @@ def test_real_recordings_spread_before_and_after_alignment() -> None:
     mean = spread_mm(on_grid(align_trajectories(trajs, band=0.3, reference="mean")))
     print(f"spread: linear {linear:.2f} mm, medoid {medoid:.2f} mm, mean {mean:.2f} mm")
     assert linear == pytest.approx(24.07, abs=0.5)  # measured 24.07
-    assert medoid <= 5.5  # the bar; measured 4.73
-    assert mean <= 5.5  # measured 4.33
+    assert medoid <= 5.5  # the bar; measured 4.61
+    assert mean <= 5.5  # measured 4.13
 
 
 def test_gmr_on_the_aligned_recordings_follows_their_mean() -> None:
@@ -337,4 +337,4 @@ def test_gmr_on_the_aligned_recordings_follows_their_mean() -> None:
     gmr = float(np.sqrt(np.mean(np.sum((1e3 * y - mean) ** 2, axis=2))))
     pointwise = float(np.sqrt(np.mean(np.sum((1e3 * (y - y.mean(axis=0))) ** 2, axis=2))))
     print(f"GMR RMSE {gmr:.2f} mm, pointwise mean {pointwise:.2f} mm, ratio {gmr / pointwise:.3f}")
-    assert gmr <= 1.1 * pointwise  # measured 1.075
+    assert gmr <= 1.1 * pointwise  # measured 1.084

@@ -14,11 +14,14 @@ from pbdkit.prob._selection import (
     CV_TOLERANCE,
     LOCAL_SPREAD_FLOOR,
     SelectionWarning,
+    _select_by_cv,
+    cap_warning,
     count_sequences,
     effective_bic,
     local_spread,
     n_parameters,
     pooled_spread,
+    reached_level,
     sequences_from_time,
 )
 
@@ -257,3 +260,30 @@ def test_a_given_k_records_its_cross_validated_score() -> None:
     # One sequence: nothing to leave out, the score is not a number.
     one = GMM(k, time_dim=0).fit(x[:100])
     assert one.selection_.n_folds == 0 and np.isnan(one.selection_.scores[0])
+
+
+def test_the_level_is_what_two_fits_reach_unless_the_scores_still_fall() -> None:
+    # One lucky fit (1.93) does not set the bar: the second lowest (2.0) does.
+    assert reached_level([5.0, 3.0, 2.0, 2.02, 1.93, 2.03]) == 2.0
+    # An unlucky fit among them changes nothing.
+    assert reached_level([5.0, 3.0, 2.0, 2.6, 1.93, 2.03]) == 2.0
+    # Falling by more than the tolerance over the last two steps: the last score.
+    assert reached_level([10.0, 5.0, 2.5, 1.2]) == 1.2
+    # Falling by less than the tolerance at the end: the second lowest.
+    assert reached_level([10.0, 5.0, 2.5, 2.48, 2.47]) == 2.48
+    assert reached_level([3.0, 2.0]) == 2.0 and reached_level([4.0]) == 4.0
+
+
+def test_one_lucky_fit_at_the_cap_does_not_put_k_there() -> None:
+    # Scores flat from K = 12 on (within 1 %), the cap's one run 4 % lower: K stays where the
+    # flat part begins, with no warning; the old bar (the best score) took the cap.
+    def cv(k: int) -> np.ndarray:
+        base = 1.0 + 8.0 / k**2 if k < 12 else 1.0 + 0.01 * ((k * 7) % 3) / 2
+        return np.full(5, 0.96 if k == 30 else base)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SelectionWarning)
+        sel = _select_by_cv(list(range(1, 31)), cv, 5)
+    assert sel.best == 30
+    assert 10 <= sel.chosen < 24, sel.chosen
+    assert cap_warning(sel, 30) is None
