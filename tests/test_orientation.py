@@ -201,7 +201,10 @@ def test_quaternion_and_matrix_poses_give_the_same_reproduction(pose_skill):
     seven = np.r_[mug[:3, 3], q[3], q[:3]]  # pbdkit: w first
     a = pose_skill.reproduce({"mug": mug})
     b = pose_skill.reproduce({"mug": seven})
-    np.testing.assert_allclose(a.joints, b.joints, atol=1e-9)
+    # The same to rounding: the two conversions to a rotation matrix differ in the last bits,
+    # and with the joint constraint widened (calibration) the first steps' solve passes them on
+    # amplified (1e-8 rad measured).
+    np.testing.assert_allclose(a.joints, b.joints, atol=1e-7)
 
 
 def test_an_oriented_object_needs_a_pose(pose_skill):

@@ -1,16 +1,17 @@
-"""Each space's covariance widened where left-out demonstrations fall outside it, moment by moment.
+"""The joint space's covariance widened where left-out demonstrations fall outside it, per moment.
 
-The product of Gaussians weighs every space by its precision, so a space whose model is
-confident where its demonstrations were not wins where it should yield (``docs/math.md``,
-"Calibration"). Learning measures it: every space's GMM keeps, for every fitted row, the
-normalized residual z of its demonstration against the model fitted without it
+The product of Gaussians weighs every space by its precision, so a joint model confident where
+the demonstrated postures were not wins where it should yield to the objects' constraints
+(``docs/math.md``, "Calibration"). Learning measures it: the joint space's GMM keeps, for every
+fitted row, the normalized residual z of its demonstration against the model fitted without it
 (:mod:`pbdkit.prob._calibration`). Per step of the skill's grid,
 
     c(t) = clip(smooth(mean over demonstrations of z(t)), 1, CALIBRATION_MAX)
 
 (a moving average over :data:`CALIBRATION_WINDOW` of the duration, linear in between the fitted
-steps) and the GMR covariance of the space at step t is c(t) times the fitted one: its mean is
-unchanged. A model is widened, never narrowed.
+steps) and the GMR covariance of the joints at step t is c(t) times the fitted one: its mean is
+unchanged. A model is widened, never narrowed. A skill file may hold factors for any space
+(:func:`check_calibration`); learning writes the joints' only.
 """
 
 from __future__ import annotations

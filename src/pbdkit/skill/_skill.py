@@ -131,7 +131,8 @@ class Skill:
         #: they were aligned in time).
         self.aligned_ = Alignment("no", False) if aligned is None else aligned
         #: The factor each space's GMR covariance is widened by at every step, (n_steps,) per
-        #: space (all ones: as fitted; ``docs/math.md``, "Calibration").
+        #: space (all ones: as fitted; learning widens the joint space only; ``docs/math.md``,
+        #: "Calibration").
         self.calibration_ = check_calibration(
             dict(calibration or {}), [JOINT, *self.object_names], self.n_steps
         )
@@ -239,10 +240,11 @@ class Skill:
             K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
             by leaving one demonstration out at a time (``docs/math.md``, "Choosing K"): the
             smallest K whose generalized trajectory predicts a left-out demonstration as well
-            as the best K does (within :data:`pbdkit.prob._selection.CV_TOLERANCE`), its error
-            at every moment measured against the demonstrations' spread at that moment, so that
-            phases where they agree (a grasp) are kept whatever they do elsewhere; ``"bic"``: the
-            effective-sample-size BIC of earlier versions (kept for comparison).
+            as the K tried do (within :data:`pbdkit.prob._selection.CV_TOLERANCE` of the level
+            two of them reach), its error at every moment measured against the demonstrations'
+            spread at that moment, so that phases where they agree (a grasp) are kept whatever
+            they do elsewhere; ``"bic"``: the effective-sample-size BIC of earlier versions
+            (kept for comparison).
         max_components : int
             Largest K tried.
         reg_covar : float, dict or None
@@ -281,12 +283,13 @@ class Skill:
         align : bool or "auto"
             Align the demonstrations in time before encoding them (:func:`pbdkit.align`:
             dynamic time warping onto the medoid within a band of 0.3 of the duration; their
-            data stay as recorded): True, False (linear rescaling, the paper's), or ``"auto"``
-            (aligned when that makes their spread at least 20 % smaller than in linear time).
-            What was done is :attr:`aligned_`. The default: :doc:`/alignment`, "In Skill.learn".
+            data stay as recorded): True (the default), False (linear rescaling, the paper's),
+            or ``"auto"`` (aligned when that makes their spread at least 20 % smaller than in
+            linear time). What was done is :attr:`aligned_`. Why aligned by default:
+            :doc:`/alignment`, "In Skill.learn".
         calibrate : bool
-            Widen each space's GMR covariance where the demonstrations left out one at a time
-            fall outside it (:class:`~pbdkit.prob.GMM`'s ``loo_residuals``; ``docs/math.md``,
+            Widen the joint space's GMR covariance where the demonstrations left out one at a
+            time fall outside it (:class:`~pbdkit.prob.GMM`'s ``loo_residuals``; ``docs/math.md``,
             "Calibration"): True (default) keeps one space's constraint from winning the fusion
             where its demonstrations disagreed (postures that differ at a grasp); False keeps
             the covariances EM fitted (the paper's).
@@ -357,11 +360,10 @@ class Skill:
                 reg_covar=space_floor[k],
                 random_state=random_state,
                 # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
-                score_dims=list(range(1, n + 1))
-                if k == JOINT and not __import__("os").environ.get("PBD_GRIP")
-                else None,
+                score_dims=list(range(1, n + 1)) if k == JOINT else None,
                 bic_samples_per_sequence=bic_samples_per_sequence,
-                loo_residuals=calibrate,
+                # Calibration widens the joint space only (docs/math.md, "Calibration").
+                loo_residuals=calibrate and k == JOINT,
             )
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", SelectionWarning)
