@@ -39,6 +39,7 @@ __all__ = [
     "count_sequences",
     "effective_bic",
     "fold_models",
+    "fold_residuals",
     "local_spread",
     "n_parameters",
     "pooled_spread",
@@ -370,20 +371,30 @@ def fold_models(rows: FitRows) -> Iterator[tuple[NDArray[np.bool_], GMRModel]]:
         yield held, gmr_precompute(*params, (time_dim,))
 
 
+def fold_residuals(
+    rows: FitRows, score_dims: Sequence[int], covariance: bool
+) -> Iterator[tuple[NDArray[np.bool_], Float, Float | None]]:
+    """Per fold of :func:`fold_models`: the rows of sequence m, their residuals on
+    ``score_dims`` against the fold's GMR mean at m's times (len(m), S), and with
+    ``covariance`` the fold's GMR covariance of those dimensions there (len(m), S, S)."""
+    x, time_dim = rows.x, rows.time_dim
+    out_dims = [i for i in range(x.shape[1]) if i != time_dim]
+    pos = np.asarray([out_dims.index(i) for i in score_dims], dtype=np.intp)
+    for held, model in fold_models(rows):
+        mean, cov = gmr_batch(model, x[held][:, [time_dim]], "exact" if covariance else None)
+        r = x[held][:, score_dims] - mean[:, pos]
+        yield held, r, None if cov is None else cov[:, pos[:, None], pos[None, :]]
+
+
 def _cv_errors(rows: FitRows, score_dims: Sequence[int], scale: Float) -> Float:
     """Leave-one-sequence-out error of the GMR mean for one K: (n_groups,).
 
-    The folds are :func:`fold_models`. The error of fold m is the mean over ``score_dims`` of
+    The folds are :func:`fold_residuals`. The error of fold m is the mean over ``score_dims`` of
     the squared difference between sequence m and the fold's GMR mean at m's times, divided by
     ``scale``: (N, S), every row's own (the local spread of each scored dimension), or (S,),
     one per dimension (the pooled spread).
     """
-    x, time_dim = rows.x, rows.time_dim
-    out_dims = [i for i in range(x.shape[1]) if i != time_dim]
-    pos = [out_dims.index(i) for i in score_dims]
     errors = np.empty(int(rows.groups.max()) + 1)
-    for m, (held, model) in enumerate(fold_models(rows)):
-        mean, _ = gmr_batch(model, x[held][:, [time_dim]], None)
-        err = (x[held][:, score_dims] - mean[:, pos]) ** 2
-        errors[m] = float(np.mean(err / (scale[held] if scale.ndim == 2 else scale)))
+    for m, (held, r, _) in enumerate(fold_residuals(rows, score_dims, covariance=False)):
+        errors[m] = float(np.mean(r**2 / (scale[held] if scale.ndim == 2 else scale)))
     return errors

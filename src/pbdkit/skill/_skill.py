@@ -134,7 +134,7 @@ class Skill:
         #: space (all ones: as fitted; learning widens the joint space only; ``docs/math.md``,
         #: "Calibration").
         self.calibration_ = check_calibration(
-            dict(calibration or {}), [JOINT, *self.object_names], self.n_steps
+            calibration, [JOINT, *self.object_names], self.n_steps
         )
 
     @property

@@ -178,6 +178,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
                 rotation_base[k] = check_rotation(data[f"rot_base_{key}"], f"rot_base_{key}")
             if f"calib_{key}" in data:
                 calibration[k] = np.asarray(data[f"calib_{key}"], dtype=np.float64)
+        calibration = check_calibration(calibration, [JOINT, *names], n_steps)
     except KeyError as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
     except (TypeError, ValueError) as exc:
@@ -242,17 +243,8 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         duration=duration,
         rotation_base=rotation_base,
         aligned=_read_alignment(data, p),
-        calibration=_checked_calibration(calibration, [JOINT, *names], n_steps, p),
+        calibration=calibration,
     )
-
-
-def _checked_calibration(
-    calibration: dict[str, Float], names: list[str], n_steps: int, p: Path
-) -> dict[str, Float]:
-    try:
-        return check_calibration(calibration, names, n_steps)
-    except ValueError as exc:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
 
 
 def _read_alignment(data: NpzArchive, p: Path) -> Alignment:
