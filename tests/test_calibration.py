@@ -142,3 +142,19 @@ def test_a_skill_file_with_bad_factors_is_refused(
     np.savez(path, **arrays)
     with pytest.raises(ValueError, match=f"not a valid pbdkit-skill file: .*{match}"):
         Skill.load(path)
+
+
+def test_a_skill_refuses_factors_for_a_space_it_does_not_have(
+    robot: Robot, demos: list[Demonstration]
+) -> None:
+    skill = Skill.learn(demos, robot, n_steps=200)
+    kwargs = {
+        "n_steps": skill.n_steps,
+        "object_names": skill.object_names,
+        "has_gripper": skill.has_gripper,
+        "reach": skill.reach,
+    }
+    with pytest.raises(ValueError, match=r"calibration: \['cup'\] are not spaces of the skill"):
+        Skill(robot, skill.gmms, calibration={"cup": np.ones(200)}, **kwargs)
+    with pytest.raises(ValueError, match=r"calibration\['joint'\] must be in \[1, 10000\]"):
+        Skill(robot, skill.gmms, calibration={"joint": np.zeros(200)}, **kwargs)
