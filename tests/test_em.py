@@ -1,4 +1,4 @@
-"""EM (pbdkit.prob._em): the time-based start, the floors (reg_covar, its scale, the time floor)."""
+"""EM (pbdkit.prob._em): the time-based start, the floors (reg_covar, its scale), time bounds."""
 
 from __future__ import annotations
 
@@ -9,11 +9,12 @@ from mixture_data import piecewise_demos
 from pbdkit import GMM
 from pbdkit.datasets import lasa
 from pbdkit.prob._em import (
+    MAX_TIME_SPREAD,
     MIN_TIME_SPREAD,
     REG_COVAR,
+    _bound_time_variance,
     _e_step,
     _Floor,
-    _floor_time_variance,
     _outer_rows,
     _params_from_stats,
     _sufficient_stats,
@@ -86,7 +87,7 @@ def test_gmr_mean_does_not_jump_where_sequences_hold_still_at_different_places()
 def test_min_time_spread_floors_each_components_time_spread() -> None:
     x, _ = _holding_still(np.random.default_rng(3))
     span = float(np.ptp(x[:, 0]))
-    plain = GMM(16, reg_covar=1e-6, min_time_spread=0.0).fit(x)
+    plain = GMM(16, reg_covar=1e-6, min_time_spread=0.0, max_time_spread=np.inf).fit(x)
     # The mechanism: plain EM leaves a component as narrow in time as reg_covar's jitter.
     assert np.sqrt(plain.covariances_[:, 0, 0].min()) < 1e-2
     for spread in (MIN_TIME_SPREAD, 0.4):
@@ -102,16 +103,63 @@ def test_min_time_spread_floors_each_components_time_spread() -> None:
     np.testing.assert_array_equal(free.covariances_, ref.covariances_)
 
 
+def test_max_time_spread_caps_each_components_time_spread() -> None:
+    x, _ = _holding_still(np.random.default_rng(3))
+    span = float(np.ptp(x[:, 0]))
+    free = GMM(8, reg_covar=1e-6, max_time_spread=np.inf).fit(x)
+    # Without it, a component that holds still spreads over more than its spacing.
+    assert np.sqrt(free.covariances_[:, 0, 0].max()) > 0.5 * span / 8
+    for ceiling in (MAX_TIME_SPREAD, 0.5):
+        gmm = GMM(8, reg_covar=1e-6, max_time_spread=ceiling).fit(x)
+        assert np.sqrt(gmm.covariances_[:, 0, 0].max()) <= ceiling * span / 8 * (1 + 1e-9)
+    assert GMM().get_params()["max_time_spread"] == MAX_TIME_SPREAD
+    for bad in (-1.0, 0.0, 0.1, float("nan"), "1", True):  # 0.1 < min_time_spread
+        with pytest.raises(ValueError, match="max_time_spread must be"):
+            GMM(3, max_time_spread=bad).fit(x)
+
+
+def test_the_time_ceiling_keeps_a_hover_out_of_the_grasp() -> None:
+    # The SO-100 teacher whose segments vary by +-30 % (seed 3): the hand hovers 10 cm above
+    # the box, goes down and holds at it while the gripper closes. Without the ceiling the
+    # component of the hover (time SD 1.7 spacings) lends it 4 % of the weight at the grasp:
+    # the GMR mean is 3-4 mm above the box where every demonstration is within 0.1 mm of it.
+    from arm_zoo import ARMS
+
+    from pbdkit import Skill
+    from pbdkit.datasets import reach_grasp_return
+
+    arm = ARMS["so100"]
+    robot = arm.robot()
+    data = reach_grasp_return(
+        robot, arm.center, arm.home, spread=arm.spreads[0], seed=3, segment_timing=0.3
+    )
+    skill = Skill.learn(data.demos, robot, n_components=21, calibrate=False)
+    box = skill.training_data(data.demos)["box"]  # (5, 1000, 4): t, hand - box
+    dist = np.linalg.norm(box[:, :, 1:], axis=2)
+    held = np.flatnonzero(dist.max(axis=0) < 1e-4)  # every demonstration at the box
+    held = held[(held > 300) & (held < 700)]
+    assert held.size > 40
+    rows = box[:, ::10].reshape(-1, 4)  # the skill's 100 samples per demonstration
+    miss = {}
+    for ceiling in (np.inf, MAX_TIME_SPREAD):
+        gmm = GMM(21, max_time_spread=ceiling, reg_covar=skill.gmms["box"].reg_covar).fit(rows)
+        mean, _ = gmm.regress(held.astype(float))
+        miss[ceiling] = float(np.linalg.norm(mean, axis=1).max())
+    assert miss[np.inf] > 2e-3
+    assert miss[MAX_TIME_SPREAD] < 1e-3
+
+
 @pytest.mark.parametrize("time_dim", [0, 2])
-def test_time_floor_keeps_each_components_regression(time_dim: int) -> None:
+def test_time_bounds_keep_each_components_regression(time_dim: int) -> None:
     rng = np.random.default_rng(20 + time_dim)
     a = rng.normal(size=(6, 4, 4))
     cov = a @ np.swapaxes(a, 1, 2) + 0.1 * np.eye(4)
-    var_min = float(np.median(cov[:, time_dim, time_dim]))
+    var = np.sort(cov[:, time_dim, time_dim])
+    var_min, var_max = float(var[2]), float(var[4])  # two below, two above, two inside
     cov[0, time_dim, :] = cov[0, :, time_dim] = 0.0  # a component with no time variance
     cov[0, time_dim, time_dim] = 0.0
     out = cov.copy()
-    _floor_time_variance(out, time_dim, var_min)
+    _bound_time_variance(out, time_dim, var_min, var_max)
     o = [i for i in range(4) if i != time_dim]
 
     def regression(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -123,8 +171,8 @@ def test_time_floor_keeps_each_components_regression(time_dim: int) -> None:
 
     for k in range(6):
         s = cov[k, time_dim, time_dim]
-        assert out[k, time_dim, time_dim] == max(s, var_min)
-        if s >= var_min:
+        assert out[k, time_dim, time_dim] == min(max(s, var_min), var_max)
+        if var_min <= s <= var_max:
             np.testing.assert_array_equal(out[k], cov[k])
         for before, after in zip(regression(cov[k]), regression(out[k]), strict=True):
             np.testing.assert_allclose(after, before, rtol=1e-12, atol=1e-12)
@@ -132,12 +180,44 @@ def test_time_floor_keeps_each_components_regression(time_dim: int) -> None:
         assert np.linalg.eigvalsh(out[k]).min() > 0.0
 
 
-def test_em_with_the_time_floor_never_lowers_the_likelihood() -> None:
-    # The floor is the exact M-step under the constraint: EM stays monotone.
+def test_the_time_ceiling_is_the_m_steps_constrained_maximum() -> None:
+    # Brute force: over time variances s in [s_min, s_max] with the regression p(x | t) kept,
+    # the expected log-likelihood of a component's data is largest at the s it returns.
+    rng = np.random.default_rng(8)
+    t = rng.uniform(0.0, 10.0, 400)
+    x = np.c_[t, 0.3 * t + rng.normal(0.0, 0.1, 400), -0.1 * t + rng.normal(0.0, 0.2, 400)]
+    mean = x.mean(axis=0)
+    cov = np.cov(x.T, bias=True)[None]
+    s_max = 0.5 * float(cov[0, 0, 0])
+    out = cov.copy()
+    _bound_time_variance(out, 0, 0.0, s_max)
+
+    def loglik(c: np.ndarray) -> float:
+        d = x - mean
+        _, logdet = np.linalg.slogdet(c)
+        return float(-0.5 * (np.einsum("ij,jk,ik->i", d, np.linalg.inv(c), d) + logdet).mean())
+
+    gain = cov[0, 1:, 0] / cov[0, 0, 0]
+    resid = cov[0, 1:, 1:] - np.outer(cov[0, 1:, 0], cov[0, 0, 1:]) / cov[0, 0, 0]
+    tried = []
+    for s in np.linspace(0.05, 1.0, 40) * s_max:
+        c = np.empty((3, 3))
+        c[0, 0], c[1:, 0], c[0, 1:] = s, gain * s, gain * s
+        c[1:, 1:] = resid + np.outer(gain, gain) * s
+        tried.append(loglik(c))
+    assert out[0, 0, 0] == s_max
+    assert loglik(out[0]) >= max(tried) - 1e-12
+
+
+@pytest.mark.parametrize("ceiling", [np.inf, 0.25])
+def test_em_with_the_time_bounds_never_lowers_the_likelihood(ceiling: float) -> None:
+    # The bounds are the exact M-step under the constraint: EM stays monotone (a ceiling of a
+    # quarter of the spacing binds from the start).
     x, _ = _holding_still(np.random.default_rng(5))
     x = x - x.mean(axis=0)
     x2 = _outer_rows(x)
-    floor = _Floor(np.full(4, 1e-6), 0, MIN_TIME_SPREAD * float(np.ptp(x[:, 0])))
+    span = float(np.ptp(x[:, 0]))
+    floor = _Floor(np.full(4, 1e-6), 0, MIN_TIME_SPREAD * span, ceiling * span)
     resp = _time_bins_resp(x, 16, 0)
     params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
     lls = []
@@ -146,6 +226,8 @@ def test_em_with_the_time_floor_never_lowers_the_likelihood() -> None:
         lls.append(ll)
         params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
     assert np.all(np.diff(lls) >= -1e-9 * np.abs(lls[:-1]))
+    sd = np.sqrt(params[2][:, 0, 0])
+    assert sd.max() <= ceiling * span / 16 * (1 + 1e-9) and sd.min() >= 0.2 * span / 16 * (1 - 1e-9)
 
 
 def test_a_cross_validation_fold_keeps_the_time_floor_of_its_models_k() -> None:

@@ -255,8 +255,10 @@ def test_aligned_in_time_the_skill_keeps_the_grasp_a_pause_blurs() -> None:
 def test_calibrated_the_fused_hand_is_where_the_box_alone_puts_it() -> None:
     """Issue 34's defect: grasp postures up to 0.35 rad apart per joint on a 7-joint arm, and
     segments +-30 % on their own. The joint model, confident where the five postures were not,
-    pulls the fused hand off the box (4.5-5.6 mm measured) where the box's constraint alone
-    puts it (1.4 mm); calibrated (the default), the fusion yields to the box there."""
+    pulled the fused hand off the box (4.5-5.6 mm measured) where the box's constraint alone
+    put it (1.4 mm); calibrated (the default), the fusion yields to the box there. Since the
+    time ceiling (GMM's max_time_spread) both are within 0.1 mm here, uncalibrated too (0.01-0.02 mm
+    measured): the widening is then a safeguard, and the fused hand must stay with the box."""
     arm = ARMS["xarm7"]
     robot = arm.robot()
     data = reach_grasp_return(robot, arm.center, arm.home, spread=NARROW, seed=0,
@@ -266,7 +268,6 @@ def test_calibrated_the_fused_hand_is_where_the_box_alone_puts_it() -> None:
     fused = grasp_errors(skill, robot, data, boxes)
     alone = grasp_errors(skill, robot, data, boxes, use=[data.object_name])
     assert np.all(fused <= alone + 0.1e-3), (fused, alone)
-    plain = grasp_errors(Skill.learn(data.demos, robot, calibrate=False), robot, data, boxes)
-    assert plain.min() > 3e-3, plain
+    assert fused.max() < 1e-3, fused
     assert np.all(skill.calibration_["joint"] >= 1.0)
     assert skill.calibration_["joint"].max() > 10.0

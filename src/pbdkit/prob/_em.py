@@ -1,4 +1,4 @@
-"""EM for full-covariance Gaussian mixtures: sufficient statistics, floors, E- and M-steps.
+"""EM for full-covariance Gaussian mixtures: sufficient statistics, floors, bounds, E- and M-steps.
 
 Pure functions on float64 arrays; :class:`pbdkit.GMM` is a thin shell over them. Parameters
 travel as (weights (K,), means (K, D), covariances (K, D, D)); precisions as upper factors U_k
@@ -7,7 +7,8 @@ with Sigma_k^-1 = U_k U_k^T (scikit-learn's ``precisions_cholesky_`` convention)
     E-step:  r_jk = pi_k N(x_j; mu_k, Sigma_k) / sum_i pi_i N(x_j; mu_i, Sigma_i)  (log domain)
     M-step:  N_k = sum_j r_jk,  pi_k = N_k / N,  mu_k = sum_j r_jk x_j / N_k,
              Sigma_k = sum_j r_jk x_j x_j^T / N_k - mu_k mu_k^T + diag(reg_covar)
-    time floor:  Sigma_k,tt >= (min_time_spread * span / K)^2, with p(x | t) kept
+    time bounds: (min_time_spread * span / K)^2 <= Sigma_k,tt <= (max_time_spread * span / K)^2,
+                 with p(x | t) kept
 
 (Bishop, *Pattern Recognition and Machine Learning*, 2006, sec. 9.2.2; the floor on the
 diagonal is scikit-learn's ``reg_covar``.) EM starts from K consecutive bins along time
@@ -29,6 +30,7 @@ from .gaussian import inverse_cholesky_factor
 
 __all__ = [
     "MAX_TIME_FLOOR_FRACTION",
+    "MAX_TIME_SPREAD",
     "MIN_TIME_SPREAD",
     "REG_COVAR",
     "scale_aware_floor",
@@ -43,6 +45,11 @@ Params = tuple[Float, Float, Float]
 #: Default ``min_time_spread``: every component's time standard deviation is at least this
 #: fraction of the components' spacing (the time span over K); ``docs/math.md``, "Time floor".
 MIN_TIME_SPREAD = 0.2
+#: Default ``max_time_spread``: every component's time standard deviation is at most this
+#: fraction of the components' spacing; ``docs/math.md``, "Time ceiling". A component wider in
+#: time lends its regression to its neighbours' phases: on an SO-100 teacher, the one that held
+#: the hand 10 cm above the box (time SD 1.7 spacings) put the grasp 2.5 mm above it.
+MAX_TIME_SPREAD = 1.0
 #: ``reg_covar=None``: the floor of a column is this fraction of its variance, and at most this
 #: value in the data's units (scikit-learn's default ``reg_covar``).
 REG_COVAR = 1e-6
@@ -75,46 +82,51 @@ class _Floor:
     time_spread : the time standard deviation of every component of a K-component mixture is at
         least ``time_spread / K`` (``min_time_spread`` times the time span: a fraction of the
         components' spacing); 0 for none.
+    time_ceiling : and at most ``time_ceiling / K`` (``max_time_spread`` times the span); inf
+        for none.
     """
 
     diag: Float
     time_dim: int | None = None
     time_spread: float = 0.0
+    time_ceiling: float = float("inf")
 
 
-def _floor_time_variance(cov: Float, time_dim: int, var_min: float) -> None:
-    """Raise every component's time variance s below v = ``var_min`` to v, keeping p(x | t).
+def _bound_time_variance(cov: Float, time_dim: int, var_min: float, var_max: float) -> None:
+    """Bring every component's time variance s into [v_min, v_max], keeping p(x | t).
 
     ``cov`` (K, D, D) is changed in place.
 
     With Sigma = [[s, b^T], [b, S]] (time first), p(x | t) has the gain A = b / s and the
     covariance C = S - b b^T / s; s' = v, b' = A v and S' = C + A A^T v keep both. A Gaussian's
-    log-likelihood is log p(t) + log p(x | t) with separate parameters, so this is the exact
-    maximum of the M-step under the constraint s >= v, and EM stays monotone.
+    log-likelihood is log p(t) + log p(x | t) with separate parameters, and the maximum of
+    log p(t) under v_min <= s <= v_max is s clipped to the interval, so this is the exact
+    maximum of the M-step under the bounds, and EM stays monotone.
     """
     s = cov[:, time_dim, time_dim]
-    short = np.flatnonzero(s < var_min)
-    if short.size == 0:
+    out = np.flatnonzero((s < var_min) | (s > var_max))
+    if out.size == 0:
         return
-    c = cov[short]
-    s_k = s[short]
+    c = cov[out]
+    s_k = s[out]
+    v = np.clip(s_k, var_min, var_max)
     b = c[:, :, time_dim].copy()
     b[:, time_dim] = 0.0
     # A = b / s; s = 0 (no reg_covar on time, one time value) has b = 0 and no gain.
     gain = np.divide(b, s_k[:, None], out=np.zeros_like(b), where=s_k[:, None] > 0.0)
-    c += (var_min - s_k)[:, None, None] * (gain[:, :, None] * gain[:, None, :])
-    c[:, :, time_dim] = var_min * gain
-    c[:, time_dim, :] = var_min * gain
-    c[:, time_dim, time_dim] = var_min
-    cov[short] = c
+    c += (v - s_k)[:, None, None] * (gain[:, :, None] * gain[:, None, :])
+    c[:, :, time_dim] = v[:, None] * gain
+    c[:, time_dim, :] = v[:, None] * gain
+    c[:, time_dim, time_dim] = v
+    cov[out] = c
 
 
 def _params_from_stats(
     s0: Float, s1: Float, s2: Float, floor: _Floor, n_components: int | None = None
 ) -> Params:
-    """M-step: weights, means and covariances (+ the floors: on the diagonal, on time).
+    """M-step: weights, means and covariances (+ the floors: on the diagonal; the bounds on time).
 
-    ``n_components`` is the K of the time floor (default: the number of components given); a
+    ``n_components`` is the K of the time bounds (default: the number of components given); a
     cross-validation fold that drops components keeps the floor of the model it comes from.
     """
     nk = s0 + 10.0 * np.finfo(np.float64).eps  # scikit-learn's guard against empty components
@@ -123,9 +135,11 @@ def _params_from_stats(
     cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
     idx = np.arange(cov.shape[-1])
     cov[:, idx, idx] += floor.diag
-    if floor.time_dim is not None and floor.time_spread > 0.0:
+    if floor.time_dim is not None and (floor.time_spread > 0.0 or floor.time_ceiling < np.inf):
         k = cov.shape[0] if n_components is None else n_components
-        _floor_time_variance(cov, floor.time_dim, (floor.time_spread / k) ** 2)
+        _bound_time_variance(
+            cov, floor.time_dim, (floor.time_spread / k) ** 2, (floor.time_ceiling / k) ** 2
+        )
     return nk / nk.sum(), means, cov
 
 

@@ -29,6 +29,7 @@ from .._threads import one_blas_thread
 from .._validation import check_array, check_int, check_positive_float
 from ._calibration import normalized_residuals
 from ._em import (
+    MAX_TIME_SPREAD,
     MIN_TIME_SPREAD,
     _check_covariances,
     _check_time_floor,
@@ -60,6 +61,21 @@ from ._selection import (
 __all__ = ["GMM"]
 
 Float = NDArray[np.float64]
+
+
+def _check_max_time_spread(value: object, min_time_spread: float) -> float:
+    """``max_time_spread``: a number >= ``min_time_spread`` and > 0, or inf (no ceiling)."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        v = float(value)
+        if v == np.inf:
+            return v
+        v = check_positive_float(value, "max_time_spread")
+        if v >= min_time_spread:
+            return v
+    raise ValueError(
+        f"max_time_spread must be a number >= min_time_spread ({min_time_spread!r}) and > 0, "
+        f"or inf for no ceiling, got {value!r}"
+    )
 
 
 def _check_rng(
@@ -132,6 +148,13 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         time step (``docs/math.md``, "Time floor"). Only the time marginal of a component is
         widened; its regression p(x | t) is kept. 0 disables it. Default
         :data:`MIN_TIME_SPREAD`.
+    max_time_spread : float
+        With a time column: every component's time standard deviation is at most this
+        fraction of the components' spacing, ``max_time_spread * span / K``, so that no
+        component lends its regression to the phases of its neighbours (a hand held 10 cm above
+        a box pulled the grasp up 2.5 mm; ``docs/math.md``, "Time ceiling"). Only the time
+        marginal is narrowed; p(x | t) is kept. ``inf`` disables it; it must be at least
+        ``min_time_spread``. Default :data:`MAX_TIME_SPREAD`.
     cv_scale : {"local", "pooled"}
         ``"auto"`` only: what a left-out demonstration's squared error is divided by. ``"local"``
         (default): the demonstrations' variance at that time (:func:`local_spread`, at least
@@ -185,6 +208,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         bic_samples_per_sequence: float = 20.0,
         bic_samples: int | None = None,
         min_time_spread: float = MIN_TIME_SPREAD,
+        max_time_spread: float = MAX_TIME_SPREAD,
         cv_scale: Literal["local", "pooled"] = "local",
         loo_residuals: bool = False,
     ) -> None:
@@ -200,6 +224,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         self.bic_samples_per_sequence = bic_samples_per_sequence
         self.bic_samples = bic_samples
         self.min_time_spread = min_time_spread
+        self.max_time_spread = max_time_spread
         self.cv_scale = cv_scale
         self.loo_residuals = loo_residuals
 
@@ -302,6 +327,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         n, d = x_raw.shape
         method, candidates, diag = self._check_params(x_raw)
         spread = check_positive_float(self.min_time_spread, "min_time_spread", allow_zero=True)
+        ceiling = _check_max_time_spread(self.max_time_spread, spread)
         # A constant column with no floor gives every component a zero variance there.
         flat = np.flatnonzero((np.ptp(x_raw, axis=0) == 0.0) & (diag <= 0.0))
         if flat.size:
@@ -333,8 +359,10 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         if self.time_dim is None:
             floor = _Floor(diag)
         else:
-            # The smallest time standard deviation of K components: spread * span / K.
-            floor = _Floor(diag, int(self.time_dim), spread * float(np.ptp(x[:, self.time_dim])))
+            # Time standard deviations of K components: from spread * span / K to
+            # ceiling * span / K.
+            span = float(np.ptp(x[:, self.time_dim]))
+            floor = _Floor(diag, int(self.time_dim), spread * span, ceiling * span)
 
         # Screening fits of a sweep stop at a looser tolerance; the kept one is refined below.
         sweep_tol = tol if method == "fixed" else max(tol, SWEEP_TOL)

@@ -302,6 +302,9 @@ class Skill:
         -----
         LimitWarning
             A demonstration leaves the robot's joint limits (see ``demos``).
+        SelectionWarning
+            A space's K (``"auto"``) is at ``max_components`` where its score still falls; the
+            message names the space and what to do.
         """
         items = check_demonstrations(demos, min_demos=2)
         check_robot(robot, KinematicModel)
