@@ -60,14 +60,20 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 warnings.simplefilter("ignore")
 from pbdkit import Skill
-from pbdkit.data._demonstration import load_demonstrations
+try:  # the baseline's layout (8aa78c9); the house's restructuring moved it
+    from pbdkit.demos import load_demonstrations
+except ImportError:
+    from pbdkit.data._demonstration import load_demonstrations
 from pbdkit.robots import katana
+import inspect
+# Skill.learn's objects= was renamed task_objects= after the baseline.
+KEY = "task_objects" if "task_objects" in inspect.signature(Skill.learn).parameters else "objects"
 job = json.loads(sys.argv[1])
 out = {}
 with threadpool_limits(1):
     for case in job["cases"]:
         demos = load_demonstrations(case["demos"])
-        skill = Skill.learn(demos, katana(), task_objects=case["objects"])
+        skill = Skill.learn(demos, katana(), **{KEY: case["objects"]})
         runs = []
         for placement in case["placements"]:
             objects = {k: np.array(v) for k, v in placement.items()}
