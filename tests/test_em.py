@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from arm_zoo import ARMS
 from mixture_data import piecewise_demos
 
-from pbdkit import GMM
-from pbdkit.datasets import lasa
+from pbdkit import GMM, Skill
+from pbdkit.datasets import lasa, reach_grasp_return
 from pbdkit.prob._em import (
     MAX_TIME_SPREAD,
     MIN_TIME_SPREAD,
@@ -123,11 +124,6 @@ def test_the_time_ceiling_keeps_a_hover_out_of_the_grasp() -> None:
     # the box, goes down and holds at it while the gripper closes. Without the ceiling the
     # component of the hover (time SD 1.7 spacings) lends it 4 % of the weight at the grasp:
     # the GMR mean is 3-4 mm above the box where every demonstration is within 0.1 mm of it.
-    from arm_zoo import ARMS
-
-    from pbdkit import Skill
-    from pbdkit.datasets import reach_grasp_return
-
     arm = ARMS["so100"]
     robot = arm.robot()
     data = reach_grasp_return(

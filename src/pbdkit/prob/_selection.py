@@ -61,8 +61,8 @@ SWEEP_TOL = 1e-2
 CV_TOLERANCE = 0.03
 #: "auto": the scores still fall at the cap when each of this many last steps of the grid
 #: falls by more than CV_TOLERANCE (:func:`reached_level`). With two (24 -> 29 -> 30), one
-#: lucky fit at 30 took the cap on 3 of 20 teach seeds of the paper's tasks; with four
-#: (17 -> 20 -> 24 -> 29 -> 30) they choose 18-29.
+#: lucky fit at 30 took the cap on 4 of 20 teach seeds of the paper's tasks (the glass space;
+#: 3 before the time ceiling); with four (17 -> 20 -> 24 -> 29 -> 30) they choose 19-25.
 FALLING_STEPS = 4
 #: "auto" with ``cv_scale="local"``: the spread at a moment is at least this fraction of the
 #: spread pooled over time (a phase weighs at most 1000 times the average): one time step where
