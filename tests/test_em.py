@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from arm_zoo import ARMS
 from mixture_data import piecewise_demos
+from scipy.stats import multivariate_normal
 
 from pbdkit import GMM, Skill
 from pbdkit.datasets import lasa, reach_grasp_return
@@ -15,11 +16,13 @@ from pbdkit.prob._em import (
     REG_COVAR,
     _bound_time_variance,
     _e_step,
+    _features,
     _Floor,
-    _outer_rows,
     _params_from_stats,
+    _precision_factors,
     _sufficient_stats,
     _time_bins_resp,
+    _weighted_log_prob,
     scale_aware_floor,
     time_based_init,
 )
@@ -211,16 +214,16 @@ def test_em_with_the_time_bounds_never_lowers_the_likelihood(ceiling: float) -> 
     # quarter of the spacing binds from the start).
     x, _ = _holding_still(np.random.default_rng(5))
     x = x - x.mean(axis=0)
-    x2 = _outer_rows(x)
+    feats = _features(x)
     span = float(np.ptp(x[:, 0]))
     floor = _Floor(np.full(4, 1e-6), 0, MIN_TIME_SPREAD * span, ceiling * span)
     resp = _time_bins_resp(x, 16, 0)
-    params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+    params = _params_from_stats(*_sufficient_stats(feats, resp), floor)
     lls = []
     for _ in range(60):
-        resp, ll = _e_step(x, x2, params)
+        resp, ll = _e_step(feats, params)
         lls.append(ll)
-        params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+        params = _params_from_stats(*_sufficient_stats(feats, resp), floor)
     assert np.all(np.diff(lls) >= -1e-9 * np.abs(lls[:-1]))
     sd = np.sqrt(params[2][:, 0, 0])
     assert sd.max() <= ceiling * span / 16 * (1 + 1e-9) and sd.min() >= 0.2 * span / 16 * (1 - 1e-9)
@@ -231,7 +234,7 @@ def test_a_cross_validation_fold_keeps_the_time_floor_of_its_models_k() -> None:
     # floor of the K fitted (spread * span / K), not of the fewer components left.
     x, _ = _holding_still(np.random.default_rng(3))
     x = x - x.mean(axis=0)
-    s0, s1, s2 = _sufficient_stats(x, _outer_rows(x), _time_bins_resp(x, 16, 0))
+    s0, s1, s2 = _sufficient_stats(_features(x), _time_bins_resp(x, 16, 0))
     spread = 0.25 * float(np.ptp(x[:, 0]))
     floor = _Floor(np.full(4, 1e-6), 0, spread)
     kept = slice(0, 10)  # 10 of 16 time bins: time sd about span / 16 / sqrt(12) each
@@ -318,3 +321,23 @@ def test_a_time_floor_that_hides_the_motion_is_refused() -> None:
     # A still column under its own floor is data (a skill may hold a joint still).
     x, _ = _lasa_rows(1.0, 1e-9)
     assert GMM(2, reg_covar=1e-6).fit(x).n_components_ == 2
+
+
+def test_sufficient_statistics_and_log_densities_from_the_features_equal_brute_force() -> None:
+    # One product with the features (upper triangle of x x^T, x, 1) gives the moments and
+    # the log-densities: against sums over rows and scipy's density, a weight-0 component -inf.
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(40, 5))
+    resp = rng.dirichlet(np.ones(3), size=40)
+    s0, s1, s2 = _sufficient_stats(_features(x), resp)
+    np.testing.assert_allclose(s0, resp.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(s1, np.einsum("nk,nd->kd", resp, x), rtol=1e-12)
+    np.testing.assert_allclose(s2, np.einsum("nk,nd,ne->kde", resp, x, x), rtol=1e-12)
+    assert np.array_equal(s2, np.swapaxes(s2, 1, 2))
+    weights = np.array([0.7, 0.3, 0.0])
+    params = _params_from_stats(s0, s1, s2, _Floor(np.full(5, 1e-6)))
+    lp = _weighted_log_prob(_features(x), weights, params[1], _precision_factors(params[2]))
+    for k in range(2):
+        expected = np.log(weights[k]) + multivariate_normal(params[1][k], params[2][k]).logpdf(x)
+        np.testing.assert_allclose(lp[k], expected, rtol=1e-10)
+    assert np.all(lp[2] == -np.inf)

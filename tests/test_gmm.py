@@ -164,7 +164,7 @@ def test_score_samples_and_bic_equal_scikit_learn() -> None:
     np.testing.assert_allclose(gmm.aic(x), sk.aic(x), rtol=1e-10)
     np.testing.assert_allclose(gmm.score(x), sk.score(x), rtol=1e-10)
     np.testing.assert_array_equal(gmm.predict(x), sk.predict(x))
-    # Away from the data too (the expansion of _log_gauss is centred on the mixture).
+    # Away from the data too (the expansion of _weighted_log_prob is centred on the mixture).
     q = rng.uniform(-3.0, 3.0, x.shape)
     np.testing.assert_allclose(gmm.score_samples(q), sk.score_samples(q), rtol=1e-10)
     np.testing.assert_allclose(gmm.predict_proba(q), sk.predict_proba(q), atol=1e-10)

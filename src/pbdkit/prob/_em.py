@@ -18,6 +18,7 @@ diagonal is scikit-learn's ``reg_covar``.) EM starts from K consecutive bins alo
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -61,16 +62,45 @@ REG_COVAR = 1e-6
 MAX_TIME_FLOOR_FRACTION = 0.1
 
 
-def _outer_rows(x: Float) -> Float:
-    """x_j x_j^T of every row, flattened: (N, D) -> (N, D*D); precomputed once per fit."""
-    n, d = x.shape
-    return (x[:, :, None] * x[:, None, :]).reshape(n, d * d)
+class _Upper(NamedTuple):
+    """The upper triangle (with the diagonal) of a D x D matrix."""
+
+    rows: NDArray[np.intp]
+    cols: NDArray[np.intp]
+    flat: NDArray[np.intp]  # rows * D + cols: into the flattened matrix
+    quad: Float  # -1/2 on the diagonal, -1 off it: the coefficients of x^T P x / -2
 
 
-def _sufficient_stats(x: Float, x2: Float, resp: Float) -> tuple[Float, Float, Float]:
-    """sum_j r_jk, sum_j r_jk x_j and sum_j r_jk x_j x_j^T: (K,), (K, D), (K, D, D)."""
-    d = x.shape[1]
-    return resp.sum(axis=0), resp.T @ x, (resp.T @ x2).reshape(-1, d, d)
+@functools.cache
+def _upper(d: int) -> _Upper:
+    iu, ju = np.triu_indices(d)
+    return _Upper(iu, ju, iu * d + ju, np.where(iu == ju, -0.5, -1.0))
+
+
+def _features(x: Float) -> Float:
+    """Every row's features, (N, D(D+1)/2 + D + 1): x_i x_j (i <= j), x, 1.
+
+    One product of responsibilities with them gives all sufficient statistics
+    (:func:`_sufficient_stats`), and one product of them with a row of coefficients per component
+    gives the log-densities (:func:`_weighted_log_prob`). Precomputed once per fit.
+    """
+    iu, ju = _upper(x.shape[1])[:2]
+    return np.hstack([x[:, iu] * x[:, ju], x, np.ones((x.shape[0], 1))])
+
+
+def _sufficient_stats(feats: Float, resp: Float) -> tuple[Float, Float, Float]:
+    """sum_j r_jk, sum_j r_jk x_j and sum_j r_jk x_j x_j^T: (K,), (K, D), (K, D, D).
+
+    ``feats`` are the rows' :func:`_features`: (D + 1)(D + 2) / 2 columns.
+    """
+    d = round((np.sqrt(8 * feats.shape[1] + 1) - 3) / 2)
+    iu, ju = _upper(d)[:2]
+    m = iu.size
+    s = resp.T @ feats
+    s2 = np.empty((s.shape[0], d, d))
+    s2[:, iu, ju] = s[:, :m]
+    s2[:, ju, iu] = s[:, :m]
+    return s[:, -1], s[:, m : m + d], s2
 
 
 @dataclass(frozen=True)
@@ -131,10 +161,10 @@ def _params_from_stats(
     """
     nk = s0 + 10.0 * np.finfo(np.float64).eps  # scikit-learn's guard against empty components
     means = s1 / nk[:, None]
+    # Symmetric as computed: s2 is (both triangles from one value) and so is mu mu^T.
     cov = s2 / nk[:, None, None] - means[:, :, None] * means[:, None, :]
-    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
-    idx = np.arange(cov.shape[-1])
-    cov[:, idx, idx] += floor.diag
+    d = cov.shape[-1]
+    cov.reshape(-1, d * d)[:, :: d + 1] += floor.diag  # the diagonals
     if floor.time_dim is not None and (floor.time_spread > 0.0 or floor.time_ceiling < np.inf):
         k = cov.shape[0] if n_components is None else n_components
         _bound_time_variance(
@@ -171,50 +201,59 @@ def _not_positive_definite(covariances: Float) -> str:
     return f"{what} (degenerate data); increase reg_covar, or scale the input data"
 
 
-def _log_gauss(x: Float, x2: Float, means: Float, factors: Float) -> Float:
-    """log N(x_j; mu_k, Sigma_k) for every row and component: (N, K).
-
-    Mahalanobis terms from one product with the precomputed x x^T rows:
-    (x - mu)^T P (x - mu) = vec(x x^T) . vec(P) - 2 x . P mu + mu^T P mu, P = U U^T.
-    Callers centre x (a shift of every mean leaves the mixture unchanged), which keeps the
-    expansion free of cancellation.
-    """
-    k, d = means.shape
-    prec = factors @ np.swapaxes(factors, -1, -2)  # (K, D, D)
-    p_mu = np.einsum("kij,kj->ki", prec, means)
-    maha = x2 @ prec.reshape(k, d * d).T - 2.0 * (x @ p_mu.T) + np.einsum("ki,ki->k", means, p_mu)
-    # log|Sigma|^(-1/2) = sum log diag(U)
-    half_log_det = np.log(np.diagonal(factors, axis1=1, axis2=2)).sum(axis=1)
-    return np.asarray(half_log_det - 0.5 * (d * np.log(2.0 * np.pi) + np.maximum(maha, 0.0)))
-
-
-def _weighted_log_prob(x: Float, x2: Float, weights: Float, means: Float, factors: Float) -> Float:
-    """log pi_k + log N(x_j; mu_k, Sigma_k) for every row and component: (N, K).
+def _weighted_log_prob(feats: Float, weights: Float, means: Float, factors: Float) -> Float:
+    """log pi_k + log N(x_j; mu_k, Sigma_k) for every component and row: (K, N).
 
     The one log-density of the mixture: EM and the estimator's ``score_samples``,
-    ``predict_proba``, ``bic``, ... all call it (x and means centred, see :func:`_log_gauss`).
+    ``predict_proba``, ``bic``, ... all call it, on the rows' :func:`_features`. One product::
+
+        log pi_k N(x; mu_k, Sigma_k) = c_k - 1/2 vec(x x^T) . vec(P_k) + x . P_k mu_k,
+        c_k = log pi_k + sum log diag(U_k) - D/2 log(2 pi) - 1/2 mu_k^T P_k mu_k,  P_k = U_k U_k^T
+
+    (the upper triangle of x x^T, its off-diagonal coefficients doubled). Callers centre x (a
+    shift of every mean leaves the mixture unchanged), which keeps the expansion free of
+    cancellation; the Mahalanobis term is kept >= 0 (the density at most c_k + its quadratic
+    term at the mean). Components first: the reductions over them in :func:`_log_resp` then run
+    along contiguous rows.
     """
+    k, d = means.shape
+    upper = _upper(d)
+    m = upper.flat.size
+    prec = factors @ np.swapaxes(factors, -1, -2)  # (K, D, D)
+    coef = np.empty((k, m + d + 1))  # [quadratic | linear | constant] per component
+    np.multiply(prec.reshape(k, d * d)[:, upper.flat], upper.quad, out=coef[:, :m])
+    p_mu = coef[:, m : m + d]
+    np.matmul(prec, means[:, :, None], out=p_mu[:, :, None])
+    # log|Sigma|^(-1/2) = sum log diag(U)
+    half_log_det = np.log(np.diagonal(factors, axis1=1, axis2=2)).sum(axis=1)
     with np.errstate(divide="ignore"):  # a component of weight 0 has log pi = -inf
-        return _log_gauss(x, x2, means, factors) + np.log(weights)
+        top = np.log(weights) + half_log_det - 0.5 * d * np.log(2.0 * np.pi)
+    coef[:, -1] = top - 0.5 * (means * p_mu).sum(axis=1)
+    lp: Float = coef @ feats.T
+    np.minimum(lp, top[:, None], out=lp)
+    return lp
 
 
 def _log_resp(lp: Float) -> tuple[Float, Float]:
-    """p(k | x_j) (N, K) and log p(x_j) (N,) from the weighted log-probabilities (N, K).
+    """p(k | x_j) (N, K) and log p(x_j) (N,) from the weighted log-probabilities (K, N).
 
     log p(x) = m + log sum_k exp(lp_k - m), m = max_k lp_k (log-sum-exp, no overflow).
+    ``lp`` is overwritten; the responsibilities are its transposed view.
     """
-    top = lp.max(axis=1, keepdims=True)
-    e = np.exp(lp - top)
-    total = e.sum(axis=1, keepdims=True)
-    return e / total, top[:, 0] + np.log(total[:, 0])
+    top = lp.max(axis=0)
+    lp -= top
+    np.exp(lp, out=lp)
+    total = lp.sum(axis=0)
+    lp /= total
+    return lp.T, top + np.log(total)
 
 
-def _e_step(x: Float, x2: Float, params: Params) -> tuple[Float, float]:
-    """Responsibilities (N, K) in the log domain, and the mean log-likelihood per sample."""
+def _e_step(feats: Float, params: Params) -> tuple[Float, float]:
+    """Responsibilities (N, K) in the log domain, and the mean log-likelihood per sample, from
+    the rows' :func:`_features`."""
     weights, means, cov = params
-    resp, log_density = _log_resp(
-        _weighted_log_prob(x, x2, weights, means, _precision_factors(cov))
-    )
+    lp = _weighted_log_prob(feats, weights, means, _precision_factors(cov))
+    resp, log_density = _log_resp(lp)
     return resp, float(np.mean(log_density))
 
 
@@ -240,19 +279,19 @@ def _em(x: Float, resp: Float, floor: _Floor, max_iter: int, tol: float) -> _Fit
     fit : _Fit
         params, resp, n_iter, converged, log_likelihood (total over the rows).
     """
-    x2 = _outer_rows(x)
-    params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+    feats = _features(x)
+    params = _params_from_stats(*_sufficient_stats(feats, resp), floor)
     prev = -np.inf
     converged = False
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 (n_iter is reported)
-        resp, ll = _e_step(x, x2, params)
-        params = _params_from_stats(*_sufficient_stats(x, x2, resp), floor)
+        resp, ll = _e_step(feats, params)
+        params = _params_from_stats(*_sufficient_stats(feats, resp), floor)
         if abs(ll - prev) < tol:
             converged = True
             break
         prev = ll
-    resp, ll = _e_step(x, x2, params)
+    resp, ll = _e_step(feats, params)
     return _Fit(params, resp, n_iter, converged, ll * x.shape[0])
 
 
@@ -292,7 +331,7 @@ def time_based_init(
     # Floor each bin's covariance with a fraction of the global variance so that a bin of
     # (nearly) constant data still gives a usable start.
     floor = _Floor(1e-3 * np.var(x, axis=0) + reg_covar)
-    w, m, cov = _params_from_stats(*_sufficient_stats(x, _outer_rows(x), resp), floor)
+    w, m, cov = _params_from_stats(*_sufficient_stats(_features(x), resp), floor)
     u = _precision_factors(cov)
     prec = u @ np.swapaxes(u, -1, -2)
     return w, m, 0.5 * (prec + np.swapaxes(prec, -1, -2))

@@ -34,10 +34,10 @@ from ._em import (
     _check_covariances,
     _check_time_floor,
     _em,
+    _features,
     _Fit,
     _Floor,
     _log_resp,
-    _outer_rows,
     _precision_factors,
     _time_bins_resp,
     _weighted_log_prob,
@@ -347,13 +347,13 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             )
         # One canonical row order (by sequence, then time): the fit does not depend on how the
         # rows were given. A shift of every mean leaves the mixture unchanged; centring keeps
-        # the Mahalanobis expansion of _log_gauss free of cancellation.
+        # the Mahalanobis expansion of _weighted_log_prob free of cancellation.
         order = np.lexsort((x_raw[:, self.time_dim], grp)) if self.time_dim is not None else None
         if order is not None:
             x_raw, grp = x_raw[order], grp[order]
         center = x_raw.mean(axis=0)
         x = x_raw - center
-        x2 = _outer_rows(x)
+        feats = _features(x)
         max_iter, tol = int(self.max_iter), float(self.tol)
         fits: dict[int, _Fit] = {}
         if self.time_dim is None:
@@ -382,7 +382,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
 
                 def cv(k: int) -> Float:
                     return _cv_errors(
-                        FitRows(x, x2, fit_k(k).resp, grp, floor, td), score_dims, scale
+                        FitRows(x, feats, fit_k(k).resp, grp, floor, td), score_dims, scale
                     )
 
                 self.selection_ = _select_by_cv(candidates, cv, n_seq)
@@ -406,7 +406,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     td = int(self.time_dim)
                     score_dims = self._check_score_dims(d, td)
                     scale = _cv_scale(x, grp, td, score_dims, diag, self.cv_scale)
-                    rows = FitRows(x, x2, fits[k].resp, grp, floor, td)
+                    rows = FitRows(x, feats, fits[k].resp, grp, floor, td)
                     errors = _cv_errors(rows, score_dims, scale)
                     scores, folds, n_folds = np.asarray([errors.mean()]), errors[None], n_seq
                 self.selection_ = ModelSelection(method, (k,), scores, folds, k, k, n_folds)
@@ -422,7 +422,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             td = int(self.time_dim)
             score_dims = self._check_score_dims(d, td)
             with one_blas_thread():
-                z = normalized_residuals(FitRows(x, x2, fit.resp, grp, floor, td), score_dims)
+                z = normalized_residuals(FitRows(x, feats, fit.resp, grp, floor, td), score_dims)
             self.loo_residuals_ = np.empty_like(z)
             self.loo_residuals_[order if order is not None else slice(None)] = z
         self.weights_ = np.asarray(weights, dtype=np.float64)
@@ -501,7 +501,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
     def _finalize(self) -> None:
         # What every density needs, computed once: the upper precision factors, and the centre
         # (sum_k pi_k mu_k: after an M-step the data mean that fit centres by, up to rounding)
-        # that keeps the expansion of _log_gauss free of cancellation.
+        # that keeps the expansion of _weighted_log_prob free of cancellation.
         self.n_features_in_ = int(self.means_.shape[1])
         self._prec_factors = _precision_factors(self.covariances_)
         self._center = np.asarray(self.weights_ @ self.means_, dtype=np.float64)
@@ -530,9 +530,10 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         """p(k | x) (N, K) and log p(x) (N,): the density EM maximizes (_weighted_log_prob)."""
         x = self._check_X(X) - self._center
         lp = _weighted_log_prob(
-            x, _outer_rows(x), self.weights_, self.means_ - self._center, self._prec_factors
+            _features(x), self.weights_, self.means_ - self._center, self._prec_factors
         )
-        return _log_resp(lp)
+        resp, log_density = _log_resp(lp)
+        return np.ascontiguousarray(resp), log_density
 
     def score_samples(self, X: npt.ArrayLike) -> Float:
         """Log-density of the mixture at each sample.

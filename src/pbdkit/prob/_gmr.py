@@ -129,10 +129,15 @@ def gmr_precompute(
     s_ii = covariances[:, i_idx[:, None], i_idx[None, :]]
     s_oi = covariances[:, o_idx[:, None], i_idx[None, :]]
     s_oo = covariances[:, o_idx[:, None], o_idx[None, :]]
-    chol, chol_inv = _cholesky_with_inverse(s_ii, "Sigma^II")  # Sigma^II = L L^T, and L^-1
-    prec_chol = np.swapaxes(chol_inv, -1, -2)  # U = L^-T: (x-mu) U = (L^-1 (x-mu))^T
-    # A_k = S_oi S_ii^-1 = S_oi L^-T L^-1
-    gain = s_oi @ prec_chol @ chol_inv
+    if len(in_dims) == 1 and np.all(s_ii > 0.0):  # Sigma^II = s: L = sqrt(s), no solve
+        chol = np.sqrt(s_ii)
+        prec_chol = 1.0 / chol
+        gain = s_oi / s_ii
+    else:
+        chol, chol_inv = _cholesky_with_inverse(s_ii, "Sigma^II")  # Sigma^II = L L^T, and L^-1
+        prec_chol = np.swapaxes(chol_inv, -1, -2)  # U = L^-T: (x-mu) U = (L^-1 (x-mu))^T
+        # A_k = S_oi S_ii^-1 = S_oi L^-T L^-1
+        gain = s_oi @ prec_chol @ chol_inv
     cond = s_oo - gain @ np.swapaxes(s_oi, -1, -2)
     cond = 0.5 * (cond + np.swapaxes(cond, -1, -2))
     log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)

@@ -343,7 +343,7 @@ class FitRows(NamedTuple):
     """One fit of a time-indexed mixture and the rows it was fitted on: what its folds need."""
 
     x: Float  # (N, D), centred
-    x2: Float  # (N, D, D), the rows' outer products
+    feats: Float  # (N, P), the rows' features (pbdkit.prob._em._features)
     resp: Float  # (N, K), the fit's responsibilities
     groups: NDArray[np.intp]  # (N,), the sequence of every row
     floor: _Floor
@@ -357,13 +357,13 @@ def fold_models(rows: FitRows) -> Iterator[tuple[NDArray[np.bool_], GMRModel]]:
     from the sufficient statistics, followed by one EM iteration on the remaining rows (exact
     refits move the errors by a few percent and cost 5-10 times more), conditioned on time.
     """
-    x, x2, resp, groups, floor, time_dim = rows
-    stats = _sufficient_stats(x, x2, resp)
+    _, feats, resp, groups, floor, time_dim = rows
+    stats = _sufficient_stats(feats, resp)
     n_components = resp.shape[1]  # the fit's K: its time floor holds in every fold
     for m in range(int(groups.max()) + 1):
         held = groups == m
         rest = ~held
-        own = _sufficient_stats(x[held], x2[held], resp[held])
+        own = _sufficient_stats(feats[held], resp[held])
         s0 = stats[0] - own[0]
         # A component (nearly) made of sequence m alone has no support left in the fold: drop
         # it (its downdated moments are rounding noise).
@@ -372,9 +372,10 @@ def fold_models(rows: FitRows) -> Iterator[tuple[NDArray[np.bool_], GMRModel]]:
             s0[keep], (stats[1] - own[1])[keep], (stats[2] - own[2])[keep], floor, n_components
         )
         n_rest = float(np.count_nonzero(rest))
-        r, _ = _e_step(x[rest], x2[rest], params)
+        feats_rest = feats[rest]
+        r, _ = _e_step(feats_rest, params)
         params = _drop_empty(
-            _params_from_stats(*_sufficient_stats(x[rest], x2[rest], r), floor, n_components),
+            _params_from_stats(*_sufficient_stats(feats_rest, r), floor, n_components),
             0.5 / n_rest,
         )
         yield held, gmr_precompute(*params, (time_dim,))
