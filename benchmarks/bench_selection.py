@@ -31,6 +31,8 @@ Then the alternatives, on the same data (peers measured in the same run):
   CV_TOLERANCE of the best (the default);
 - ``auto-pooled``: the same against their spread pooled over time (the earlier default, which
   loses a tight phase where the demonstrations differ elsewhere: ``bench_zoo.py``).
+- ``K=15``, ``K=20``, ``K=30``: a fixed K for every space (issue 34: "15-20 may simply be
+  right for 5 demonstrations").
 
 and on LASA (26 shapes, 7 demonstrations): K range and the GMR mean's RMSE over the pointwise
 mean's. Last, the accuracy of the approximate leave-one-out against exact refits.
@@ -185,10 +187,22 @@ def choose(method: str, x: Float, floor: Float, kmax: int, score_dims: list[int]
         return GMM("bic", max_components=kmax, reg_covar=floor, bic_samples=n_eff).fit(x)
     if method == "loo-lik":
         return GMM(_loo_loglik_k(x, groups, floor, min(kmax, 12)), reg_covar=floor).fit(x)
+    if method.startswith("K="):
+        return GMM(int(method[2:]), reg_covar=floor).fit(x)
     raise ValueError(method)
 
 
-METHODS = ["auto", "auto-pooled", "bic20", "bic-plain", "bic-acf", "loo-lik"]
+METHODS = [
+    "auto",
+    "auto-pooled",
+    "bic20",
+    "bic-plain",
+    "bic-acf",
+    "loo-lik",
+    "K=15",
+    "K=20",
+    "K=30",
+]
 
 
 def training_sets(skill: Skill, demos: list[Demonstration]) -> dict[str, Float]:
@@ -325,7 +339,8 @@ def run(args: argparse.Namespace) -> None:
                 )
                 q = joint_quality(alt, demos)
                 ks_all += list(alt.n_components.values())
-                caps += sum(k >= MAX_COMPONENTS for k in alt.n_components.values())
+                if not method.startswith("K="):  # a fixed K chooses nothing
+                    caps += sum(k >= MAX_COMPONENTS for k in alt.n_components.values())
                 worst.append(q["ratio"])
                 if task == "basin":
                     roll_end.append(q["roll_end"])

@@ -11,6 +11,7 @@ from scipy.stats import multivariate_normal
 from pbdkit import GMM, Skill
 from pbdkit.datasets import lasa, reach_grasp_return
 from pbdkit.prob._em import (
+    EM_LOG_FLOOR,
     MAX_TIME_SPREAD,
     MIN_TIME_SPREAD,
     REG_COVAR,
@@ -18,6 +19,7 @@ from pbdkit.prob._em import (
     _e_step,
     _features,
     _Floor,
+    _log_resp,
     _params_from_stats,
     _precision_factors,
     _sufficient_stats,
@@ -341,3 +343,18 @@ def test_sufficient_statistics_and_log_densities_from_the_features_equal_brute_f
         expected = np.log(weights[k]) + multivariate_normal(params[1][k], params[2][k]).logpdf(x)
         np.testing.assert_allclose(lp[k], expected, rtol=1e-10)
     assert np.all(lp[2] == -np.inf)
+
+
+def test_the_e_steps_log_floor_changes_nothing_visible() -> None:
+    # EM_LOG_FLOOR keeps exp on its fast path: components far below the best at a row get
+    # exp(-floor) of it instead of (subnormal) almost nothing. The log-density is the same to
+    # the last bit, the responsibilities within 1e-40; outside EM a weight of 0 stays 0.
+    rng = np.random.default_rng(12)
+    lp = rng.uniform(-900.0, 0.0, size=(30, 400))
+    lp[3] = -np.inf
+    plain_resp, plain_ll = _log_resp(lp.copy())
+    resp, ll = _log_resp(lp.copy(), EM_LOG_FLOOR)
+    assert np.array_equal(ll, plain_ll)
+    np.testing.assert_allclose(resp, plain_resp, rtol=0, atol=1e-40)
+    assert resp.min() >= np.exp(-EM_LOG_FLOOR) * (1 - 1e-12) / 30
+    assert np.all(plain_resp[:, 3] == 0.0)

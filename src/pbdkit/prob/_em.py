@@ -234,14 +234,27 @@ def _weighted_log_prob(feats: Float, weights: Float, means: Float, factors: Floa
     return lp
 
 
-def _log_resp(lp: Float) -> tuple[Float, Float]:
+#: EM's E-step: a component more than this far below the most likely one at a row (in log
+#: density) is given exp(-EM_LOG_FLOOR) ~ 4e-44 of that row, not less. Nothing visible changes
+#: (the sum over the components is the largest term plus at most 30 such: it does not move in
+#: float64), and exp stays on its fast path: 80 % of the entries of a 30-component fit lie
+#: below -700, and exp of a number whose result is subnormal, 0 or of -inf costs 4-45 times
+#: one whose result is normal (Skill.learn on the coaster workload: 0.31 -> 0.29 s).
+EM_LOG_FLOOR = 100.0
+
+
+def _log_resp(lp: Float, floor: float | None = None) -> tuple[Float, Float]:
     """p(k | x_j) (N, K) and log p(x_j) (N,) from the weighted log-probabilities (K, N).
 
     log p(x) = m + log sum_k exp(lp_k - m), m = max_k lp_k (log-sum-exp, no overflow).
-    ``lp`` is overwritten; the responsibilities are its transposed view.
+    ``lp`` is overwritten; the responsibilities are its transposed view. With ``floor``,
+    lp_k - m is taken as at least -floor (:data:`EM_LOG_FLOOR`; EM only: a component of weight
+    0 then gets a responsibility of exp(-floor)).
     """
     top = lp.max(axis=0)
     lp -= top
+    if floor is not None:
+        np.maximum(lp, -floor, out=lp)
     np.exp(lp, out=lp)
     total = lp.sum(axis=0)
     lp /= total
@@ -253,7 +266,7 @@ def _e_step(feats: Float, params: Params) -> tuple[Float, float]:
     the rows' :func:`_features`."""
     weights, means, cov = params
     lp = _weighted_log_prob(feats, weights, means, _precision_factors(cov))
-    resp, log_density = _log_resp(lp)
+    resp, log_density = _log_resp(lp, EM_LOG_FLOOR)
     return resp, float(np.mean(log_density))
 
 

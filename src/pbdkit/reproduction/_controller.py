@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from .._rotations import log3
 from .._validation import check_array
-from ..data._placement import check_placements, position_of, rotation_of
+from ..data._placement import position_of, rotation_of
 from ..motion._limits import LIMIT_SAFETY, MotionLimits
 from ..motion._otg import Motion, follow
 from ..robots._protocols import KinematicModel
@@ -464,20 +464,50 @@ class Controller:
         st.plan = _Plan(res, now, objects, reached, res.t.tolist())
         st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
 
-    def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
+    def _checked_objects(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
+        """An update of some objects, checked as :meth:`step` checks it (names, form, reach),
+        or a ValueError; nothing is kept."""
         names = self._c.object_names
         given = check_objects(objects, names, oriented=self._c.oriented, partial=True)
-        updated = {**self._objs, **given}
         if self._run.reach is not None:
-            # Checked before it is kept: a refused update leaves the positions as they were.
-            self._check_reach({k: v for k, v in updated.items() if k in given})
-        self._objs = updated
+            self._check_reach(given)
+        return given
+
+    def _unchanged(self, objects: Mapping[str, npt.ArrayLike]) -> bool:
+        """Every object given exactly as it is in use (float64 arrays of its stored form): a
+        loop that passes the objects on every call pays for nothing until one moves."""
+        objs = self._objs
+        for k, v in objects.items():
+            held = objs.get(k) if isinstance(k, str) else None
+            if (
+                held is None
+                or type(v) is not np.ndarray
+                or v.dtype != held.dtype
+                or v.shape != held.shape
+                or v.tobytes() != held.tobytes()  # bit for bit (a NaN is never held)
+            ):
+                return False
+        return True
+
+    def _update_objects(self, objects: Mapping[str, npt.ArrayLike]) -> None:
+        if self._unchanged(objects):
+            return
+        # Checked before it is kept: a refused update leaves the positions as they were.
+        given = self._checked_objects(objects)
+        changed = {k: v for k, v in given.items() if not np.array_equal(v, self._objs[k])}
+        if not changed:
+            return
+        self._objs = {**self._objs, **changed}
         st = self._timed
-        if st is not None and st.plan is not None:
-            planned = st.plan.objects
-            st.moved = st.moved or any(
-                _moved(updated[k], planned[k], st.replan_distance) for k in given
-            )
+        if st is not None:
+            # The plans take the positions from here (_replan); the per-step stacks are not
+            # used with motion limits.
+            if st.plan is not None:
+                planned = st.plan.objects
+                st.moved = st.moved or any(
+                    _moved(self._objs[k], planned[k], st.replan_distance) for k in changed
+                )
+            return
         self._step.set_objects(self._objs)
 
     def _check_reach(self, objs: Mapping[str, Float]) -> None:
@@ -618,11 +648,14 @@ class CommandStream:
         """The next setpoint (n,), from the measured posture.
 
         ``objects`` (any subset of the skill's objects) reach the controller at its next step.
+        They are checked in this call, as :meth:`Controller.step` checks them: an unknown
+        object, a wrong form or a position beyond the arm's reach raises ValueError here, and
+        the stream goes on with the last accepted positions.
         """
         ctrl = self.controller
         q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],), allow_bool=False)
         if objects is not None:
-            self._pending.update(check_placements(objects, "objects"))
+            self._pending.update(ctrl._checked_objects(objects))
         if self.done:
             raise ValueError("the stream is done: its setpoints came to rest at the end")
         t = (self._ticks + 1) * self.period  # the time of the setpoint to give

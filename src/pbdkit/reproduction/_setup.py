@@ -285,7 +285,8 @@ def _check_reach(
             target = o[:3, 3] + o[:3, :3] @ constraints.task_mean[k][j, :3]
         else:
             target = o + constraints.task_mean[k][j]
-        dist = float(np.linalg.norm(target))
+        with np.errstate(over="ignore"):  # 1e200 m: inf, beyond the reach
+            dist = float(np.linalg.norm(target))
         if dist > reach:
             msg = (
                 f"objects[{k!r}]: the hand must be at {np.round(target, 4).tolist()} at step "
