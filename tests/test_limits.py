@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import types
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,8 @@ from pbdkit.motion._limits import (
 Float = NDArray[np.float64]
 AnyFloat = NDArray[np.floating[Any]]
 INF = math.inf
+
+DATA = Path(__file__).parent / "data"
 
 
 # ------------------------------------------------------------------------------------------
@@ -567,6 +570,21 @@ def test_retime_from_a_start_velocity_on_the_limit() -> None:
         assert _continued_check(h, q, v0, lim).worst <= 1.0 + 1e-8
     with pytest.raises(ValueError, match=r"start_velocity\[0\] is 0.707 rad/s, beyond"):
         retime(q, 0.01, lim, start_velocity=v0 * 1.01)
+
+
+def test_retime_continues_a_motion_planned_on_the_limit() -> None:
+    """Issue 35: `pbdkit evaluate --task coaster --trials 10 --seed 616 --perturb move --online`
+    (at 8ed3178) died in a re-plan after the coaster moved: "retime: the path is not within
+    the limits after 200 rounds (largest excess 1x)". Its input, saved where it raised: 646
+    samples continuing the last command's velocity, an excess of 1 + 1e-12 where the padding
+    before the path meets its first steps, whose stretch rounding lost at every round."""
+    with np.load(DATA / "retime_start_on_the_limit.npz") as d:
+        q, dt, v0 = d["q"], d["dt"], d["start_velocity"]
+        lim = MotionLimits(d["velocity"], d["acceleration"], d["jerk"])
+    h = retime(q, dt, lim, start_velocity=v0)
+    assert np.all(h >= dt)
+    assert _continued_check(h, q, v0, lim).worst <= 1.0 + 1e-9
+    assert h.sum() / dt.sum() < 1.03  # measured: 1.0235 (the steps that needed it before)
 
 
 def test_retime_validates_its_input() -> None:
