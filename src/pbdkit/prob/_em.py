@@ -84,8 +84,8 @@ def _features(x: Float) -> Float:
     (:func:`_sufficient_stats`), and one product of them with a row of coefficients per component
     gives the log-densities (:func:`_weighted_log_prob`). Precomputed once per fit.
     """
-    iu, ju = _upper(x.shape[1])[:2]
-    return np.hstack([x[:, iu] * x[:, ju], x, np.ones((x.shape[0], 1))])
+    upper = _upper(x.shape[1])
+    return np.hstack([x[:, upper.rows] * x[:, upper.cols], x, np.ones((x.shape[0], 1))])
 
 
 def _sufficient_stats(feats: Float, resp: Float) -> tuple[Float, Float, Float]:
@@ -94,12 +94,12 @@ def _sufficient_stats(feats: Float, resp: Float) -> tuple[Float, Float, Float]:
     ``feats`` are the rows' :func:`_features`: (D + 1)(D + 2) / 2 columns.
     """
     d = round((np.sqrt(8 * feats.shape[1] + 1) - 3) / 2)
-    iu, ju = _upper(d)[:2]
-    m = iu.size
+    upper = _upper(d)
+    m = upper.flat.size
     s = resp.T @ feats
     s2 = np.empty((s.shape[0], d, d))
-    s2[:, iu, ju] = s[:, :m]
-    s2[:, ju, iu] = s[:, :m]
+    s2[:, upper.rows, upper.cols] = s[:, :m]
+    s2[:, upper.cols, upper.rows] = s[:, :m]
     return s[:, -1], s[:, m : m + d], s2
 
 

@@ -493,7 +493,10 @@ class Controller:
         if self._unchanged(objects):
             return
         # Checked before it is kept: a refused update leaves the positions as they were.
-        given = self._checked_objects(objects)
+        self._apply_objects(self._checked_objects(objects))
+
+    def _apply_objects(self, given: Mapping[str, Float]) -> None:
+        """Use positions already checked (:meth:`_checked_objects`) from this step on."""
         changed = {k: v for k, v in given.items() if not np.array_equal(v, self._objs[k])}
         if not changed:
             return
@@ -648,9 +651,9 @@ class CommandStream:
         """The next setpoint (n,), from the measured posture.
 
         ``objects`` (any subset of the skill's objects) reach the controller at its next step.
-        They are checked in this call, as :meth:`Controller.step` checks them: an unknown
-        object, a wrong form or a position beyond the arm's reach raises ValueError here, and
-        the stream goes on with the last accepted positions.
+        They are checked in this call, as :meth:`Controller.step` checks them (and only here):
+        an unknown object, a wrong form or a position beyond the arm's reach raises ValueError
+        here, and the stream goes on with the last accepted positions.
         """
         ctrl = self.controller
         q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],), allow_bool=False)
@@ -662,8 +665,10 @@ class CommandStream:
         # The controller decides at its cycles (plans again, holds), before any setpoint after
         # that cycle is given: the setpoints are samples of the motion it plans.
         while not ctrl.done and self._cycles * ctrl.dt < t - 1e-12:
-            self.command = ctrl.step(q, self._pending or None)
-            self._pending = {}
+            if self._pending:
+                ctrl._apply_objects(self._pending)
+                self._pending = {}
+            self.command = ctrl.step(q)
             self._cycles += 1
         self._ticks += 1
         p, v, a = self._timed.motion.at(t)
