@@ -440,7 +440,7 @@ def test_postures_must_be_real_numbers(
     with pytest.raises(ValueError, match=match):
         ctrl.step(posture)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=match):
-        skill.controller({"glass": glass}).stream(1000).step(posture)  # type: ignore[arg-type]
+        skill.controller({"glass": glass}).stream(1000, planner="inline").step(posture)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=match.replace("q_measured", "q0")):
         skill.controller({"glass": glass}, q0=posture)  # type: ignore[arg-type]
     # Integers are numbers: converted as before.

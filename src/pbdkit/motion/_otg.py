@@ -35,6 +35,7 @@ from ._limits import MotionLimits
 __all__ = [
     "MERGE_SAMPLES",
     "Motion",
+    "brake",
     "follow",
     "follow_samples",
     "point_to_point",
@@ -127,28 +128,120 @@ class Motion:
     derivative); before ``t0`` it is the start state, after :attr:`end` it holds the last
     position (at rest when it was planned to end so).
 
+    A motion pickles as arrays (the online controller's planner process sends it): each Ruckig
+    segment as the input it was planned from, planned again where it is first sampled (Ruckig
+    is deterministic: the same trajectory), each quintic as its coefficients.
+
     Attributes
     ----------
     t0, end : float
         Start and end times (s).
     """
 
-    def __init__(self, t0: float, start: tuple[Float, Float, Float]) -> None:
+    def __init__(
+        self,
+        t0: float,
+        start: tuple[Float, Float, Float],
+        limits: MotionLimits | None = None,
+    ) -> None:
         self.t0 = float(t0)
         self.end = self.t0
         #: Built by :func:`follow`: when the motion reaches each of the samples it follows
         #: (their own times, later where the limits kept it behind).
         self.sample_times: Float = np.array([self.t0])
-        self._start = tuple(np.array(x, dtype=np.float64) for x in start)
+        p, v, a = (np.array(x, dtype=np.float64) for x in start)
+        self._start = (p, v, a)
+        self._limits = limits  # what its Ruckig segments were planned within
         self._starts: list[float] = []
-        self._segments: list[tuple[float, Any]] = []  # (duration, ruckig.Trajectory)
+        self._durations: list[float] = []
+        # A segment's trajectory (a _Quintic or a ruckig.Trajectory), None until it is planned
+        # again from its recipe (after unpickling).
+        self._segments: list[Any] = []
+        # A Ruckig segment's recipe: its input (current and target position, velocity,
+        # acceleration: (6, n)), its minimum duration (NaN: none), its control interface (0
+        # position, 1 velocity); a quintic's: its coefficients (6, n), NaN, -1.
+        self._recipes: list[tuple[Float, float, int]] | tuple[Float, Float, NDArray[np.int8]] = []
 
-    def append(self, trajectory: Any) -> None:
-        """The next segment (a ``ruckig.Trajectory`` from the state at :attr:`end`)."""
+    def append(self, trajectory: Any, recipe: tuple[Float, float, int] | None = None) -> None:
+        """The next segment (a ``ruckig.Trajectory`` from the state at :attr:`end`, with the
+        ``recipe`` it was planned from: :func:`ruckig_recipe`; or a quintic)."""
         duration = float(trajectory.duration)
+        if isinstance(trajectory, _Quintic):
+            recipe = (trajectory.c, math.nan, -1)
+        elif recipe is None:
+            raise ValueError("a Ruckig segment needs the recipe it was planned from")
+        if not isinstance(self._recipes, list):
+            raise ValueError("an unpickled motion cannot be extended")
         self._starts.append(self.end)
-        self._segments.append((duration, trajectory))
+        self._durations.append(duration)
+        self._segments.append(trajectory)
+        self._recipes.append(recipe)
         self.end += duration
+
+    def _segment(self, k: int) -> Any:
+        traj = self._segments[k]
+        if traj is None:
+            traj = self._segments[k] = self._plan_again(k)
+        return traj
+
+    def _plan_again(self, k: int) -> Any:
+        recipes = self._recipes
+        if isinstance(recipes, list):
+            rows, min_duration, interface = recipes[k]
+        else:  # unpickled: arrays
+            rows, min_duration, interface = (
+                recipes[0][k],
+                float(recipes[1][k]),
+                int(recipes[2][k]),
+            )
+        duration = self._durations[k]
+        if interface < 0:
+            return _Quintic(None, (rows[0], rows[1], rows[2]), duration, rows)
+        assert self._limits is not None
+        traj = _ruckig_plan(rows, min_duration, interface, self._limits)
+        if float(traj.duration) != duration:
+            raise RuntimeError("a motion's segment planned again differs from the original")
+        return traj
+
+    def _packed(self) -> tuple[Float, Float, NDArray[np.int8]]:
+        recipes = self._recipes
+        if not isinstance(recipes, list):
+            return recipes
+        n = self._start[0].shape[0]
+        return (
+            np.array([r[0] for r in recipes]).reshape(len(recipes), 6, n),
+            np.array([r[1] for r in recipes], dtype=np.float64),
+            np.array([r[2] for r in recipes], dtype=np.int8),
+        )
+
+    def __getstate__(self) -> dict[str, Any]:
+        rows, min_durations, interfaces = self._packed()
+        return {
+            "t0": self.t0,
+            "end": self.end,
+            "sample_times": self.sample_times,
+            "start": np.array(self._start),
+            "limits": None
+            if self._limits is None
+            else np.array([self._limits.velocity, self._limits.acceleration, self._limits.jerk]),
+            "starts": np.array(self._starts, dtype=np.float64),
+            "durations": np.array(self._durations, dtype=np.float64),
+            "rows": rows,
+            "min_durations": min_durations,
+            "interfaces": interfaces,
+        }
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.t0, self.end = state["t0"], state["end"]
+        self.sample_times = state["sample_times"]
+        p, v, a = (np.array(x) for x in state["start"])
+        self._start = (p, v, a)
+        lim = state["limits"]
+        self._limits = None if lim is None else MotionLimits(lim[0], lim[1], lim[2])
+        self._starts = state["starts"].tolist()
+        self._durations = state["durations"].tolist()
+        self._recipes = (state["rows"], state["min_durations"], state["interfaces"])
+        self._segments = [None] * len(self._starts)
 
     def at(self, t: float) -> tuple[Float, Float, Float]:
         """Position, velocity and acceleration at time ``t`` (s)."""
@@ -156,7 +249,7 @@ class Motion:
             p, v, a = self._start
             return p.copy(), v.copy(), a.copy()
         k = max(0, bisect.bisect_right(self._starts, t) - 1)
-        duration, traj = self._segments[k]
+        duration, traj = self._durations[k], self._segment(k)
         local = t - self._starts[k]
         if local >= duration:
             p, v, a = traj.at_time(duration)
@@ -165,6 +258,27 @@ class Motion:
             return pv + vv * (local - duration), vv, np.zeros_like(pv)
         p, v, a = traj.at_time(local)  # a quintic's rows, or Ruckig's lists
         return np.array(p), np.array(v), np.array(a)
+
+    def at_rest_after(self, t: float) -> bool:
+        """Whether the motion is at rest from time ``t`` on (its last segment ended by then,
+        at rest within rounding; or it has none)."""
+        if not self._segments:
+            return not (np.any(self._start[1]) or np.any(self._start[2]))
+        if t < self.end:
+            return False
+        _, v, a = self.at(self.end)  # Ruckig ends within rounding of rest
+        return float(np.abs(v).max()) <= 1e-9 and float(np.abs(a).max()) <= 1e-6
+
+    def shifted(self, offset: float) -> Motion:
+        """The same motion ``offset`` s later (sharing its segments)."""
+        out = Motion(self.t0 + offset, self._start, self._limits)
+        out.end = self.end + offset
+        out.sample_times = self.sample_times + offset
+        out._starts = [s + offset for s in self._starts]
+        out._durations = self._durations
+        out._segments = self._segments
+        out._recipes = self._recipes
+        return out
 
     def sample(self, times: Float) -> tuple[Float, Float, Float]:
         """:meth:`at` for every time, as arrays (len(times), n)."""
@@ -180,6 +294,61 @@ class Motion:
         the first at or after :attr:`end`."""
         total = math.ceil((self.end - self.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
         return self.sample(self.t0 + period * np.arange(total, dtype=np.float64))
+
+
+#: The rows of a Ruckig segment's recipe: the ``ruckig.InputParameter`` fields it was planned
+#: from (with its limits, minimum duration and control interface).
+_RECIPE_ROWS = (
+    "current_position",
+    "current_velocity",
+    "current_acceleration",
+    "target_position",
+    "target_velocity",
+    "target_acceleration",
+)
+
+
+def _ruckig_plan(rows: Float, min_duration: float, interface: int, limits: MotionLimits) -> Any:
+    """The Ruckig trajectory of a recipe (:meth:`Motion.append`)."""
+    rk = _ruckig()
+    n = rows.shape[1]
+    inp = rk.InputParameter(n)
+    inp.max_velocity = limits.velocity.tolist()
+    inp.max_acceleration = limits.acceleration.tolist()
+    inp.max_jerk = limits.jerk.tolist()
+    if interface == 1:
+        inp.control_interface = rk.ControlInterface.Velocity
+    for name, row in zip(_RECIPE_ROWS, rows.tolist(), strict=True):
+        setattr(inp, name, row)
+    inp.minimum_duration = None if math.isnan(min_duration) else min_duration
+    traj = rk.Trajectory(n)
+    result = rk.Ruckig(n).calculate(inp, traj)
+    if result not in (rk.Result.Working, rk.Result.Finished):
+        raise RuntimeError(f"Ruckig could not plan the segment: {result}")
+    return traj
+
+
+def ruckig_recipe(inp: Any) -> tuple[Float, float, int]:
+    """What :meth:`Motion.append` keeps of the ``ruckig.InputParameter`` a segment was planned
+    from (its limits are the motion's)."""
+    rows = np.array([getattr(inp, name) for name in _RECIPE_ROWS], dtype=np.float64)
+    md = inp.minimum_duration
+    interface = 1 if inp.control_interface == _ruckig().ControlInterface.Velocity else 0
+    return rows, math.nan if md is None else float(md), interface
+
+
+def brake(t0: float, state: tuple[Float, Float, Float], limits: MotionLimits) -> Motion:
+    """The motion from ``state`` (position, velocity, acceleration at ``t0``) to rest as fast
+    as ``limits`` allow (Ruckig's velocity interface, the joints stopping together; a state
+    beyond the limits is first brought within them, as Ruckig does)."""
+    p, v, a = (np.asarray(x, dtype=np.float64) for x in state)
+    motion = Motion(t0, (p, v, a), limits)
+    if not (np.any(v) or np.any(a)):
+        return motion
+    zeros = np.zeros(p.shape[0])
+    rows = np.array([p, v, a, p, zeros, zeros])
+    motion.append(_ruckig_plan(rows, math.nan, 1, limits), (rows, math.nan, 1))
+    return motion
 
 
 def spline_derivatives(
@@ -275,7 +444,9 @@ def follow(
     ok = (rk.Result.Working, rk.Result.Finished)
     zeros = [0.0] * n
     last = t.shape[0] - 1
-    motion = Motion(float(t[0]), (p0, v0, a0))
+    motion = Motion(float(t[0]), (p0, v0, a0), limits)
+
+    recipes: dict[int, tuple[Float, float, int]] = {}  # id of a trajectory -> its recipe
 
     def plan_to(j: int, now: float, with_acceleration: bool = True) -> tuple[Any, float]:
         """A trajectory from the current state (at ``now``) to sample j, never before its
@@ -294,6 +465,7 @@ def follow(
             result = otg.calculate(inp, traj)
         if result not in ok:
             raise RuntimeError(f"Ruckig could not plan the motion to sample {j}: {result}")
+        recipes[id(traj)] = ruckig_recipe(inp)
         return traj, left
 
     def on_time(traj: Any, left: float) -> bool:
@@ -321,7 +493,8 @@ def follow(
     def arrived(i: int, j: int, traj: Any) -> tuple[list[float], list[float], list[float]]:
         """The segment ``traj`` to sample j appended (samples i..j reached); its end state."""
         nonlocal delay
-        motion.append(traj)
+        motion.append(traj, None if isinstance(traj, _Quintic) else recipes[id(traj)])
+        recipes.clear()  # the other candidates are dropped (their ids may be reused)
         end = motion.end
         # Merged samples: reached in proportion to their times.
         span = t[i - 1 : j + 1]

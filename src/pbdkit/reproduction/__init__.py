@@ -6,8 +6,9 @@ Above :mod:`pbdkit.data`; never imports the simulator, OpenCV or matplotlib."""
 
 from __future__ import annotations
 
-from ._controller import Command, CommandStream, Controller
+from ._controller import Command, Controller
 from ._result import ReproductionResult
 from ._setup import ReachWarning
+from ._stream import CommandStream
 
 __all__ = ["Command", "CommandStream", "Controller", "ReachWarning", "ReproductionResult"]

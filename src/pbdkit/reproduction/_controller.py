@@ -20,12 +20,11 @@ Why, and what each case does: :doc:`/reproduction`, "The online controller".
 
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -34,16 +33,33 @@ from numpy.typing import NDArray
 from .._rotations import log3
 from .._validation import check_array
 from ..data._placement import position_of, rotation_of
-from ..motion._limits import LIMIT_SAFETY, MotionLimits
-from ..motion._otg import Motion, follow
+from ..motion._limits import MotionLimits
+from ..motion._otg import Motion, brake
 from ..robots._protocols import KinematicModel
+from ._command import Command
 from ._constraints import Constraints
-from ._result import ReproductionResult
+from ._planner import (
+    InlinePlanner,
+    Planner,
+    PlannerKind,
+    PlanRequest,
+    ProcessPlanner,
+)
+from ._plans import _Handover, _Plan, _Timed
 from ._setup import RunOptions, _check_reach, check_objects, setup_run
+from ._stream import CommandStream
 from ._table_ii import make_step
-from ._timing import check_timing, timed_path
+from ._timing import check_timing
 
-__all__ = ["REPLAN_ANGLE", "REPLAN_DISTANCE", "Command", "CommandStream", "Controller"]
+__all__ = [
+    "PLANNERS",
+    "REPLAN_ANGLE",
+    "REPLAN_DISTANCE",
+    "Command",
+    "CommandStream",
+    "Controller",
+    "PlanFailedWarning",
+]
 
 #: With motion limits, an object that moves farther than this (m) from the position the plan
 #: was made for makes the controller plan again (:doc:`/reproduction`, "The online
@@ -55,7 +71,23 @@ REPLAN_DISTANCE = 1e-3
 #: :data:`REPLAN_DISTANCE`.
 REPLAN_ANGLE = 1e-2
 
+#: Where the plans of a controller with motion limits are made: in a separate process (the loop
+#: never waits for one) or where they are needed (:mod:`pbdkit.reproduction._planner`).
+PLANNERS: tuple[PlannerKind, ...] = ("process", "inline")
+#: With the process planner: the hand-over of the first plans is predicted this far ahead (s),
+#: then from the planner's measured latencies (:meth:`Controller._lead`).
+FIRST_LEAD = 0.1
+#: The hand-over is predicted this many times the planner's longest recent latency ahead, plus
+#: :data:`LEAD_MARGIN` s.
+LEAD_FACTOR = 1.25
+LEAD_MARGIN = 0.005
+
 Float = NDArray[np.float64]
+
+
+class PlanFailedWarning(RuntimeWarning):
+    """A plan of the online controller could not be made: the arm is brought to rest
+    (:attr:`Controller.fault` says why)."""
 
 
 def _moved(now: Float, planned: Float, distance: float) -> bool:
@@ -67,80 +99,6 @@ def _moved(now: Float, planned: Float, distance: float) -> bool:
     if rot is None or ref is None:
         return False
     return float(np.linalg.norm(log3(rot @ ref.T))) > REPLAN_ANGLE
-
-
-class Command:
-    """One target of a :class:`Controller` (covariance and influence computed on first use).
-
-    Attributes
-    ----------
-    q : ndarray, shape (n,)
-        The joint angles to reach at the end of this step (within the joint limits).
-    gripper : bool
-        The generalized gripper command (closed if True).
-    index : int
-        The step of the skill's time grid it targets.
-    limited : bool
-        True if a velocity bound (or ``max_step``) shortened the step.
-    held : bool
-        True if the arm was more than ``max_lag`` steps behind the last target: the phase held
-        and the command re-targets from the measured posture (a reference that runs through
-        the commands should restart there).
-    velocity, acceleration : ndarray, shape (n,), or None
-        With motion limits: the command's velocity and acceleration (the state of the
-        trajectory generator at the command's time); None without.
-    phase : float
-        With motion limits: the skill's phase after this command (steps, fractional where the
-        limits slowed it); ``index`` without.
-    covariance : ndarray, shape (n, n)
-        Covariance of the target (the fused Sigma of eq. (1), Sigma^theta for the joint-only
-        controller, J+ S J+^T for a task-only one).
-    influence : dict str -> float
-        Share of each constraint in use, in the hand's space (as
-        :attr:`pbdkit.reproduction.ReproductionResult.influence`).
-    """
-
-    def __init__(
-        self,
-        controller: Controller,
-        q: Float,
-        index: int,
-        limited: bool,
-        jac: Float,
-        held: bool = False,
-        velocity: Float | None = None,
-        acceleration: Float | None = None,
-        phase: float | None = None,
-        details: tuple[_Plan, int] | None = None,
-    ) -> None:
-        self.q = q
-        self.index = index
-        self.limited = limited
-        self.held = held
-        self.velocity = velocity
-        self.acceleration = acceleration
-        self.phase = float(index) if phase is None else phase
-        self.gripper = controller._gripper_at(index)
-        self._ctrl = controller
-        self._jac = jac  # the Jacobian the step was linearized with
-        self._details = details  # with motion limits: the plan and its sample at this command
-
-    @cached_property
-    def covariance(self) -> Float:
-        if self._details is not None:
-            plan, i = self._details
-            return np.array(plan.result.covariances[i], dtype=np.float64)
-        return self._ctrl._covariance(self.index, self._jac)
-
-    @cached_property
-    def influence(self) -> dict[str, float]:
-        if self._details is not None:
-            plan, i = self._details
-            return {k: float(v[i]) for k, v in plan.result.influence.items()}
-        return self._ctrl._influence(self.index, self._jac, self.covariance)
-
-    def __repr__(self) -> str:
-        return f"Command(index={self.index}, q={np.round(self.q, 4).tolist()})"
 
 
 @dataclass
@@ -183,6 +141,14 @@ class Controller:
     replan_distance : float
         With motion limits: an object that moves farther than this (m) from where the plan
         assumed it makes the controller plan again (:data:`REPLAN_DISTANCE`).
+    planner : {"inline", "process"}
+        With motion limits, where its plans are made (:doc:`/reproduction`, "Plans off the
+        control loop"). "inline" (default): in :meth:`step`, which then waits for them (25-150
+        ms on the coaster skill), and a run depends only on its inputs (a simulation). "process":
+        in a separate process started here (1-3 s), :meth:`step` never waits for one: until a
+        plan is ready the commands continue the current motion, and it takes over at a
+        hand-over time predicted from the planner's latency, from the state the commands are
+        in then. Call :meth:`close` (or let the controller be collected) to end the process.
 
     Attributes
     ----------
@@ -213,7 +179,10 @@ class Controller:
         max_lag: float = 3.0,
         limits: MotionLimits | None = None,
         replan_distance: float = REPLAN_DISTANCE,
+        planner: PlannerKind = "inline",
     ) -> None:
+        if planner not in PLANNERS:
+            raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
         timed = check_timing(limits, dt)
         if timed:
             step_limit = None  # the trajectory generator bounds the speed
@@ -249,6 +218,7 @@ class Controller:
             if not (distance >= 0):
                 raise ValueError(f"replan_distance must be >= 0 (m), got {replan_distance!r}")
             self._timed = _Timed(limits, distance)
+            self._use_planner(planner)
             plan = self._timed.plan_limits
             # A lag counts in steps at top speed (max_step where no speed limit).
             self._step_bound = np.where(
@@ -289,10 +259,50 @@ class Controller:
         """How many times the controller planned again (motion limits; 0 without)."""
         return 0 if self._timed is None else self._timed.replans
 
-    def stream(self, rate_hz: float) -> CommandStream:
+    @property
+    def fault(self) -> str | None:
+        """Why the controller brought the arm to rest, in one line (a plan that could not be
+        made, the planner process gone); None while it runs normally."""
+        return None if self._timed is None else self._timed.fault
+
+    @property
+    def planner(self) -> PlannerKind | None:
+        """Where the plans are made ("inline" or "process"; None without motion limits)."""
+        return None if self._timed is None else self._timed.planner.kind
+
+    def stream(
+        self, rate_hz: float, planner: PlannerKind | Planner | None = "process"
+    ) -> CommandStream:
         """Setpoints at ``rate_hz`` following this controller's plans (see
-        :class:`CommandStream`); this controller must not have been stepped yet."""
-        return CommandStream(self, rate_hz)
+        :class:`CommandStream`); this controller must not have been stepped yet.
+
+        ``planner``: where the plans are made from now on ("process", the default: the loop
+        never waits for a plan; "inline": in the call that needs one, as :meth:`step` by
+        default; None: as this controller was built).
+        """
+        return CommandStream(self, rate_hz, planner)
+
+    def close(self) -> None:
+        """End the planner process, if any (the controller then plans inline)."""
+        st = self._timed
+        if st is not None and st.planner.kind == "process":
+            st.planner.close()
+            self._use_planner("inline")
+
+    def _use_planner(self, planner: PlannerKind | Planner) -> None:
+        st = self._timed
+        assert st is not None
+        if isinstance(planner, Planner):
+            new: Planner = planner
+        elif planner not in PLANNERS:
+            raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+        elif planner == "process":
+            new = ProcessPlanner(self._robot, self._run, st.limits, st.plan_limits, self.dt)
+        else:
+            new = InlinePlanner(self._robot, self._run, st.limits, st.plan_limits, self.dt)
+        old, st.planner = getattr(st, "planner", None), new
+        if old is not None and old is not new:
+            old.close()
 
     @property
     def target(self) -> Float:
@@ -352,7 +362,9 @@ class Controller:
         if objects is not None:
             self._update_objects(objects)
         if self._timed is not None:
-            return self._step_timed(q, self._timed)
+            if self._timed.planner.kind == "inline":
+                return self._step_timed(q, self._timed)
+            return self._step_async(q, self._timed)
         last = self._last
         # Phase: advance while the arm follows (docs: "The online controller").
         lag = float((np.abs(q - last.q) / self._step_bound).max())
@@ -387,10 +399,10 @@ class Controller:
         """:meth:`step` with motion limits (:doc:`/reproduction`, "The online controller")."""
         held = False
         now = st.cycle * self.dt  # the time of the last command (of the measurement)
-        if st.plan is None:
+        if st.cycle == 0:
             # The first command starts from the measured posture, at rest.
             self._replan(st, now, (q, np.zeros_like(q), np.zeros_like(q)), 0.0)
-        else:
+        elif st.fault is None:
             last = st.last  # the last command's state
             lag = float((np.abs(q - last[0]) / self._step_bound).max())
             if lag > self.max_lag:
@@ -402,67 +414,200 @@ class Controller:
             elif st.moved:
                 self._replan(st, now, last, st.phase)
         st.moved = False
+        return self._command(q, st, held)
+
+    def _command(self, q: Float, st: _Timed, held: bool) -> Command:
+        """The command at the next cycle: the motion's state then, and the phase of the plan
+        in use (held where none is: before the first plan, braking after a push)."""
         st.q_measured = q
         st.cycle += 1
         t = st.cycle * self.dt
+        handover = st.handover
+        if handover is not None and t >= handover[0] - 1e-9:
+            # The new plan takes over (from its hand-over time on: the setpoints of a stream
+            # before it, up to this command, still sample the motion before it).
+            st.plan, st.handover = handover[1], None
+            st.active = True
         p, v, a = st.last = st.motion.at(t)
         plan = st.plan
-        assert plan is not None
-        res = plan.result
-        # The phase at the command's time (linear between the plan's samples) and the sample
-        # at or after it.
-        local = t - plan.t0
-        times = plan.times
-        sample = min(bisect.bisect_left(times, local - 1e-9), len(times) - 1)
-        if sample == 0 or local >= times[-1]:
-            st.phase = plan.steps[sample]
-        else:
-            w = (local - times[sample - 1]) / (times[sample] - times[sample - 1])
-            st.phase = plan.steps[sample - 1] + w * (plan.steps[sample] - plan.steps[sample - 1])
-        st.done = t >= st.motion.end - 1e-9
+        details: tuple[_Plan, int] | None = None
+        limited = False
+        if plan is not None and st.active:
+            st.phase, sample = plan.phase_at(t)
+            limited = bool(plan.result.limited[sample])
+            details = (plan, sample)
+        st.done = (
+            t >= st.motion.end - 1e-9
+            and st.handover is None
+            and (st.fault is not None or (st.active and st.pending is None and not st.want))
+        )
         index = min(self._c.n_steps - 1, math.floor(st.phase + 1e-9))
         self._last = _Targets(p, index, None, None)
         return Command(
             self,
             p.copy(),
             index,
-            bool(res.limited[sample]),
-            self._no_jac,
+            limited,
+            self._no_jac if details is not None else None,
             held,
             v,
             a,
             phase=st.phase,
-            details=(plan, sample),
+            details=details,
         )
 
     def _replan(
         self, st: _Timed, now: float, state: tuple[Float, Float, Float], phase: float
     ) -> None:
         """Plan from ``state`` (position, velocity, acceleration) at time ``now`` and
-        ``phase``, with the object positions known now."""
+        ``phase``, with the object positions known now, and follow it from now (inline)."""
         q, v, a = state
-        run = dataclasses.replace(self._run, objects=dict(self._objs), theta0=q)
-        moving = bool(np.any(v))
-        res = timed_path(
-            self._robot, run, st.limits, self.dt, phase=phase, velocity=v if moving else None
-        )
-        assert res.times is not None
-        st.motion = follow(
-            now + res.times,
-            res.joints,
-            st.plan_limits,
-            velocities=res.velocities,
-            accelerations=res.accelerations,
-            start=(q, v, a),
-        )
+        objects = {k: o.copy() for k, o in self._objs.items()}
+        request = PlanRequest(st.generation, now, (q, v, a), phase, objects)
+        st.planned_objects = objects
+        st.planner.submit(request)
+        reply = st.planner.poll()
+        assert reply is not None
+        if reply.error is not None:
+            self._fault(st, now, reply.error, (q, v, a))
+            return
+        assert reply.motion is not None and reply.result is not None
         if st.plan is not None:
             st.replans += 1
-        objects = {k: o.copy() for k, o in self._objs.items()}
-        # The phase follows the motion: when it reaches each sample of the plan (later than
-        # the sample's time where the limits kept it behind, pbdkit.motion._otg.follow).
-        reached = (st.motion.sample_times - now).tolist()
-        st.plan = _Plan(res, now, objects, reached, res.t.tolist())
+        st.motion = reply.motion
+        st.plan = _Plan.of(reply, objects)
+        st.active = True
         st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
+
+    # ------------------------------------------------------------------ the process planner
+    def _step_async(self, q: Float, st: _Timed) -> Command:
+        """:meth:`step` with motion limits, the plans made by the planner process: the
+        commands never wait for one (:doc:`/reproduction`, "Plans off the control loop")."""
+        held = False
+        now = st.cycle * self.dt
+        motion = st.motion
+        if isinstance(motion, _Handover) and now >= motion.t0 - 1e-9:
+            st.motion = motion.new  # the hand-over is past
+        if st.cycle == 0:
+            # At rest where measured until the first plan takes over.
+            st.motion = Motion(now, (q, np.zeros_like(q), np.zeros_like(q)))
+            st.last = st.motion.at(now)
+            st.want = True
+        elif st.fault is None:
+            lag = float((np.abs(q - st.last[0]) / self._step_bound).max())
+            if lag > self.max_lag:
+                # A push: brake from the measured state, the phase held, and plan again from
+                # where the brake will be at the hand-over (a reply on its way is void).
+                held = True
+                assert st.q_measured is not None
+                v = np.clip((q - st.q_measured) / self.dt, -st.velocity, st.velocity)
+                st.motion = brake(now, (q, v, np.zeros_like(q)), st.plan_limits)
+                st.last = st.motion.at(now)
+                st.handover, st.active = None, False
+                st.generation += 1
+                st.want = True
+        self._service(st, now)
+        return self._command(q, st, held)
+
+    def _service(self, st: _Timed, now: float) -> None:
+        """Take a plan that is ready, and ask for one where wanted (an object moved, a push,
+        a late plan), one at a time (``now``: the time of the last command or setpoint
+        given)."""
+        if st.pending is not None:
+            self._receive(st, now)
+        if st.moved:
+            st.want, st.moved = True, False
+        if st.want and st.pending is None and st.handover is None and st.fault is None:
+            self._request(st, now)
+
+    def _lead(self, st: _Timed) -> float:
+        """Seconds from a request to its hand-over: :data:`LEAD_FACTOR` times the planner's
+        longest latency of its last five plans, plus :data:`LEAD_MARGIN`; :data:`FIRST_LEAD`
+        before any."""
+        if not st.latencies:
+            return FIRST_LEAD
+        return LEAD_FACTOR * max(st.latencies) + LEAD_MARGIN
+
+    def _request(self, st: _Timed, now: float) -> None:
+        """Ask the planner for a plan taking over at a predicted hand-over time, from the state
+        and phase the commands will be in then."""
+        motion = st.motion
+        at_rest = motion.at_rest_after(now)
+        # At rest, the state is the same at any time: the plan starts whenever it is ready.
+        t0 = now if at_rest else now + self._lead(st)
+        p, v, a = motion.at(t0)
+        if at_rest:
+            v, a = np.zeros_like(p), np.zeros_like(p)
+        phase = st.plan.phase_at(t0)[0] if st.plan is not None and st.active else st.phase
+        objects = {k: o.copy() for k, o in self._objs.items()}
+        st.planned_objects = objects
+        st.pending = (PlanRequest(st.generation, t0, (p, v, a), phase, objects), now)
+        st.want = False
+        st.planner.submit(st.pending[0])
+
+    def _receive(self, st: _Timed, now: float) -> None:
+        """Take the planner's reply, if it is ready (``now``: the time of the last command or
+        setpoint given): the plan takes over at its hand-over time; a late one, or one for a
+        state given up, is asked for again."""
+        reply = st.planner.poll()
+        if reply is None:
+            return
+        assert st.pending is not None
+        request, asked = st.pending
+        st.pending = None
+        st.latencies.append(now - asked)
+        if reply.generation == -1:  # the planner process is gone
+            assert reply.error is not None
+            self._fault(st, now, reply.error)
+            return
+        if reply.generation != st.generation:
+            st.want = True  # made for a state given up (a push since)
+            return
+        if reply.error is not None:
+            self._fault(st, now, reply.error)
+            return
+        assert reply.motion is not None and reply.result is not None
+        t0 = reply.t0
+        if t0 < now - 1e-9:
+            if not st.motion.at_rest_after(t0):
+                st.want = True  # late: ask again, further ahead (the latency is measured)
+                return
+            # Made from rest, and still there: it starts now.
+            reply = dataclasses.replace(reply, t0=now, motion=reply.motion.shifted(now - t0))
+        plan = _Plan.of(reply, request.objects)
+        if st.plan is not None:
+            st.replans += 1
+        assert reply.motion is not None
+        st.handover = (reply.t0, plan, reply.motion)
+        st.motion = _Handover(st.motion, reply.motion, reply.t0)
+
+    def _fault(
+        self,
+        st: _Timed,
+        now: float,
+        reason: str,
+        state: tuple[Float, Float, Float] | None = None,
+    ) -> None:
+        """No plan: bring the arm to rest from ``state`` at ``now`` (default: where the
+        commands are then), and say why."""
+        st.fault = reason
+        st.motion = brake(now, st.motion.at(now) if state is None else state, st.plan_limits)
+        st.last = st.motion.at(now)
+        st.handover, st.active, st.want = None, False, False
+        warnings.warn(
+            f"the controller could not plan ({reason}): the arm is brought to rest",
+            PlanFailedWarning,
+            stacklevel=4,
+        )
+
+    def _jacobian_at(self, q: Float) -> Float:
+        """J at q, the per-step stacks set to the objects in use (the details of a command
+        made without a plan)."""
+        step = self._step
+        if not step.needs_kinematics:
+            return self._no_jac
+        step.set_objects(self._objs)
+        return step.kinematics(q)[1]
 
     def _checked_objects(self, objects: Mapping[str, npt.ArrayLike]) -> dict[str, Float]:
         """An update of some objects, checked as :meth:`step` checks it (names, form, reach),
@@ -473,10 +618,13 @@ class Controller:
             self._check_reach(given)
         return given
 
-    def _unchanged(self, objects: Mapping[str, npt.ArrayLike]) -> bool:
-        """Every object given exactly as it is in use (float64 arrays of its stored form): a
-        loop that passes the objects on every call pays for nothing until one moves."""
-        objs = self._objs
+    def _unchanged(
+        self, objects: Mapping[str, npt.ArrayLike], pending: Mapping[str, Float] | None = None
+    ) -> bool:
+        """Every object given exactly as it is in use (or in ``pending``, checked and not yet
+        in use; float64 arrays of its stored form): a loop that passes the objects on every
+        call pays for nothing until one moves."""
+        objs = {**self._objs, **pending} if pending else self._objs
         for k, v in objects.items():
             held = objs.get(k) if isinstance(k, str) else None
             if (
@@ -505,8 +653,8 @@ class Controller:
         if st is not None:
             # The plans take the positions from here (_replan); the per-step stacks are not
             # used with motion limits.
-            if st.plan is not None:
-                planned = st.plan.objects
+            planned = st.planned_objects
+            if planned is not None:
                 st.moved = st.moved or any(
                     _moved(self._objs[k], planned[k], st.replan_distance) for k in changed
                 )
@@ -529,148 +677,3 @@ class Controller:
 
     def _influence(self, j: int, jac: Float, cov: Float) -> dict[str, float]:
         return self._step.influence(j, jac, cov)
-
-
-@dataclass
-class _Plan:
-    """A plan of a controller with motion limits: the timed reproduction it follows, made at
-    time ``t0`` (s from the first command) for these object positions."""
-
-    result: ReproductionResult
-    t0: float
-    objects: dict[str, Float]
-    times: list[float]  # when the motion reaches each sample (from t0), and its step: lists
-    steps: list[float]  # for the per-step look-ups
-
-
-class _Timed:
-    """The state of a controller with motion limits."""
-
-    def __init__(self, limits: MotionLimits, replan_distance: float) -> None:
-        self.limits = limits
-        self.plan_limits = limits.scaled(LIMIT_SAFETY)
-        self.velocity = np.where(
-            np.isfinite(self.plan_limits.velocity), self.plan_limits.velocity, np.inf
-        )
-        self.replan_distance = replan_distance
-        self.plan: _Plan | None = None
-        # The motion the commands are samples of (from the first command's time, 0), and how
-        # many commands were given (the last one's time is cycle * dt).
-        n = limits.n_joints
-        self.motion = Motion(0.0, (np.zeros(n), np.zeros(n), np.zeros(n)))
-        self.cycle = 0
-        self.last = self.motion.at(0.0)  # the last command's state
-        self.phase = 0.0
-        self.moved = False
-        self.replans = 0
-        self.q_measured: Float | None = None
-        self.done = False
-
-
-class CommandStream:
-    """Setpoints at a fast rate following a :class:`Controller`'s plans (``ctrl.stream(rate)``).
-
-    Every ``1 / rate_hz`` s, :meth:`step` takes the measured posture and returns the next
-    setpoint. The controller is stepped at its cycles (every ``ctrl.dt``), with the measured
-    posture and the object positions given since, before any setpoint after that cycle is
-    given. The setpoints are samples of the motion the controller follows (its commands are
-    samples of the same motion every ``ctrl.dt``: :class:`pbdkit.motion._otg.Motion`), so they are
-    one continuous jerk-limited motion, through its re-plans, consecutive ones within the limits at
-    this rate. A held command (:attr:`Command.held`: a push) restarts them from the measured
-    state.
-
-    Call ``m`` (from 0) returns the setpoint for ``(m + 1) / rate_hz`` s after the first call:
-    the motion starts at rest at the posture measured at the first call, one period before the
-    first setpoint. A drive that checks its stream (a Franka Panda at 1 kHz) compares the first
-    setpoint with the posture it holds: give the first call that posture (libfranka's desired
-    posture ``q_d``, not a noisy encoder reading), and check a recorded stream with that posture
-    prepended (:class:`pbdkit.motion._limits.StreamMonitor` fed it first).
-
-    Parameters
-    ----------
-    controller : Controller
-        With motion limits (:meth:`pbdkit.Skill.controller` gives them by default), not yet
-        stepped.
-    rate_hz : float
-        Setpoints per second (e.g. 1000), at least one per controller step.
-
-    Attributes
-    ----------
-    done : bool
-        True once the controller is done and the setpoints have come to rest at its end.
-    rate : float
-    velocity, acceleration : ndarray, shape (n,)
-        Of the last setpoint (e.g. as a servo's velocity feed-forward).
-    command : Command or None
-        The controller's last command.
-    """
-
-    def __init__(self, controller: Controller, rate_hz: float) -> None:
-        rate = float(rate_hz)
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate_hz must be a positive number of Hz, got {rate_hz!r}")
-        if controller.limits is None or controller._timed is None:
-            raise ValueError(
-                "the controller has no motion limits: a stream needs them (give the robot "
-                "acceleration and jerk limits, e.g. Robot.from_urdf(..., joint_limits=YAML))"
-            )
-        if controller._timed.plan is not None:
-            raise ValueError("the controller has already run: make a new one for the stream")
-        if rate * controller.dt < 1.0:
-            raise ValueError(
-                f"rate_hz must give at least one setpoint per controller step "
-                f"(>= {1.0 / controller.dt:.6g} Hz), got {rate_hz!r}"
-            )
-        self.controller = controller
-        self.rate = rate
-        self.period = 1.0 / rate
-        self._timed = controller._timed
-        self._ticks = 0  # setpoints given
-        self._cycles = 0  # controller steps made
-        self._state: tuple[Float, Float, Float] | None = None
-        self._pending: dict[str, Float] = {}
-        self.command: Command | None = None
-
-    @property
-    def done(self) -> bool:
-        """The controller is done and the setpoints have come to rest at the end of its
-        motion."""
-        return self.controller.done and self._ticks * self.period >= self._timed.motion.end - 1e-9
-
-    @property
-    def velocity(self) -> Float:
-        return np.zeros(self.controller._lower.shape[0]) if self._state is None else self._state[1]
-
-    @property
-    def acceleration(self) -> Float:
-        return np.zeros(self.controller._lower.shape[0]) if self._state is None else self._state[2]
-
-    def step(
-        self, q_measured: npt.ArrayLike, objects: Mapping[str, npt.ArrayLike] | None = None
-    ) -> Float:
-        """The next setpoint (n,), from the measured posture.
-
-        ``objects`` (any subset of the skill's objects) reach the controller at its next step.
-        They are checked in this call, as :meth:`Controller.step` checks them (and only here):
-        an unknown object, a wrong form or a position beyond the arm's reach raises ValueError
-        here, and the stream goes on with the last accepted positions.
-        """
-        ctrl = self.controller
-        q = check_array(q_measured, "q_measured", shape=(ctrl._lower.shape[0],), allow_bool=False)
-        if objects is not None:
-            self._pending.update(ctrl._checked_objects(objects))
-        if self.done:
-            raise ValueError("the stream is done: its setpoints came to rest at the end")
-        t = (self._ticks + 1) * self.period  # the time of the setpoint to give
-        # The controller decides at its cycles (plans again, holds), before any setpoint after
-        # that cycle is given: the setpoints are samples of the motion it plans.
-        while not ctrl.done and self._cycles * ctrl.dt < t - 1e-12:
-            if self._pending:
-                ctrl._apply_objects(self._pending)
-                self._pending = {}
-            self.command = ctrl.step(q)
-            self._cycles += 1
-        self._ticks += 1
-        p, v, a = self._timed.motion.at(t)
-        self._state = (p, v, a)
-        return p.copy()

@@ -271,8 +271,13 @@ def execute_online(
     grip = controller.gripper
     start_at(sim, q_prev, grip)
     # With motion limits the servos follow the controller's jerk-limited setpoint stream at the
-    # physics rate; without, the piecewise-linear reference through the commands.
-    stream = controller.stream(1.0 / TIMESTEP) if controller.limits is not None else None
+    # physics rate; without, the piecewise-linear reference through the commands. The plans
+    # inline: the simulation runs in its own time, and a run depends only on its inputs.
+    stream = (
+        controller.stream(1.0 / TIMESTEP, planner="inline")
+        if controller.limits is not None
+        else None
+    )
 
     names = list(controller.objects)
     ticks: list[float] = []

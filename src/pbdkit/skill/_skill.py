@@ -619,12 +619,14 @@ class Skill:
         line_search: bool = True,
         newton: bool = True,
         max_lag: float = 3.0,
+        planner: Literal["inline", "process"] = "inline",
     ) -> Controller:
         """One closed-loop run of the skill, step by step from the measured joint angles.
 
         ``ctrl.step(q_measured, objects=None)`` returns the next command (:class:`Command`);
         ``ctrl.dt`` is the seconds per step (:attr:`step_seconds`), ``ctrl.done`` tells when the
-        run is over; ``ctrl.stream(rate_hz)`` gives setpoints for a faster loop. Within the
+        run is over; ``ctrl.stream(rate_hz)`` gives setpoints for a faster loop, its plans made
+        in a separate process (the loop never waits for one). Within the
         robot's limits (the default), consecutive commands are within the velocity,
         acceleration and jerk limits at ``ctrl.dt``, the first one starting from the measured
         posture at rest; see :doc:`/reproduction`, "The online controller", for how the phase
@@ -642,6 +644,11 @@ class Skill:
         max_lag : float
             The phase holds while the measured posture is more than this many steps (at the
             joints' top speed) behind the last command.
+        planner : {"inline", "process"}
+            With limits, where :meth:`Controller.step` makes its plans: "inline" (default: it
+            waits for them, 25-150 ms; a simulation's run depends only on its inputs) or
+            "process" (a separate process; a real arm's loop calling ``ctrl.step`` itself never
+            waits): :doc:`/reproduction`, "Plans off the control loop".
 
         Returns
         -------
@@ -670,6 +677,7 @@ class Skill:
             reach=self.reach,
             max_lag=max_lag,
             limits=limits,
+            planner=planner,
         )
 
     # ------------------------------------------------------------------ I/O

@@ -1,0 +1,330 @@
+"""The online controller's plans, made off its loop (:doc:`/reproduction`, "Plans off the control
+loop").
+
+A plan is the reproduction within the motion limits from a state along the way
+(:func:`~pbdkit.reproduction._timing.timed_path`) and the jerk-limited motion through it
+(:func:`pbdkit.motion._otg.follow`): 25-150 ms on the coaster skill, dozens of cycles of a 1 kHz
+loop. :class:`ProcessPlanner` makes them in a separate process, so that the loop never waits:
+
+- The process is a new interpreter (``python -c``), started once per controller, at lower
+  priority (``os.nice``), BLAS on one thread, the robot and the skill's run set-up sent once. Not
+  ``multiprocessing``'s spawn or forkserver: both import the user's main script again in the
+  worker, which runs a script without an ``if __name__ == "__main__"`` guard a second time. Not
+  a thread: the GIL holds the loop for whole numpy calls (a numpy thread beside a 1 kHz loop
+  delayed it by up to 3.3 ms).
+- A request carries the state the commands will be in at a predicted hand-over time, the phase
+  there and the object positions; the reply, the plan (a
+  :class:`~pbdkit.reproduction.ReproductionResult`) and its motion (a picklable
+  :class:`pbdkit.motion._otg.Motion`), or a one-line reason it could not be made.
+- A thread of the loop's process reads the replies off the socket (the read releases the GIL)
+  and unpickles them (0.1-0.5 ms for the coaster's plan, while the loop sleeps between its
+  calls, most of the time): the loop's poll only takes a reply that is ready.
+
+:class:`InlinePlanner` makes them where they are asked for (the controller's default: a
+simulation steps it in simulated time and must not depend on the machine's speed).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import dataclasses
+import math
+import os
+import pickle
+import socket
+import subprocess
+import sys
+import threading
+import time
+import weakref
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..motion._limits import MotionLimits
+from ..motion._otg import Motion, follow
+from ..robots._protocols import KinematicModel
+from ._result import ReproductionResult
+from ._setup import RunSetup
+from ._timing import timed_path
+
+__all__ = [
+    "PLANNER_NICE",
+    "PLANNER_START_TIMEOUT",
+    "InlinePlanner",
+    "PlanReply",
+    "PlanRequest",
+    "Planner",
+    "ProcessPlanner",
+    "make_plan",
+    "one_line",
+]
+
+Float = NDArray[np.float64]
+PlannerKind = Literal["process", "inline"]
+
+#: The planner process's niceness: the loop's process wins the core when both want it.
+PLANNER_NICE = 5
+#: Seconds the planner process may take to start (a new interpreter importing pbdkit).
+PLANNER_START_TIMEOUT = 120.0
+
+
+def one_line(err: BaseException) -> str:
+    """An exception as one line (its type and first line)."""
+    text = str(err).strip().splitlines()
+    return f"{type(err).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """A plan to make: from ``state`` (position, velocity, acceleration) at time ``t0`` (s, the
+    controller's clock) and ``phase`` (steps), for these object positions. ``generation``
+    tells a reply to a request the controller has since given up (a push) from the current
+    one."""
+
+    generation: int
+    t0: float
+    state: tuple[Float, Float, Float]
+    phase: float
+    objects: dict[str, Float]
+
+
+@dataclass(frozen=True)
+class PlanReply:
+    """A plan made for a :class:`PlanRequest`: its reproduction and motion (from ``t0``), or
+    ``error`` (one line) where none could be made; ``seconds``: how long it took."""
+
+    generation: int
+    t0: float
+    result: ReproductionResult | None
+    motion: Motion | None
+    error: str | None
+    seconds: float
+
+
+def make_plan(
+    robot: KinematicModel,
+    run: RunSetup,
+    limits: MotionLimits,
+    plan_limits: MotionLimits,
+    dt: float,
+    request: PlanRequest,
+) -> PlanReply:
+    """The plan of a request (in any process): Table II from the state at the phase, timed
+    within ``limits`` (:func:`~pbdkit.reproduction._timing.timed_path`), and the motion
+    through it from the state within ``plan_limits``."""
+    start = time.perf_counter()
+    q, v, a = request.state
+    setup = dataclasses.replace(run, objects=dict(request.objects), theta0=q)
+    moving = bool(np.any(v))
+    try:
+        res = timed_path(
+            robot, setup, limits, dt, phase=request.phase, velocity=v if moving else None
+        )
+        assert res.times is not None
+        motion = follow(
+            request.t0 + res.times,
+            res.joints,
+            plan_limits,
+            velocities=res.velocities,
+            accelerations=res.accelerations,
+            start=(q, v, a),
+        )
+    except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+        took = time.perf_counter() - start
+        return PlanReply(request.generation, request.t0, None, None, one_line(err), took)
+    took = time.perf_counter() - start
+    return PlanReply(request.generation, request.t0, res, motion, None, took)
+
+
+class Planner:
+    """Where a controller's plans are made: :meth:`submit` a request, :meth:`poll` for its
+    reply (None until it is ready), one at a time."""
+
+    kind: PlannerKind
+
+    def submit(self, request: PlanRequest) -> None:
+        raise NotImplementedError
+
+    def poll(self) -> PlanReply | None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release what the planner holds (a process)."""
+
+
+class InlinePlanner(Planner):
+    """Plans made in :meth:`submit`, in the caller's thread: its reply is ready at once."""
+
+    kind: PlannerKind = "inline"
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        run: RunSetup,
+        limits: MotionLimits,
+        plan_limits: MotionLimits,
+        dt: float,
+    ) -> None:
+        self._args = (robot, run, limits, plan_limits, dt)
+        self._reply: PlanReply | None = None
+
+    def submit(self, request: PlanRequest) -> None:
+        self._reply = make_plan(*self._args, request)
+
+    def poll(self) -> PlanReply | None:
+        reply, self._reply = self._reply, None
+        return reply
+
+
+class ProcessPlanner(Planner):
+    """Plans made in a separate process (module docstring); starting it waits until the
+    process has the robot and the skill (1-3 s: a new interpreter importing pbdkit).
+
+    Parameters
+    ----------
+    robot, run, limits, plan_limits, dt
+        As :func:`make_plan` (the robot and the run set-up are sent once: both must pickle).
+    delay : float
+        Seconds the process sleeps before each plan (tests: a slow planner).
+    nice : int
+        Added to the process's niceness (:data:`PLANNER_NICE`).
+    """
+
+    kind: PlannerKind = "process"
+
+    def __init__(
+        self,
+        robot: KinematicModel,
+        run: RunSetup,
+        limits: MotionLimits,
+        plan_limits: MotionLimits,
+        dt: float,
+        *,
+        delay: float = 0.0,
+        nice: int = PLANNER_NICE,
+        timeout: float = PLANNER_START_TIMEOUT,
+    ) -> None:
+        try:
+            setup = pickle.dumps(
+                ("setup", robot, run, limits, plan_limits, dt, float(delay), int(nice)),
+                protocol=pickle.HIGHEST_PROTOCOL,
+            )
+        except (pickle.PicklingError, TypeError, AttributeError) as err:
+            raise ValueError(
+                f"planner='process' sends the robot and the skill to a planner process, and "
+                f"they do not pickle ({one_line(err)}): use planner='inline'"
+            ) from err
+        ours, theirs = socket.socketpair()
+        self._sock = ours
+        env = dict(os.environ)
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            env[var] = "1"
+        # The worker imports the same pbdkit as this process, installed or not.
+        here = str(Path(__file__).resolve().parents[2])
+        env["PYTHONPATH"] = os.pathsep.join([here, *filter(None, [env.get("PYTHONPATH")])])
+        code = f"from pbdkit.reproduction._planner import serve; serve({theirs.fileno()})"
+        self._proc = subprocess.Popen(
+            [sys.executable, "-c", code],
+            pass_fds=(theirs.fileno(),),
+            env=env,
+            stdin=subprocess.DEVNULL,
+        )
+        theirs.close()
+        self._conn = Connection(os.dup(ours.fileno()))
+        self._finalizer = weakref.finalize(self, _stop, self._proc, self._conn, ours)
+        self._inbox: collections.deque[PlanReply] = collections.deque()
+        self._gone: str | None = None
+        try:
+            self._conn.send_bytes(setup)
+            if not self._conn.poll(timeout):
+                raise RuntimeError(f"the planner process did not start in {timeout:g} s")
+            status = self._conn.recv()
+        except (OSError, EOFError) as err:
+            self.close()
+            raise RuntimeError(
+                f"the planner process stopped while starting (exit code {self._proc.poll()})"
+            ) from err
+        except RuntimeError:
+            self.close()
+            raise
+        if status[0] != "ready":
+            self.close()
+            raise RuntimeError(f"the planner process could not start: {status[1]}")
+        self.pid: int = self._proc.pid
+        self._reader = threading.Thread(target=self._read, name="pbdkit-planner", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        conn = self._conn
+        while True:
+            try:
+                reply = pickle.loads(conn.recv_bytes())
+            except (EOFError, OSError):
+                self._gone = f"the planner process stopped (exit code {self._proc.poll()})"
+                return
+            self._inbox.append(reply)
+
+    def submit(self, request: PlanRequest) -> None:
+        try:
+            self._conn.send_bytes(pickle.dumps(request, protocol=pickle.HIGHEST_PROTOCOL))
+        except OSError:
+            self._gone = self._gone or "the planner process stopped"
+
+    def poll(self) -> PlanReply | None:
+        if self._inbox:
+            return self._inbox.popleft()
+        if self._gone is not None:
+            return PlanReply(-1, math.nan, None, None, self._gone, 0.0)
+        return None
+
+    def close(self) -> None:
+        self._finalizer()
+
+
+def _stop(proc: subprocess.Popen[bytes], conn: Connection, sock: socket.socket) -> None:
+    """End the planner process: its socket shut, it exits (at once when idle, else at the end
+    of the plan it is making); killed if it has not within 2 s."""
+    with contextlib.suppress(OSError):
+        sock.shutdown(socket.SHUT_RDWR)  # also wakes the reading thread
+    sock.close()
+    conn.close()
+    try:
+        proc.wait(timeout=2.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def serve(fd: int) -> None:
+    """The planner process: plans for requests on the socket ``fd`` until it closes."""
+    conn = Connection(fd)
+    try:
+        _, robot, run, limits, plan_limits, dt, delay, nice = pickle.loads(conn.recv_bytes())
+        os.nice(nice)
+        # A first plan, from the start, warms what the first plan would pay for (imports,
+        # caches): the first reply comes in the time of the others.
+        zeros = np.zeros_like(run.theta0)
+        warm = PlanRequest(0, 0.0, (run.theta0, zeros, zeros), 0.0, run.objects)
+        make_plan(robot, run, limits, plan_limits, dt, warm)
+    except Exception as err:  # said to the controller, which raises it
+        conn.send(("error", one_line(err)))
+        return
+    conn.send(("ready", os.getpid()))
+    while True:
+        try:
+            request = pickle.loads(conn.recv_bytes())
+        except (EOFError, OSError):
+            os._exit(0)  # the controller closed: nothing to tidy (no interpreter teardown)
+        if delay > 0:
+            time.sleep(delay)
+        reply = make_plan(robot, run, limits, plan_limits, dt, request)
+        try:
+            conn.send_bytes(pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
+        except OSError:
+            os._exit(0)

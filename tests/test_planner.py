@@ -1,0 +1,189 @@
+"""Plans off the control loop (issue 35, item 1): the stream's plans made in a separate process,
+no call waiting for one, the setpoints continuous across each hand-over; motions that pickle;
+braking to rest; a plan that cannot be made brings the arm to rest with a one-line reason."""
+
+from __future__ import annotations
+
+import pickle
+import time
+
+import numpy as np
+import pytest
+from synthetic_teacher import unseen_glass
+
+from pbdkit import Skill
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.motion._limits import MotionLimits, motion_peaks
+from pbdkit.motion._otg import brake, follow
+from pbdkit.reproduction._controller import CommandStream, PlanFailedWarning
+from pbdkit.reproduction._planner import (
+    InlinePlanner,
+    PlanReply,
+    PlanRequest,
+    ProcessPlanner,
+    one_line,
+)
+
+
+def _peaks(s: np.ndarray, limits: MotionLimits) -> float:
+    """Peak v/a/j of 1 kHz setpoints over the limits, from rest at the first."""
+    s = np.vstack([np.repeat(s[:1], 3, axis=0), s])
+    return motion_peaks(1e-3 * np.arange(len(s)), s, limits, pad_rest=0).worst
+
+
+def _until_done(stream: CommandStream, q: np.ndarray, setpoints: list[np.ndarray]) -> np.ndarray:
+    """Step ``stream`` fed its setpoints until it is done or has a fault."""
+    while not stream.done and stream.fault is None:
+        q = stream.step(q)
+        setpoints.append(q)
+    return q
+
+
+def test_a_motion_pickles_and_samples_bit_for_bit() -> None:
+    # Smooth samples (the spline's pieces: quintics), started away from them (Ruckig).
+    t = np.linspace(0.0, 4.0, 81)
+    q = 0.3 * np.sin(np.outer(t, [1.0, 1.5, 2.0]))
+    lim = MotionLimits(np.full(3, 1.5), np.full(3, 4.0), np.full(3, 40.0))
+    motion = follow(t, q, lim, start=(q[0] + 0.05, np.zeros(3), np.zeros(3)))
+    kinds = {type(s).__name__ for s in motion._segments}
+    assert {"_Quintic", "Trajectory"} <= kinds  # both kinds of segment
+    copy = pickle.loads(pickle.dumps(motion))
+    assert all(s is None for s in copy._segments)  # planned again where first sampled
+    for x in np.linspace(t[0] - 0.1, motion.end + 0.1, 3001):
+        for a, b in zip(motion.at(float(x)), copy.at(float(x)), strict=True):
+            np.testing.assert_array_equal(a, b)
+    later = copy.shifted(2.5)
+    np.testing.assert_array_equal(later.at(t[5] + 2.5)[0], motion.at(t[5])[0])
+
+
+def test_brake_comes_to_rest_within_the_limits_from_the_state() -> None:
+    lim = MotionLimits(np.full(2, 1.0), np.full(2, 5.0), np.full(2, 50.0))
+    start = (np.array([0.2, -0.1]), np.array([0.9, -0.6]), np.array([2.0, 1.0]))
+    m = brake(1.0, start, lim)
+    for a, b in zip(m.at(1.0), start, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    assert m.at_rest_after(m.end) and not m.at_rest_after(m.end - 1e-3)
+    s = m.every(1e-3)[0]
+    # Moving at the start: the divided differences from the state, not from rest.
+    peaks = motion_peaks(1e-3 * np.arange(len(s)), s, lim, pad_rest=0)
+    assert peaks.worst <= 1.0 + 1e-7  # Ruckig's own rounding, at the limits exactly
+    # As fast as the limits allow: the faster joint stops in about v/a + a/j (0.9/5 + 5/50).
+    assert m.end - 1.0 < 0.9 / 5.0 + 5.0 / 50.0 + 0.05
+
+
+def test_no_call_waits_for_a_slow_planner_and_the_stream_stays_continuous(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits
+) -> None:
+    # Issue 35: re-plans blocked stream.step for 37-247 ms. Here every plan takes 200 ms more;
+    # the loop runs in real time at 1 kHz and moves the glass 0.3 s in.
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    planner = ProcessPlanner(
+        ctrl._robot, ctrl._run, ctrl._timed.limits, ctrl._timed.plan_limits, ctrl.dt, delay=0.2
+    )
+    moved = glass + np.array([0.01, -0.01, 0.0])
+    with ctrl.stream(1000, planner=planner) as stream:
+        q = demos[1].joints[0].copy()
+        setpoints, costs, first_move, taken = [q], [], -1, -1
+        start = time.perf_counter()
+        for k in range(900):
+            t0 = time.perf_counter()
+            q = stream.step(q, objects={"glass": moved} if k >= 300 else {"glass": glass})
+            costs.append(time.perf_counter() - t0)
+            setpoints.append(q)
+            if first_move < 0 and np.any(q != setpoints[0]):
+                first_move = k
+            plan = ctrl._timed.plan
+            if taken < 0 and plan is not None and np.array_equal(plan.objects["glass"], moved):
+                taken = k
+            time.sleep(max(0.0, start + (k + 1) * 1e-3 - time.perf_counter()))
+    assert max(costs) < 5e-3, max(costs)
+    assert first_move >= 200  # at rest where it started until the first plan came
+    assert taken >= 500  # the move's plan took over after its 200 ms, never before
+    assert ctrl.replans >= 1 and ctrl.fault is None
+    assert _peaks(np.array(setpoints), limits) <= 1.0 + 1e-9
+    assert planner._proc.wait(timeout=10) == 0  # the stream's end let the process go
+
+
+def test_a_push_brakes_from_the_measured_state_and_plans_from_where_it_stops(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits
+) -> None:
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    with ctrl.stream(1000) as stream:  # the process planner, not paced: replies come late
+        q = demos[1].joints[0].copy()
+        setpoints: list[np.ndarray] = []
+        held_at, offset = -1, np.zeros(5)
+        for k in range(6000):
+            if stream.done or (held_at > 0 and ctrl.replans >= 1 and k > held_at + 300):
+                break
+            if k == 400:
+                assert ctrl._timed.active and ctrl.replans == 0
+                offset = np.array([0.15, 0.0, 0.0, 0.0, -0.1])  # pushed: held off the setpoints
+            q = stream.step(q + offset)
+            if held_at < 0 and stream.command is not None and stream.command.held:
+                held_at, offset = len(setpoints), np.zeros(5)  # noticed: it restarts from there
+            setpoints.append(q)
+            if not ctrl._timed.active:
+                time.sleep(1e-3)  # until the first plan, and the one after the push, take over
+    s = np.array(setpoints)
+    assert held_at > 400
+    assert ctrl.replans >= 1
+    after = s[held_at:]
+    peaks = motion_peaks(1e-3 * np.arange(len(after)), after, limits, pad_rest=0)
+    assert peaks.worst <= 1.0 + 1e-9
+    assert ctrl.fault is None
+
+
+class _Failing(InlinePlanner):
+    """Every plan fails after the first."""
+
+    def __init__(self, *args: object) -> None:
+        super().__init__(*args)  # type: ignore[arg-type]
+        self.count = 0
+
+    def submit(self, request: PlanRequest) -> None:
+        self.count += 1
+        if self.count == 1:
+            super().submit(request)
+        else:
+            err = RuntimeError("retime: the path is not within the limits after 200 rounds")
+            self._reply = PlanReply(request.generation, request.t0, None, None, one_line(err), 0)
+
+
+def test_a_plan_that_cannot_be_made_brings_the_arm_to_rest_with_one_line(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits
+) -> None:
+    # Issue 35: a re-plan that raised aborted the run with a traceback.
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    t = ctrl._timed
+    failing = _Failing(ctrl._robot, ctrl._run, t.limits, t.plan_limits, ctrl.dt)
+    stream = ctrl.stream(1000, planner=failing)
+    q = demos[1].joints[0].copy()
+    setpoints = [q]
+    for _ in range(300):
+        q = stream.step(q)
+        setpoints.append(q)
+    q = stream.step(q, objects={"glass": glass + np.array([0.02, 0.0, 0.0])})
+    setpoints.append(q)
+    with pytest.warns(PlanFailedWarning, match=r"could not plan \(RuntimeError: retime: .*\)"):
+        q = _until_done(stream, q, setpoints)  # the plan for the move fails
+    while not stream.done:  # brought to rest
+        q = stream.step(q)
+        setpoints.append(q)
+    assert stream.fault is not None and "\n" not in stream.fault
+    np.testing.assert_allclose(stream.velocity, 0.0, atol=1e-9)
+    assert _peaks(np.array(setpoints), limits) <= 1.0 + 1e-9
+
+
+def test_planner_choices(skill: Skill, demos: list[Demonstration]) -> None:
+    glass, _ = unseen_glass(demos)
+    with pytest.raises(ValueError, match="planner must be one of"):
+        skill.controller({"glass": glass}, planner="thread")  # type: ignore[arg-type]
+    ctrl = skill.controller({"glass": glass})
+    assert ctrl.planner == "inline"
+    with pytest.raises(ValueError, match="planner must be one of"):
+        ctrl.stream(1000, planner="fork")  # type: ignore[arg-type]
+    no_limits = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
+    assert skill.controller({"glass": glass}, **no_limits).planner is None  # type: ignore[arg-type]
