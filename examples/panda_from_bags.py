@@ -244,7 +244,10 @@ def run_online(
 ) -> tuple[np.ndarray, np.ndarray, MotionPeaks]:
     """The skill in the arm's 1 kHz loop: the setpoints sent (the first is where the arm
     started), the gripper command at each, and the stream's peaks over ``limits``."""
-    stream = skill.controller(objects).stream(LOOP_HZ)
+    # The simulated arm runs faster than real time: its plans are made inline, in the call that
+    # needs them. On the real arm (a loop at the drive's pace) keep the default,
+    # planner="process": no call waits for a plan.
+    stream = skill.controller(objects).stream(LOOP_HZ, planner="inline")
     monitor = StreamMonitor(limits, 1.0 / LOOP_HZ)
     # The stream starts at rest from the first posture it is given. Give it the drive's last
     # setpoint (on a Panda, robot_state.q_d), not a reading: that is off by the encoder noise,

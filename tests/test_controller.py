@@ -14,6 +14,7 @@ from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion._limits import LIMIT_SAFETY, MotionLimits, count_reversals, motion_peaks
 from pbdkit.motion._otg import follow
 from pbdkit.reproduction._controller import REPLAN_DISTANCE, Command
+from pbdkit.reproduction._planner import _at_rest_on_limits
 from pbdkit.reproduction._setup import RunOptions
 from pbdkit.robots._robot import Robot
 
@@ -104,13 +105,19 @@ def test_fed_its_own_commands_it_plays_the_reproduction(
     ctrl = skill.controller({"glass": glass})
     assert ctrl.limits is not None
     joints, cmds = _run(ctrl, q0.copy())
-    # The commands are the reproduction's motion (pbdkit.motion._otg.follow) sampled every dt.
+    # The commands are the reproduction's motion (pbdkit.motion._otg.follow) sampled every dt,
+    # within the joint limits (issue 35: the plans' motion never passes them; a joint at a
+    # limit at a sample is at rest there): near a limit this path touches, off the motion
+    # without them by up to 5e-5 rad.
+    bounds = (skill.robot.lower, skill.robot.upper)
+    velocities, accelerations = _at_rest_on_limits(offline, bounds, moving=False)
     motion = follow(
         offline.times,
         offline.joints,
         limits.scaled(LIMIT_SAFETY),
-        velocities=offline.velocities,
-        accelerations=offline.accelerations,
+        velocities=velocities,
+        accelerations=accelerations,
+        bounds=bounds,
     )
     expected = motion.sample(ctrl.dt * np.arange(joints.shape[0]))[0]
     np.testing.assert_allclose(joints, expected, rtol=0, atol=1e-12)

@@ -18,6 +18,7 @@ from pbdkit.motion._limits import (
     LIMIT_SAFETY,
     MotionLimits,
     MotionPeaks,
+    RetimeWarning,
     StreamMonitor,
     count_reversals,
     divided_differences,
@@ -487,6 +488,26 @@ def test_retime_stretches_a_fast_min_jerk_move_into_the_limits() -> None:
     # the durations vary smoothly: neighbours differ by a few percent at most
     assert np.abs(np.diff(h) / h[:-1]).max() < 0.25
     assert times_from_durations(h, 2.0)[0] == 2.0
+
+
+def test_retime_that_does_not_converge_slows_the_whole_path_and_says_so(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Issue 35: a re-plan's retime raised after its rounds and the online run died with a
+    # traceback. With one round allowed, the local stretches cannot converge: the whole path
+    # is stretched alike instead, within the limits, with a warning that says by how much.
+    import pbdkit.motion._limits as L
+
+    monkeypatch.setattr(L, "_MAX_ROUNDS", 1)
+    dt = 0.01
+    t = dt * np.arange(60)
+    q = min_jerk(t, t[-1], np.array([0.9, -1.2]))
+    with pytest.warns(RetimeWarning, match=r"the whole path is slowed by \d"):
+        h = retime(q, dt, LIM2)
+    times = times_from_durations(h)
+    assert motion_peaks(times, q, LIM2).worst <= 1.0 + 1e-12
+    ratio = h / h[0]
+    assert np.all(h >= dt) and ratio.max() > 1.0  # the one round's taper, then a uniform stretch
 
 
 def test_retime_a_path_with_a_kink_and_leaves_far_away_steps_at_dt() -> None:

@@ -56,8 +56,11 @@ def test_online_run_equals_the_offline_one_and_keeps_the_limits(
     # One command per step of the controller, at its pace, the skill's time stretched where the
     # limits need it as offline; nothing held, no re-plan (the objects do not move).
     np.testing.assert_allclose(np.diff(run.tick_times), ctrl.dt, atol=TIMESTEP + 1e-9)
+    # Online, the plans keep the arm within its joint limits where the offline motion passes
+    # lift3's (the path brakes onto it harder than the jerk limit lets a motion follow): the
+    # steps around it take longer (1.1 s in all; pbdkit.reproduction._planner.make_plan).
     t_offline = ts.skill.times(offline.reproduction)[-1]
-    assert abs(len(run.tick_times) * ctrl.dt - t_offline) < 1.0
+    assert abs(len(run.tick_times) * ctrl.dt - t_offline) < 1.5
     # No push is seen. The calibrated skill's hand meets the glass on its shelf such that the
     # glass wobbles by 1.5-3 mm as the gripper closes, and each wobble past REPLAN_DISTANCE
     # (1 mm) is a re-plan (4 measured; 0 with calibrate=False): the threshold does not know a

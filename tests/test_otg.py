@@ -464,3 +464,33 @@ def test_follow_never_enters_a_state_that_must_overshoot_the_velocity_limit() ->
     assert np.abs(v).max() <= 1.0 + 1e-9
     # The motion's own samples (it starts moving: no rest before it) within every limit.
     assert_within_limits(times, p, lim, pad_rest=0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_follow_with_bounds_never_passes_a_joint_limit_the_path_stops_on(seed: int) -> None:
+    # Issue 35: a path that brakes onto a joint limit (Table II clips it there) harder than the
+    # jerk limit lets a motion follow: its samples are within the divided-difference limits,
+    # and the motion through them was late and passed the limit (by 0.07 rad on an online
+    # coaster plan). Given the bounds, no segment passes them.
+    rng = np.random.default_rng(seed)
+    lim = MotionLimits(np.array([1.19]), np.array([6.0]), np.array([60.0]))
+    bound = 0.3
+    x = np.minimum(np.cumsum(rng.uniform(0.02, 0.06, 30)), bound)
+    q = np.concatenate([x, np.full(8, bound)])[:, None]
+    t = times_from_durations(retime(q, 0.05, lim.scaled(0.995)))
+    v, a = spline_derivatives(t, q)
+    free = follow(t, q, lim, velocities=v, accelerations=a)
+    held = follow(
+        t, q, lim, velocities=v, accelerations=a, bounds=(np.array([-1.0]), np.array([bound]))
+    )
+    grid = np.linspace(t[0], max(free.end, held.end), 6000)
+    top_free = max(free.at(float(s))[0][0] for s in grid)
+    top_held = max(held.at(float(s))[0][0] for s in grid)
+    assert top_held <= bound + 1e-9
+    assert held.out_of(np.array([-1.0]), np.array([bound + 1e-9])) == []
+    if seed in (0, 2):  # the seeds whose free motion passes the bound by a centimetre or more
+        assert top_free > bound + 0.01 and free.out_of(np.array([-1.0]), np.array([bound]))
+    # Within the motion limits still, and at rest at the end on the bound.
+    s = held.every(1e-3)[0]
+    assert motion_peaks(1e-3 * np.arange(len(s)), s, lim).worst <= 1.0 + 1e-6
+    np.testing.assert_allclose(held.at(held.end + 1.0)[0], [bound], atol=1e-9)

@@ -187,3 +187,82 @@ def test_planner_choices(skill: Skill, demos: list[Demonstration]) -> None:
         ctrl.stream(1000, planner="fork")  # type: ignore[arg-type]
     no_limits = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
     assert skill.controller({"glass": glass}, **no_limits).planner is None  # type: ignore[arg-type]
+
+
+def _pushed_stream(
+    skill: Skill, glass: np.ndarray, q0: np.ndarray, at: int, push: np.ndarray
+) -> tuple[CommandStream, np.ndarray, int, list[bool]]:
+    """A 1 kHz stream (inline plans) fed its setpoints, pushed at setpoint ``at`` by ``push``
+    (held off the setpoints until the stream notices): the setpoints, the call it noticed the
+    push at, and whether each setpoint stopped a joint on a limit."""
+    stream = skill.controller({"glass": glass}).stream(1000, planner="inline")
+    q, offset, held_at = q0.copy(), np.zeros(5), -1
+    setpoints, stopped = [], []
+    while not stream.done and len(setpoints) < 20000:
+        if len(setpoints) == at:
+            offset = push
+        q = stream.step(q + offset)
+        if held_at < 0 and stream.command is not None and stream.command.held:
+            held_at, offset = len(setpoints), np.zeros(5)
+        setpoints.append(q)
+        stopped.append(bool(stream.at_position_limit.any()))
+    return stream, np.array(setpoints), held_at, stopped
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_push_toward_a_joint_limit_never_leaves_it(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits, seed: int
+) -> None:
+    # Issue 35: after a push toward lift2's lower limit the commands left it for 6 steps (by up
+    # to 0.076 rad), then snapped back by 3.3x the velocity limit. Here pushes toward the
+    # nearest limit, by more than the room left (seeded): the stream brakes as hard as the
+    # limits allow, stops the joint on its limit where even that cannot stop it in time, and
+    # reports the excess that forces; nothing else exceeds a limit.
+    rng = np.random.default_rng(seed)
+    glass, _ = unseen_glass(demos)
+    _, setpoints, _, _ = _pushed_stream(skill, glass, demos[1].joints[0], 10**9, np.zeros(5))
+    at = int(rng.integers(300, len(setpoints) - 600))
+    lower, upper = skill.robot.lower, skill.robot.upper
+    room_down, room_up = setpoints[at] - lower, upper - setpoints[at]
+    joint = int(np.argmin(np.minimum(room_down, room_up)))
+    push = np.zeros(5)
+    sign = -1.0 if room_down[joint] < room_up[joint] else 1.0
+    push[joint] = sign * min(0.2, 0.9 * min(room_down[joint], room_up[joint]) + 0.05)
+    other = (joint + 1 + int(rng.integers(4))) % 5
+    push[other] = rng.uniform(-0.1, 0.1)
+    stream, s, held_at, stopped = _pushed_stream(skill, glass, demos[1].joints[0], at, push)
+    assert held_at >= at
+    assert np.all(s >= lower) and np.all(s <= upper)  # every setpoint inside the limits
+    # Within v/a/j at 1 kHz, from the first posture at rest and from the pushed posture, but
+    # where a joint was stopped on a limit: there, the excess is what the stream reported.
+    forced = {round(v.time * 1000) - 1 for v in stream.limit_violations}
+    for part, first in ((s[:held_at], demos[1].joints[0]), (s[held_at:], None)):
+        x = part if first is None else np.vstack([np.repeat(first[None], 4, axis=0), part])
+        offset = held_at if first is None else -4
+        ok = np.array([offset + i not in forced for i in range(len(x))])
+        peaks = motion_peaks(1e-3 * np.arange(len(x)), x, limits, pad_rest=0, mask=ok)
+        assert peaks.worst <= 1.0 + 1e-9, peaks
+    if any(stopped):
+        assert stream.limit_violations and all(v.ratio > 1.0 for v in stream.limit_violations)
+    assert stream.fault is None and stream.done
+
+
+def test_the_commands_say_which_joints_a_limit_stopped(
+    skill: Skill, demos: list[Demonstration]
+) -> None:
+    glass, _ = unseen_glass(demos)
+    _, free, _, _ = _pushed_stream(skill, glass, demos[1].joints[0], 10**9, np.zeros(5))
+    lower = skill.robot.lower
+    at = 400
+    joint = int(np.argmin(free[at] - lower))
+    push = np.zeros(5)
+    # To 2 cm of it, fast (the measured velocity toward it at the limit): the brake cannot stop
+    # the joint in 2 cm, which stops on the limit, and the acceleration and jerk that forces
+    # are reported, for that joint only.
+    push[joint] = -(free[at][joint] - lower[joint]) + 0.02
+    stream, s, _, stopped = _pushed_stream(skill, glass, demos[1].joints[0], at, push)
+    assert any(stopped) and stream.limit_violations
+    assert {v.joint for v in stream.limit_violations} == {joint}
+    assert {v.quantity for v in stream.limit_violations} <= {"acceleration", "jerk"}
+    assert stream.last_command is stream.command
+    assert np.all(s[:, joint] >= lower[joint]) and np.any(s[:, joint] == lower[joint])

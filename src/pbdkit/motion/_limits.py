@@ -49,6 +49,8 @@ given less than dt: the skill keeps the demonstrations' pace wherever the arm ca
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -62,9 +64,11 @@ __all__ = [
     "LIMIT_SAFETY",
     "MotionLimits",
     "MotionPeaks",
+    "RetimeWarning",
     "StreamMonitor",
     "count_reversals",
     "divided_differences",
+    "last_differences",
     "motion_peaks",
     "positive_bounds",
     "retime",
@@ -453,7 +457,14 @@ def retime(
         :data:`START_VELOCITY_TOLERANCE`).
     RuntimeError
         If the limits are still exceeded after 200 rounds (each round stretches every excess
-        by more than it needs, so a finite path never gets there; the loop is bounded anyway).
+        by more than it needs, so a finite path never gets there; the loop is bounded anyway)
+        and stretching every step alike does not bring them within either.
+
+    Warns
+    -----
+    RetimeWarning
+        After 200 rounds: the whole path is slowed alike instead (the warning says by how
+        much), within the limits.
     """
     q_ = check_array(q, "q", ndim=2, min_rows=2)
     k_steps = q_.shape[0] - 1
@@ -508,10 +519,49 @@ def retime(
         padded_excess = np.concatenate([edge, excess, edge])
         windows = np.lib.stride_tricks.sliding_window_view(padded_excess, offsets.shape[0])
         h = h * (1.0 + (windows * taper).max(axis=1))
-    raise RuntimeError(
-        f"retime: the path is not within the limits after {_MAX_ROUNDS} rounds (largest excess "
-        f"{float(f.max()):.6g}x)"
+    # Not converged (never seen since the minimum stretch; the loop is bounded anyway): the
+    # durations reached, all stretched alike until every divided difference is within.
+    largest = float(f.max())
+    slowed = _slowed_uniformly(q_, h, limits, pad, v0)
+    if slowed is None:
+        raise RuntimeError(
+            f"retime: the path is not within the limits after {_MAX_ROUNDS} rounds (largest "
+            f"excess {largest:.6g}x), nor slowed as a whole"
+        )
+    factor = float(slowed.sum() / h.sum())
+    warnings.warn(
+        f"retime: the path was not within the limits after {_MAX_ROUNDS} rounds (largest excess "
+        f"{largest:.6g}x): the whole path is slowed by {factor:.4g}x instead",
+        RetimeWarning,
+        stacklevel=2,
     )
+    return slowed
+
+
+class RetimeWarning(RuntimeWarning):
+    """:func:`retime` fell back to slowing the whole path (the local stretches did not
+    converge)."""
+
+
+def _slowed_uniformly(
+    q: Float, h: Float, limits: MotionLimits, pad: int, v0: Float | None
+) -> Float | None:
+    """Durations ``h`` all stretched alike until the path is within ``limits`` (a uniform
+    stretch by f divides velocities by f, accelerations by f^2, jerks by f^3: one step gets
+    there but where a moving start does not scale), or None after 20 steps."""
+    vlim, alim, jlim = limits.velocity, limits.acceleration, limits.jerk
+    for _ in range(20):
+        t = np.concatenate([[0.0], np.cumsum(h)])
+        v, a, j = _derivatives(*_padded(t, q, pad, v0))
+        need = max(
+            float((np.abs(v) / vlim).max()),
+            float(np.sqrt((np.abs(a) / alim).max())),
+            float(np.cbrt((np.abs(j) / jlim).max())),
+        )
+        if need <= 1.0:
+            return h
+        h = h * need * 1.001
+    return None
 
 
 #: A start velocity this close to the velocity limit (relative) counts as on it.
@@ -537,6 +587,17 @@ def _start_velocity(v0: Float, vlim: Float) -> Float:
 def times_from_durations(h: Float, t0: float = 0.0) -> Float:
     """Sample times from step durations: (K - 1,) -> (K,)."""
     return np.concatenate([[t0], t0 + np.cumsum(h)])
+
+
+def last_differences(q: Sequence[Float], h: float) -> tuple[Float, Float, Float]:
+    """Velocity, acceleration and jerk at the last of four setpoints ``h`` s apart (the divided
+    differences on a uniform grid, oldest first)."""
+    q0, q1, q2, q3 = q
+    return (
+        (q3 - q2) / h,
+        (q3 - 2.0 * q2 + q1) / (h * h),
+        (q3 - 3.0 * q2 + 3.0 * q1 - q0) / (h * h * h),
+    )
 
 
 class StreamMonitor:
@@ -573,13 +634,7 @@ class StreamMonitor:
         self._q = [*self._q[1:], arr]
         self._ok = [*self._ok[1:], bool(counted)]
         self.count += 1
-        q0, q1, q2, q3 = self._q
-        h = self.period
-        diffs = (
-            (q3 - q2) / h,
-            (q3 - 2.0 * q2 + q1) / (h * h),
-            (q3 - 3.0 * q2 + 3.0 * q1 - q0) / (h * h * h),
-        )
+        diffs = last_differences(self._q, self.period)
         bounds = (self.limits.velocity, self.limits.acceleration, self.limits.jerk)
         for k, (d, lim) in enumerate(zip(diffs, bounds, strict=True)):
             if all(self._ok[3 - k - 1 :]):

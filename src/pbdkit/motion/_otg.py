@@ -22,7 +22,6 @@ Ruckig is imported when one of them is first used.
 
 from __future__ import annotations
 
-import bisect
 import math
 from typing import Any
 
@@ -31,6 +30,15 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from ._limits import MotionLimits
+from ._motion import (
+    Motion,
+    _Quintic,
+    _quintic_coefficients,
+    _ruckig,
+    _ruckig_plan,
+    brake,
+    ruckig_recipe,
+)
 
 __all__ = [
     "MERGE_SAMPLES",
@@ -46,18 +54,14 @@ __all__ = [
 #: A sample :func:`follow_samples` cannot reach in its time is passed by toward one of the next
 #: ones, up to this many samples ahead.
 MERGE_SAMPLES = 8
+#: How far (rad) a segment of :func:`follow` may pass a joint limit it is given (rounding).
+BOUNDS_TOL = 1e-9
 #: :func:`follow` takes a piece of the spline through the samples as it is where the piece is
 #: within this fraction of the limits (the rest is room for joining it from where the motion
 #: is).
 SPLINE_MARGIN = 0.99
 
 Float = NDArray[np.float64]
-
-
-def _ruckig() -> Any:
-    import ruckig
-
-    return ruckig
 
 
 def valid_target(velocity: Float, acceleration: Float, limits: MotionLimits) -> tuple[Float, Float]:
@@ -118,239 +122,6 @@ def point_to_point(
     return pos, vel, acc
 
 
-class Motion:
-    """A continuous jerk-limited motion: Ruckig trajectories one after another, each starting in
-    the state the previous one ended in, from a start state at ``t0`` (position, velocity and
-    acceleration continuous, jerk within the limits it was planned with).
-
-    Samples of it at any times pass the divided-difference check of :mod:`pbdkit.motion._limits`
-    against those limits (a divided difference of order k is a weighted average of the k-th
-    derivative); before ``t0`` it is the start state, after :attr:`end` it holds the last
-    position (at rest when it was planned to end so).
-
-    A motion pickles as arrays (the online controller's planner process sends it): each Ruckig
-    segment as the input it was planned from, planned again where it is first sampled (Ruckig
-    is deterministic: the same trajectory), each quintic as its coefficients.
-
-    Attributes
-    ----------
-    t0, end : float
-        Start and end times (s).
-    """
-
-    def __init__(
-        self,
-        t0: float,
-        start: tuple[Float, Float, Float],
-        limits: MotionLimits | None = None,
-    ) -> None:
-        self.t0 = float(t0)
-        self.end = self.t0
-        #: Built by :func:`follow`: when the motion reaches each of the samples it follows
-        #: (their own times, later where the limits kept it behind).
-        self.sample_times: Float = np.array([self.t0])
-        p, v, a = (np.array(x, dtype=np.float64) for x in start)
-        self._start = (p, v, a)
-        self._limits = limits  # what its Ruckig segments were planned within
-        self._starts: list[float] = []
-        self._durations: list[float] = []
-        # A segment's trajectory (a _Quintic or a ruckig.Trajectory), None until it is planned
-        # again from its recipe (after unpickling).
-        self._segments: list[Any] = []
-        # A Ruckig segment's recipe: its input (current and target position, velocity,
-        # acceleration: (6, n)), its minimum duration (NaN: none), its control interface (0
-        # position, 1 velocity); a quintic's: its coefficients (6, n), NaN, -1.
-        self._recipes: list[tuple[Float, float, int]] | tuple[Float, Float, NDArray[np.int8]] = []
-
-    def append(self, trajectory: Any, recipe: tuple[Float, float, int] | None = None) -> None:
-        """The next segment (a ``ruckig.Trajectory`` from the state at :attr:`end`, with the
-        ``recipe`` it was planned from: :func:`ruckig_recipe`; or a quintic)."""
-        duration = float(trajectory.duration)
-        if isinstance(trajectory, _Quintic):
-            recipe = (trajectory.c, math.nan, -1)
-        elif recipe is None:
-            raise ValueError("a Ruckig segment needs the recipe it was planned from")
-        if not isinstance(self._recipes, list):
-            raise ValueError("an unpickled motion cannot be extended")
-        self._starts.append(self.end)
-        self._durations.append(duration)
-        self._segments.append(trajectory)
-        self._recipes.append(recipe)
-        self.end += duration
-
-    def _segment(self, k: int) -> Any:
-        traj = self._segments[k]
-        if traj is None:
-            traj = self._segments[k] = self._plan_again(k)
-        return traj
-
-    def _plan_again(self, k: int) -> Any:
-        recipes = self._recipes
-        if isinstance(recipes, list):
-            rows, min_duration, interface = recipes[k]
-        else:  # unpickled: arrays
-            rows, min_duration, interface = (
-                recipes[0][k],
-                float(recipes[1][k]),
-                int(recipes[2][k]),
-            )
-        duration = self._durations[k]
-        if interface < 0:
-            return _Quintic(None, (rows[0], rows[1], rows[2]), duration, rows)
-        assert self._limits is not None
-        traj = _ruckig_plan(rows, min_duration, interface, self._limits)
-        if float(traj.duration) != duration:
-            raise RuntimeError("a motion's segment planned again differs from the original")
-        return traj
-
-    def _packed(self) -> tuple[Float, Float, NDArray[np.int8]]:
-        recipes = self._recipes
-        if not isinstance(recipes, list):
-            return recipes
-        n = self._start[0].shape[0]
-        return (
-            np.array([r[0] for r in recipes]).reshape(len(recipes), 6, n),
-            np.array([r[1] for r in recipes], dtype=np.float64),
-            np.array([r[2] for r in recipes], dtype=np.int8),
-        )
-
-    def __getstate__(self) -> dict[str, Any]:
-        rows, min_durations, interfaces = self._packed()
-        return {
-            "t0": self.t0,
-            "end": self.end,
-            "sample_times": self.sample_times,
-            "start": np.array(self._start),
-            "limits": None
-            if self._limits is None
-            else np.array([self._limits.velocity, self._limits.acceleration, self._limits.jerk]),
-            "starts": np.array(self._starts, dtype=np.float64),
-            "durations": np.array(self._durations, dtype=np.float64),
-            "rows": rows,
-            "min_durations": min_durations,
-            "interfaces": interfaces,
-        }
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.t0, self.end = state["t0"], state["end"]
-        self.sample_times = state["sample_times"]
-        p, v, a = (np.array(x) for x in state["start"])
-        self._start = (p, v, a)
-        lim = state["limits"]
-        self._limits = None if lim is None else MotionLimits(lim[0], lim[1], lim[2])
-        self._starts = state["starts"].tolist()
-        self._durations = state["durations"].tolist()
-        self._recipes = (state["rows"], state["min_durations"], state["interfaces"])
-        self._segments = [None] * len(self._starts)
-
-    def at(self, t: float) -> tuple[Float, Float, Float]:
-        """Position, velocity and acceleration at time ``t`` (s)."""
-        if t <= self.t0 or not self._segments:
-            p, v, a = self._start
-            return p.copy(), v.copy(), a.copy()
-        k = max(0, bisect.bisect_right(self._starts, t) - 1)
-        duration, traj = self._durations[k], self._segment(k)
-        local = t - self._starts[k]
-        if local >= duration:
-            p, v, a = traj.at_time(duration)
-            # Beyond the last segment: at rest where it ended (or moving on at its velocity).
-            pv, vv = np.array(p), np.array(v)
-            return pv + vv * (local - duration), vv, np.zeros_like(pv)
-        p, v, a = traj.at_time(local)  # a quintic's rows, or Ruckig's lists
-        return np.array(p), np.array(v), np.array(a)
-
-    def at_rest_after(self, t: float) -> bool:
-        """Whether the motion is at rest from time ``t`` on (its last segment ended by then,
-        at rest within rounding; or it has none)."""
-        if not self._segments:
-            return not (np.any(self._start[1]) or np.any(self._start[2]))
-        if t < self.end:
-            return False
-        _, v, a = self.at(self.end)  # Ruckig ends within rounding of rest
-        return float(np.abs(v).max()) <= 1e-9 and float(np.abs(a).max()) <= 1e-6
-
-    def shifted(self, offset: float) -> Motion:
-        """The same motion ``offset`` s later (sharing its segments)."""
-        out = Motion(self.t0 + offset, self._start, self._limits)
-        out.end = self.end + offset
-        out.sample_times = self.sample_times + offset
-        out._starts = [s + offset for s in self._starts]
-        out._durations = self._durations
-        out._segments = self._segments
-        out._recipes = self._recipes
-        return out
-
-    def sample(self, times: Float) -> tuple[Float, Float, Float]:
-        """:meth:`at` for every time, as arrays (len(times), n)."""
-        rows = [self.at(float(t)) for t in times]
-        return (
-            np.array([r[0] for r in rows], dtype=np.float64),
-            np.array([r[1] for r in rows], dtype=np.float64),
-            np.array([r[2] for r in rows], dtype=np.float64),
-        )
-
-    def every(self, period: float, n_steps: int | None = None) -> tuple[Float, Float, Float]:
-        """:meth:`sample` every ``period`` from :attr:`t0`: ``n_steps`` rows, or (default) until
-        the first at or after :attr:`end`."""
-        total = math.ceil((self.end - self.t0) / period - 1e-9) + 1 if n_steps is None else n_steps
-        return self.sample(self.t0 + period * np.arange(total, dtype=np.float64))
-
-
-#: The rows of a Ruckig segment's recipe: the ``ruckig.InputParameter`` fields it was planned
-#: from (with its limits, minimum duration and control interface).
-_RECIPE_ROWS = (
-    "current_position",
-    "current_velocity",
-    "current_acceleration",
-    "target_position",
-    "target_velocity",
-    "target_acceleration",
-)
-
-
-def _ruckig_plan(rows: Float, min_duration: float, interface: int, limits: MotionLimits) -> Any:
-    """The Ruckig trajectory of a recipe (:meth:`Motion.append`)."""
-    rk = _ruckig()
-    n = rows.shape[1]
-    inp = rk.InputParameter(n)
-    inp.max_velocity = limits.velocity.tolist()
-    inp.max_acceleration = limits.acceleration.tolist()
-    inp.max_jerk = limits.jerk.tolist()
-    if interface == 1:
-        inp.control_interface = rk.ControlInterface.Velocity
-    for name, row in zip(_RECIPE_ROWS, rows.tolist(), strict=True):
-        setattr(inp, name, row)
-    inp.minimum_duration = None if math.isnan(min_duration) else min_duration
-    traj = rk.Trajectory(n)
-    result = rk.Ruckig(n).calculate(inp, traj)
-    if result not in (rk.Result.Working, rk.Result.Finished):
-        raise RuntimeError(f"Ruckig could not plan the segment: {result}")
-    return traj
-
-
-def ruckig_recipe(inp: Any) -> tuple[Float, float, int]:
-    """What :meth:`Motion.append` keeps of the ``ruckig.InputParameter`` a segment was planned
-    from (its limits are the motion's)."""
-    rows = np.array([getattr(inp, name) for name in _RECIPE_ROWS], dtype=np.float64)
-    md = inp.minimum_duration
-    interface = 1 if inp.control_interface == _ruckig().ControlInterface.Velocity else 0
-    return rows, math.nan if md is None else float(md), interface
-
-
-def brake(t0: float, state: tuple[Float, Float, Float], limits: MotionLimits) -> Motion:
-    """The motion from ``state`` (position, velocity, acceleration at ``t0``) to rest as fast
-    as ``limits`` allow (Ruckig's velocity interface, the joints stopping together; a state
-    beyond the limits is first brought within them, as Ruckig does)."""
-    p, v, a = (np.asarray(x, dtype=np.float64) for x in state)
-    motion = Motion(t0, (p, v, a), limits)
-    if not (np.any(v) or np.any(a)):
-        return motion
-    zeros = np.zeros(p.shape[0])
-    rows = np.array([p, v, a, p, zeros, zeros])
-    motion.append(_ruckig_plan(rows, math.nan, 1, limits), (rows, math.nan, 1))
-    return motion
-
-
 def spline_derivatives(
     t: Float, q: Float, start_velocity: Float | None = None
 ) -> tuple[Float, Float]:
@@ -372,6 +143,7 @@ def follow(
     velocities: Float | None = None,
     accelerations: Float | None = None,
     start: tuple[Float, Float, Float] | None = None,
+    bounds: tuple[Float, Float] | None = None,
 ) -> Motion:
     """The jerk-limited motion through timed samples, segment by segment.
 
@@ -416,6 +188,10 @@ def follow(
         start (or moving at ``start``'s velocity).
     start : (ndarray (n,), ndarray (n,), ndarray (n,)), optional
         The state at t[0].
+    bounds : (ndarray (n,), ndarray (n,)), optional
+        Joint position limits (lower, upper) the samples are within: no segment leaves them
+        where one that stays within exists (the quintics are checked at 33 points, Ruckig's
+        trajectories at their extrema; of the late ones, the one that leaves them least).
 
     Returns
     -------
@@ -434,7 +210,7 @@ def follow(
     # Where the quintic between two samples' states is within the limits and the motion is on
     # it, it is the motion (with the spline's derivatives: the spline's piece, its jerk
     # constant); elsewhere Ruckig.
-    on_spline = _KnotPieces(t, q, velocities, accelerations, limits)
+    on_spline = _KnotPieces(t, q, velocities, accelerations, limits, bounds)
     knot_v, knot_a = valid_target(velocities, accelerations, limits)
     otg = rk.Ruckig(n)
     inp = rk.InputParameter(n)
@@ -448,12 +224,14 @@ def follow(
 
     recipes: dict[int, tuple[Float, float, int]] = {}  # id of a trajectory -> its recipe
 
-    def plan_to(j: int, now: float, with_acceleration: bool = True) -> tuple[Any, float]:
-        """A trajectory from the current state (at ``now``) to sample j, never before its
-        time; and the time left."""
+    def plan_to(
+        j: int, now: float, with_acceleration: bool = True, stop: bool = False
+    ) -> tuple[Any, float]:
+        """A trajectory from the current state (at ``now``) to sample j (``stop``: at rest
+        there), never before its time; and the time left."""
         traj = rk.Trajectory(n)
         inp.target_position = q[j].tolist()
-        inp.target_velocity = zeros if j == last else knot_v[j].tolist()
+        inp.target_velocity = zeros if j == last or stop else knot_v[j].tolist()
         use_a = with_acceleration and j != last
         inp.target_acceleration = knot_a[j].tolist() if use_a else zeros
         left = float(t[j]) + delay - now
@@ -474,13 +252,25 @@ def follow(
     def beyond(traj: Any, i: int, j: int, p_now: Float, lenient: bool) -> float:
         """How far (rad) the trajectory to sample j swings beyond the range of the samples on
         the way from i and of where the motion is, give or take 1e-6 (``lenient``: and one
-        sample's step)."""
+        sample's step); plus a thousand times how far it leaves the joint limits."""
         way = np.vstack([p_now, q[i : j + 1]])
         tol = 1e-9 + 1e-6 * float(np.abs(way).max())
         slack = tol + (np.abs(np.diff(way, axis=0)).max(axis=0) if lenient else 0.0)
         lo, hi = way.min(axis=0) - slack, way.max(axis=0) + slack
-        over = [max(lo[k] - e.min, e.max - hi[k], 0.0) for k, e in enumerate(traj.position_extrema)]
-        return float(max(over))
+        extrema = traj.position_extrema
+        over = max(max(lo[k] - e.min, e.max - hi[k], 0.0) for k, e in enumerate(extrema))
+        if bounds is not None:  # beyond a joint limit counts a thousand times more
+            lower, upper = bounds[0] - BOUNDS_TOL, bounds[1] + BOUNDS_TOL
+            out = max(max(lower[k] - e.min, e.max - upper[k], 0.0) for k, e in enumerate(extrema))
+            # And where it ends: a state from which no stop keeps within them is one the rest
+            # of the motion cannot recover from.
+            if isinstance(traj, _Quintic):
+                e_p, e_v, e_a = traj.end
+            else:
+                e_p, e_v, e_a = (np.array(x) for x in traj.at_time(float(traj.duration)))
+            stop = _stop_overshoot(e_p[None], e_v[None], e_a[None], bounds, limits)
+            over += 1e3 * max(out, float(stop[0]))
+        return float(over)
 
     # Where the limits kept the motion from a sample's time, the rest of the samples are aimed
     # for as much later (``delay``): the motion keeps following the path and its timing
@@ -522,7 +312,11 @@ def follow(
         p_now = np.asarray(state[0])
         # Off the spline's pieces but on time: the quintic from here to a sample's state (the
         # next, or one of the window's with the time of all), if it is within the limits.
-        bridge = on_spline.bridge(window, now - delay, state, limits) if window[-1] < last else None
+        bridge = (
+            on_spline.bridge(window, now - delay, state, limits, bounds)
+            if window[-1] < last
+            else None
+        )
         if bridge is not None:
             j, piece = bridge
             state = arrived(i, j, piece)
@@ -543,15 +337,33 @@ def follow(
                 break
         if found is None:
             # Late: as fast as the limits allow, to the sample of the window it swings the
-            # least beyond the samples on the way for (the first that does not at all).
+            # least beyond the samples on the way for (the first that does not at all). With
+            # the sample's velocity, or (with bounds) stopping there where that swings less:
+            # samples that brake harder than the jerk limit lets the motion would otherwise be
+            # overshot by the whole braking distance (0.12 rad, out of the joint limits,
+            # measured on an online coaster plan whose path stops on lift3's limit).
             best = math.inf
             for j in window:
-                traj, _ = plan_to(j, now, False)
-                over = beyond(traj, i, j, p_now, False)
-                if over < best:
-                    best, found = over, (j, traj)
-                if over == 0.0:
+                for stop in (False, True) if bounds is not None else (False,):
+                    traj, _ = plan_to(j, now, False, stop)
+                    over = beyond(traj, i, j, p_now, False)
+                    if over < best:
+                        best, found = over, (j, traj)
+                    if over == 0.0:
+                        break
+                if best == 0.0:
                     break
+            if bounds is not None and best >= 1e3 * BOUNDS_TOL and any(state[1]):
+                # Every way on leaves a joint limit: brake to rest first, as hard as the
+                # limits allow (the least any motion from here can pass), then go on from
+                # there (from rest, stopping at a sample within the limits never leaves them).
+                rows = np.array([*state, state[0], zeros, zeros], dtype=np.float64)
+                stop = _ruckig_plan(rows, math.nan, 1, limits)
+                if beyond(stop, i, i, p_now, False) < best:
+                    motion.append(stop, (rows, math.nan, 1))
+                    end_p = stop.at_time(float(stop.duration))[0]
+                    state = (list(end_p), [0.0] * n, [0.0] * n)
+                    continue
         assert found is not None
         j, traj = found
         state = arrived(i, j, traj)
@@ -560,74 +372,22 @@ def follow(
     return motion
 
 
-class _Quintic:
-    """A motion segment from one state (position, velocity, acceleration) to another in a
-    given time: the quintic polynomial through both (``duration``, ``at_time``)."""
-
-    def __init__(
-        self,
-        start: tuple[Float, Float, Float] | None,
-        end: tuple[Float, Float, Float],
-        duration: float,
-        coefficients: Float | None = None,
-    ) -> None:
-        if coefficients is None:
-            assert start is not None
-            coefficients = _quintic_coefficients(start, end, np.full(1, duration))
-        self.c = coefficients  # (6, n)
-        self.duration = duration
-        self.end = end
-
-    def at_time(self, t: float) -> Float:
-        """Position, velocity and acceleration at ``t``: rows of a (3, n) array (one product
-        of the powers of t with the coefficients)."""
-        t2 = t * t
-        t3 = t2 * t
-        powers = np.array(
-            [
-                [1.0, t, t2, t3, t3 * t, t3 * t2],
-                [0.0, 1.0, 2.0 * t, 3.0 * t2, 4.0 * t3, 5.0 * t3 * t],
-                [0.0, 0.0, 2.0, 6.0 * t, 12.0 * t2, 20.0 * t3],
-            ]
-        )
-        return np.asarray(powers.dot(self.c), dtype=np.float64)
-
-    def end_state(self) -> tuple[list[float], list[float], list[float]]:
-        """Exactly the state it was built to end in."""
-        p, v, a = self.end
-        return list(p.tolist()), list(v.tolist()), list(a.tolist())
-
-
-def _quintic_coefficients(
-    start: tuple[Float, Float, Float], end: tuple[Float, Float, Float], h: Float
+def _quintics_within(
+    c: Float,
+    h: Float,
+    v1: Float,
+    a1: Float,
+    lim: MotionLimits,
+    bounds: tuple[Float, Float] | None = None,
 ) -> Float:
-    """Coefficients c_0..c_5 (leading axis) of the quintics from ``start`` to ``end`` (each a
-    (position, velocity, acceleration)) in times ``h`` (broadcast against them)."""
-    p0, v0, a0 = start
-    p1, v1, a1 = end
-    d = p1 - (p0 + v0 * h + 0.5 * a0 * h * h)
-    e = v1 - (v0 + a0 * h)
-    f = a1 - a0
-    return np.stack(
-        [
-            p0 + 0.0 * h,
-            v0 + 0.0 * h,
-            0.5 * a0 + 0.0 * h,
-            (10.0 * d - 4.0 * e * h + 0.5 * f * h * h) / h**3,
-            (-15.0 * d + 7.0 * e * h - f * h * h) / h**4,
-            (6.0 * d - 3.0 * e * h + 0.5 * f * h * h) / h**5,
-        ]
-    )
-
-
-def _quintics_within(c: Float, h: Float, v1: Float, a1: Float, lim: MotionLimits) -> Float:
     """Which quintics (coefficients ``c`` (6, m, n), durations ``h`` (m, 1), ending at velocity
     ``v1`` and acceleration ``a1`` (m, n)) stay within ``lim``: (m,) bool.
 
     Jerk and acceleration exactly (their extrema in closed form), velocity at 33 points of
     each. And where each ends, the velocity reached if the acceleration were ramped down at the
     jerk limit (what the next segment must be able to do, whatever it is): else a Ruckig
-    segment after it would overshoot the velocity limit.
+    segment after it would overshoot the velocity limit. With ``bounds`` (joint position
+    limits (lower, upper), each (n,)), positions within them at the same 33 points.
     """
     c3, c4, c5 = c[3], c[4], c[5]
     # jerk 6 c3 + 24 c4 s + 60 c5 s^2: at the ends and its vertex; acceleration at the ends
@@ -660,7 +420,64 @@ def _quintics_within(c: Float, h: Float, v1: Float, a1: Float, lim: MotionLimits
         & (np.abs(v1 + coast) <= lim.velocity)
         & np.isfinite(jerk)
     )
-    return np.asarray(within.all(axis=1))
+    ok = within.all(axis=1)
+    if bounds is not None:
+        pos = ((((c5 * s_v + c4) * s_v + c3) * s_v + c[2]) * s_v + c[1]) * s_v + c[0]
+        # Between two of the 33 points, a position passes the straight line through them by at
+        # most (largest |acceleration|) (spacing)^2 / 8: a bound, not an estimate.
+        gap = big * (h / 32.0) ** 2 / 8.0
+        ok &= (
+            (pos.min(axis=0) - gap >= bounds[0] - BOUNDS_TOL)
+            & (pos.max(axis=0) + gap <= bounds[1] + BOUNDS_TOL)
+        ).all(axis=1)
+        # Ending where a stop still keeps within them (a state the rest can recover from).
+        ok &= _stop_overshoot(pos[-1], v1 + 0.0 * pos[-1], a1 + 0.0 * pos[-1], bounds, lim) <= 0.0
+    return np.asarray(ok)
+
+
+def _stop_overshoot(
+    p: Float, v: Float, a: Float, bounds: tuple[Float, Float], limits: MotionLimits
+) -> Float:
+    """How far (rad) past a joint limit the hardest stop from each state goes (rows of p, v, a:
+    (m, n)): the largest over the joints of each row, 0 where every stop keeps within.
+
+    A bound on the stopping distance first (the acceleration ramped down at the jerk limit,
+    then braking at the acceleration limit, all at the speed reached); Ruckig's exact stop
+    (its velocity interface) only for the joints that bound does not clear."""
+    amax, jmax = limits.acceleration, limits.jerk
+    s = np.where(v != 0.0, np.sign(v), np.sign(a))
+    push = np.maximum(s * a, 0.0)  # acceleration still toward the motion's direction
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_ramp = np.where(np.isinf(jmax), 0.0, push / jmax)
+        v_top = np.abs(v) + np.where(np.isinf(jmax), 0.0, push * push / (2.0 * jmax))
+        t_brake = np.where(np.isinf(amax), 0.0, v_top / amax) + np.where(
+            np.isinf(jmax), 0.0, amax / jmax
+        )
+        far = np.where(np.isfinite(t_brake), v_top * (t_ramp + t_brake), np.inf)
+    room = np.where(s > 0, bounds[1] - p, np.where(s < 0, p - bounds[0], np.inf))
+    out = np.zeros(p.shape[0])
+    rows, cols = np.nonzero(far > room - BOUNDS_TOL)
+    if rows.size == 0:
+        return out
+    rk = _ruckig()
+    for r, k in zip(rows.tolist(), cols.tolist(), strict=True):
+        inp = rk.InputParameter(1)
+        inp.control_interface = rk.ControlInterface.Velocity
+        inp.max_velocity = [float(limits.velocity[k])]
+        inp.max_acceleration = [float(amax[k])]
+        inp.max_jerk = [float(jmax[k])]
+        inp.current_position = [float(p[r, k])]
+        inp.current_velocity = [float(v[r, k])]
+        inp.current_acceleration = [float(a[r, k])]
+        inp.target_velocity = [0.0]
+        inp.target_acceleration = [0.0]
+        traj = rk.Trajectory(1)
+        if rk.Ruckig(1).calculate(inp, traj) not in (rk.Result.Working, rk.Result.Finished):
+            out[r] = max(out[r], np.inf)
+            continue
+        e = traj.position_extrema[0]
+        out[r] = max(out[r], bounds[0][k] - BOUNDS_TOL - e.min, e.max - bounds[1][k] - BOUNDS_TOL)
+    return out
 
 
 class _KnotPieces:
@@ -677,14 +494,22 @@ class _KnotPieces:
     at 33 points of each piece, inside the margin.
     """
 
-    def __init__(self, t: Float, q: Float, v: Float, a: Float, limits: MotionLimits) -> None:
+    def __init__(
+        self,
+        t: Float,
+        q: Float,
+        v: Float,
+        a: Float,
+        limits: MotionLimits,
+        bounds: tuple[Float, Float] | None = None,
+    ) -> None:
         self.t = t
         self.state = (q, v, a)
         self.rows = [q.tolist(), v.tolist(), a.tolist()]  # exact, for comparing with a state
         h = np.diff(t)[:, None]
         c = _quintic_coefficients((q[:-1], v[:-1], a[:-1]), (q[1:], v[1:], a[1:]), h)
         self.c = c  # (6, T - 1, n)
-        self.feasible = _quintics_within(c, h, v[1:], a[1:], limits.scaled(SPLINE_MARGIN))
+        self.feasible = _quintics_within(c, h, v[1:], a[1:], limits.scaled(SPLINE_MARGIN), bounds)
 
     def bridge(
         self,
@@ -692,9 +517,10 @@ class _KnotPieces:
         now: float,
         state: tuple[list[float], list[float], list[float]],
         limits: MotionLimits,
+        bounds: tuple[Float, Float] | None = None,
     ) -> tuple[int, _Quintic] | None:
         """The first sample j of ``window`` the quintic from ``state`` (at ``now``) reaches on
-        time within ``limits``: (j, that quintic), or None."""
+        time within ``limits`` (and ``bounds``): (j, that quintic), or None."""
         js = np.array([j for j in window if self.t[j] > now + 1e-9], dtype=np.intp)
         if js.size == 0:
             return None
@@ -702,7 +528,7 @@ class _KnotPieces:
         h = (self.t[js] - now)[:, None]
         end = (self.state[0][js], self.state[1][js], self.state[2][js])
         c = _quintic_coefficients((p, v, a), end, h)
-        ok = np.flatnonzero(_quintics_within(c, h, end[1], end[2], limits))
+        ok = np.flatnonzero(_quintics_within(c, h, end[1], end[2], limits, bounds))
         if ok.size == 0:
             return None
         k = int(ok[0])

@@ -9,6 +9,13 @@ from __future__ import annotations
 from ._controller import Command, Controller
 from ._result import ReproductionResult
 from ._setup import ReachWarning
-from ._stream import CommandStream
+from ._stream import CommandStream, LimitViolation
 
-__all__ = ["Command", "CommandStream", "Controller", "ReachWarning", "ReproductionResult"]
+__all__ = [
+    "Command",
+    "CommandStream",
+    "Controller",
+    "LimitViolation",
+    "ReachWarning",
+    "ReproductionResult",
+]

@@ -41,6 +41,12 @@ class Command:
         The step of the skill's time grid it targets.
     limited : bool
         True if a velocity bound (or ``max_step``) shortened the step.
+    at_position_limit : ndarray of bool, shape (n,)
+        With motion limits: the joints the command stopped on a joint limit, where the motion
+        would have crossed it (after a push toward it: the brake could not stop in the room
+        left). Its velocity and acceleration there are 0; the acceleration and jerk this
+        forces is the stream's :attr:`~pbdkit.reproduction.CommandStream.limit_violations`.
+        All False without motion limits (the commands are clipped to the limits).
     held : bool
         True if the arm was more than ``max_lag`` steps behind the last target: the phase held
         and the command re-targets from the measured posture (a reference that runs through
@@ -71,6 +77,7 @@ class Command:
         acceleration: Float | None = None,
         phase: float | None = None,
         details: tuple[_Plan, int] | None = None,
+        at_position_limit: NDArray[np.bool_] | None = None,
     ) -> None:
         self.q = q
         self.index = index
@@ -79,6 +86,9 @@ class Command:
         self.velocity = velocity
         self.acceleration = acceleration
         self.phase = float(index) if phase is None else phase
+        self.at_position_limit = (
+            np.zeros(q.shape[0], dtype=bool) if at_position_limit is None else at_position_limit
+        )
         self.gripper = controller._gripper_at(index)
         self._ctrl = controller
         # The Jacobian the step was linearized with (None: f and J at q, when first needed).

@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 from .._rotations import log3
 from .._validation import check_array
 from ..data._placement import position_of, rotation_of
-from ..motion._limits import MotionLimits
-from ..motion._otg import Motion, brake
+from ..motion._limits import MotionLimits, RetimeWarning
+from ..motion._motion import Motion, brake
 from ..robots._protocols import KinematicModel
 from ._command import Command
 from ._constraints import Constraints
@@ -77,12 +77,16 @@ PLANNERS: tuple[PlannerKind, ...] = ("process", "inline")
 #: With the process planner: the hand-over of the first plans is predicted this far ahead (s),
 #: then from the planner's measured latencies (:meth:`Controller._lead`).
 FIRST_LEAD = 0.1
-#: The hand-over is predicted this many times the planner's longest recent latency ahead, plus
-#: :data:`LEAD_MARGIN` s.
+#: The hand-over is predicted this many times the planner's longest recent latency (per step
+#: planned, times the steps the new plan makes) ahead, plus :data:`LEAD_MARGIN` s.
 LEAD_FACTOR = 1.25
 LEAD_MARGIN = 0.005
 
 Float = NDArray[np.float64]
+
+
+#: The warnings a plan may raise, said again by the controller (:class:`PlanReply` notes).
+_WARNINGS: dict[str, type[Warning]] = {"RetimeWarning": RetimeWarning}
 
 
 class PlanFailedWarning(RuntimeWarning):
@@ -362,9 +366,7 @@ class Controller:
         if objects is not None:
             self._update_objects(objects)
         if self._timed is not None:
-            if self._timed.planner.kind == "inline":
-                return self._step_timed(q, self._timed)
-            return self._step_async(q, self._timed)
+            return self._step_timed(q, self._timed)
         last = self._last
         # Phase: advance while the arm follows (docs: "The online controller").
         lag = float((np.abs(q - last.q) / self._step_bound).max())
@@ -395,27 +397,6 @@ class Controller:
         self._last = _Targets(new, j, x_new, jac_new, axes_new if x_new is not None else None)
         return Command(self, new, j, limited, jac, held)
 
-    def _step_timed(self, q: Float, st: _Timed) -> Command:
-        """:meth:`step` with motion limits (:doc:`/reproduction`, "The online controller")."""
-        held = False
-        now = st.cycle * self.dt  # the time of the last command (of the measurement)
-        if st.cycle == 0:
-            # The first command starts from the measured posture, at rest.
-            self._replan(st, now, (q, np.zeros_like(q), np.zeros_like(q)), 0.0)
-        elif st.fault is None:
-            last = st.last  # the last command's state
-            lag = float((np.abs(q - last[0]) / self._step_bound).max())
-            if lag > self.max_lag:
-                # A push: plan again from the measured state, the phase where it was.
-                held = True
-                assert st.q_measured is not None
-                v = np.clip((q - st.q_measured) / self.dt, -st.velocity, st.velocity)
-                self._replan(st, now, (q, v, np.zeros_like(q)), st.phase)
-            elif st.moved:
-                self._replan(st, now, last, st.phase)
-        st.moved = False
-        return self._command(q, st, held)
-
     def _command(self, q: Float, st: _Timed, held: bool) -> Command:
         """The command at the next cycle: the motion's state then, and the phase of the plan
         in use (held where none is: before the first plan, braking after a push)."""
@@ -427,8 +408,9 @@ class Controller:
             # The new plan takes over (from its hand-over time on: the setpoints of a stream
             # before it, up to this command, still sample the motion before it).
             st.plan, st.handover = handover[1], None
-            st.active = True
-        p, v, a = st.last = st.motion.at(t)
+            st.active, st.braking = True, False
+        p, v, a, stopped = self._guard(*st.motion.at(t))
+        st.last = (p, v, a)
         plan = st.plan
         details: tuple[_Plan, int] | None = None
         limited = False
@@ -454,35 +436,14 @@ class Controller:
             a,
             phase=st.phase,
             details=details,
+            at_position_limit=stopped,
         )
 
-    def _replan(
-        self, st: _Timed, now: float, state: tuple[Float, Float, Float], phase: float
-    ) -> None:
-        """Plan from ``state`` (position, velocity, acceleration) at time ``now`` and
-        ``phase``, with the object positions known now, and follow it from now (inline)."""
-        q, v, a = state
-        objects = {k: o.copy() for k, o in self._objs.items()}
-        request = PlanRequest(st.generation, now, (q, v, a), phase, objects)
-        st.planned_objects = objects
-        st.planner.submit(request)
-        reply = st.planner.poll()
-        assert reply is not None
-        if reply.error is not None:
-            self._fault(st, now, reply.error, (q, v, a))
-            return
-        assert reply.motion is not None and reply.result is not None
-        if st.plan is not None:
-            st.replans += 1
-        st.motion = reply.motion
-        st.plan = _Plan.of(reply, objects)
-        st.active = True
-        st.last = (np.asarray(q), np.asarray(v), np.asarray(a))
-
-    # ------------------------------------------------------------------ the process planner
-    def _step_async(self, q: Float, st: _Timed) -> Command:
-        """:meth:`step` with motion limits, the plans made by the planner process: the
-        commands never wait for one (:doc:`/reproduction`, "Plans off the control loop")."""
+    # ------------------------------------------------------------------ with motion limits
+    def _step_timed(self, q: Float, st: _Timed) -> Command:
+        """:meth:`step` with motion limits (:doc:`/reproduction`, "The online controller"):
+        with the process planner, no call waits for a plan ("Plans off the control
+        loop")."""
         held = False
         now = st.cycle * self.dt
         motion = st.motion
@@ -496,14 +457,14 @@ class Controller:
         elif st.fault is None:
             lag = float((np.abs(q - st.last[0]) / self._step_bound).max())
             if lag > self.max_lag:
-                # A push: brake from the measured state, the phase held, and plan again from
-                # where the brake will be at the hand-over (a reply on its way is void).
+                # A push: brake from the measured state as hard as the limits allow, the phase
+                # held, and plan again from where the brake stops (a reply on its way is void).
                 held = True
                 assert st.q_measured is not None
                 v = np.clip((q - st.q_measured) / self.dt, -st.velocity, st.velocity)
                 st.motion = brake(now, (q, v, np.zeros_like(q)), st.plan_limits)
                 st.last = st.motion.at(now)
-                st.handover, st.active = None, False
+                st.handover, st.active, st.braking = None, False, True
                 st.generation += 1
                 st.want = True
         self._service(st, now)
@@ -519,25 +480,38 @@ class Controller:
             st.want, st.moved = True, False
         if st.want and st.pending is None and st.handover is None and st.fault is None:
             self._request(st, now)
+            if st.planner.kind == "inline":
+                self._receive(st, now)  # made in the request: it takes over now
+
+    def _steps_left(self, phase: float) -> float:
+        """The steps a plan from ``phase`` makes (its cost is about proportional to them)."""
+        return max(1.0, self._c.n_steps - phase)
 
     def _lead(self, st: _Timed) -> float:
-        """Seconds from a request to its hand-over: :data:`LEAD_FACTOR` times the planner's
-        longest latency of its last five plans, plus :data:`LEAD_MARGIN`; :data:`FIRST_LEAD`
-        before any."""
+        """Seconds from a request to its hand-over: 0 inline; else :data:`LEAD_FACTOR` times
+        the planner's longest latency per step of its last five plans, times the steps left,
+        plus :data:`LEAD_MARGIN` (a plan's cost is about proportional to the steps it makes: the
+        first, the whole skill, takes twice as long as one from halfway);
+        :data:`FIRST_LEAD` before any."""
+        if st.planner.kind == "inline":
+            return 0.0
         if not st.latencies:
             return FIRST_LEAD
-        return LEAD_FACTOR * max(st.latencies) + LEAD_MARGIN
+        return LEAD_FACTOR * max(st.latencies) * self._steps_left(st.phase) + LEAD_MARGIN
 
     def _request(self, st: _Timed, now: float) -> None:
         """Ask the planner for a plan taking over at a predicted hand-over time, from the state
         and phase the commands will be in then."""
         motion = st.motion
-        at_rest = motion.at_rest_after(now)
-        # At rest, the state is the same at any time: the plan starts whenever it is ready.
-        t0 = now if at_rest else now + self._lead(st)
+        t0 = now  # at rest, the state is the same at any time: the plan starts when ready
+        if not motion.at_rest_after(now):
+            t0 = now + self._lead(st)
+            if st.braking:  # after a push, from where the brake stops
+                t0 = max(t0, motion.end)
         p, v, a = motion.at(t0)
-        if at_rest:
+        if motion.at_rest_after(t0):
             v, a = np.zeros_like(p), np.zeros_like(p)
+        p, v, a, _ = self._guard(p, v, a)
         phase = st.plan.phase_at(t0)[0] if st.plan is not None and st.active else st.phase
         objects = {k: o.copy() for k, o in self._objs.items()}
         st.planned_objects = objects
@@ -555,7 +529,7 @@ class Controller:
         assert st.pending is not None
         request, asked = st.pending
         st.pending = None
-        st.latencies.append(now - asked)
+        st.latencies.append((now - asked) / self._steps_left(request.phase))
         if reply.generation == -1:  # the planner process is gone
             assert reply.error is not None
             self._fault(st, now, reply.error)
@@ -566,6 +540,8 @@ class Controller:
         if reply.error is not None:
             self._fault(st, now, reply.error)
             return
+        for category, message in reply.notes:  # said where the plan was made: said here too
+            warnings.warn(message, _WARNINGS.get(category, RuntimeWarning), stacklevel=4)
         assert reply.motion is not None and reply.result is not None
         t0 = reply.t0
         if t0 < now - 1e-9:
@@ -580,6 +556,18 @@ class Controller:
         assert reply.motion is not None
         st.handover = (reply.t0, plan, reply.motion)
         st.motion = _Handover(st.motion, reply.motion, reply.t0)
+
+    def _guard(
+        self, p: Float, v: Float, a: Float
+    ) -> tuple[Float, Float, Float, NDArray[np.bool_] | None]:
+        """A state of the motion within the joint limits: a joint beyond one stopped on it
+        (velocity and acceleration 0), and which joints were (None: none)."""
+        lower, upper = self._lower, self._upper
+        out = (p < lower) | (p > upper)
+        if not out.any():
+            return p, v, a, None
+        p = np.minimum(np.maximum(p, lower), upper)
+        return p, np.where(out, 0.0, v), np.where(out, 0.0, a), out
 
     def _fault(
         self,

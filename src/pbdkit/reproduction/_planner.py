@@ -7,7 +7,8 @@ A plan is the reproduction within the motion limits from a state along the way
 loop. :class:`ProcessPlanner` makes them in a separate process, so that the loop never waits:
 
 - The process is a new interpreter (``python -c``), started once per controller, at lower
-  priority (``os.nice``), BLAS on one thread, the robot and the skill's run set-up sent once. Not
+  priority (``os.nice`` and ``SCHED_IDLE``: it runs where a core is otherwise idle, and never
+  preempts the loop), BLAS on one thread, the robot and the skill's run set-up sent once. Not
   ``multiprocessing``'s spawn or forkserver: both import the user's main script again in the
   worker, which runs a script without an ``if __name__ == "__main__"`` guard a second time. Not
   a thread: the GIL holds the loop for whole numpy calls (a numpy thread beside a 1 kHz loop
@@ -15,7 +16,7 @@ loop. :class:`ProcessPlanner` makes them in a separate process, so that the loop
 - A request carries the state the commands will be in at a predicted hand-over time, the phase
   there and the object positions; the reply, the plan (a
   :class:`~pbdkit.reproduction.ReproductionResult`) and its motion (a picklable
-  :class:`pbdkit.motion._otg.Motion`), or a one-line reason it could not be made.
+  :class:`pbdkit.motion._motion.Motion`), or a one-line reason it could not be made.
 - A thread of the loop's process reads the replies off the socket (the read releases the GIL)
   and unpickles them (0.1-0.5 ms for the coaster's plan, while the loop sleeps between its
   calls, most of the time): the loop's poll only takes a reply that is ready.
@@ -37,6 +38,7 @@ import subprocess
 import sys
 import threading
 import time
+import warnings
 import weakref
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -47,7 +49,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..motion._limits import MotionLimits
-from ..motion._otg import Motion, follow
+from ..motion._motion import Motion
+from ..motion._otg import BOUNDS_TOL, follow
 from ..robots._protocols import KinematicModel
 from ._result import ReproductionResult
 from ._setup import RunSetup
@@ -97,7 +100,9 @@ class PlanRequest:
 @dataclass(frozen=True)
 class PlanReply:
     """A plan made for a :class:`PlanRequest`: its reproduction and motion (from ``t0``), or
-    ``error`` (one line) where none could be made; ``seconds``: how long it took."""
+    ``error`` (one line) where none could be made; ``seconds``: how long it took; ``notes``:
+    the warnings making it raised (their category's name and message: the controller warns
+    them again in its own process)."""
 
     generation: int
     t0: float
@@ -105,6 +110,17 @@ class PlanReply:
     motion: Motion | None
     error: str | None
     seconds: float
+    notes: tuple[tuple[str, str], ...] = ()
+
+
+#: A plan whose motion would leave the joint limits is timed again with the steps around where
+#: it does this much slower each time (the follower then has room to follow a path that
+#: brakes hard onto a joint limit), up to :data:`SLOWER_TRIES` times; the steps within
+#: :data:`SLOWER_SPAN` s of the excursion, times the try's number (every step after half the
+#: tries).
+SLOWER = 1.25
+SLOWER_TRIES = 8
+SLOWER_SPAN = 0.25
 
 
 def make_plan(
@@ -117,29 +133,95 @@ def make_plan(
 ) -> PlanReply:
     """The plan of a request (in any process): Table II from the state at the phase, timed
     within ``limits`` (:func:`~pbdkit.reproduction._timing.timed_path`), and the motion
-    through it from the state within ``plan_limits``."""
+    through it from the state within ``plan_limits`` and the joint limits.
+
+    A path that brakes onto a joint limit harder than the jerk limit lets a motion follow can
+    only be followed by passing the limit (its samples are within the limits; the motion
+    through them is late and overshoots): the steps around it are then given more time
+    (:data:`SLOWER`), until the motion stays within the joint limits.
+    """
     start = time.perf_counter()
-    q, v, a = request.state
+    q = request.state[0]
     setup = dataclasses.replace(run, objects=dict(request.objects), theta0=q)
+    # From where the request starts: a start beyond a limit is the controller's guard's.
+    lower = np.minimum(run.lower, q) - BOUNDS_TOL
+    upper = np.maximum(run.upper, q) + BOUNDS_TOL
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        try:
+            res, motion = _plan_within_bounds(
+                robot, setup, limits, plan_limits, dt, request, (lower, upper)
+            )
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+            took = time.perf_counter() - start
+            return PlanReply(request.generation, request.t0, None, None, one_line(err), took)
+    took = time.perf_counter() - start
+    notes = tuple(dict.fromkeys((w.category.__name__, str(w.message)) for w in seen))
+    return PlanReply(request.generation, request.t0, res, motion, None, took, notes)
+
+
+def _plan_within_bounds(
+    robot: KinematicModel,
+    setup: RunSetup,
+    limits: MotionLimits,
+    plan_limits: MotionLimits,
+    dt: float,
+    request: PlanRequest,
+    within: tuple[Float, Float],
+) -> tuple[ReproductionResult, Motion]:
+    """:func:`make_plan`'s reproduction and motion, the steps around where the motion would
+    leave ``within`` (the joint limits, or the start where it is beyond them) slowed."""
+    q, v, a = request.state
     moving = bool(np.any(v))
-    try:
+    bounds = (setup.lower, setup.upper)
+    slower: Float | None = None
+    for attempt in range(SLOWER_TRIES + 1):
         res = timed_path(
-            robot, setup, limits, dt, phase=request.phase, velocity=v if moving else None
+            robot,
+            setup,
+            limits,
+            dt,
+            phase=request.phase,
+            velocity=v if moving else None,
+            slower=slower,
         )
         assert res.times is not None
+        velocities, accelerations = _at_rest_on_limits(res, bounds, moving)
+        t = request.t0 + res.times
         motion = follow(
-            request.t0 + res.times,
+            t,
             res.joints,
             plan_limits,
-            velocities=res.velocities,
-            accelerations=res.accelerations,
+            velocities=velocities,
+            accelerations=accelerations,
             start=(q, v, a),
+            bounds=bounds,
         )
-    except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
-        took = time.perf_counter() - start
-        return PlanReply(request.generation, request.t0, None, None, one_line(err), took)
-    took = time.perf_counter() - start
-    return PlanReply(request.generation, request.t0, res, motion, None, took)
+        out = motion.out_of(*within)
+        if not out:
+            break
+        # Around each excursion, wider at every try (the whole path after half of them).
+        span = SLOWER_SPAN * (attempt + 1) if 2 * attempt < SLOWER_TRIES else math.inf
+        steps = np.zeros(t.shape[0] - 1, dtype=bool)
+        for t_a, t_b in out:
+            steps |= (t[1:] >= t_a - span) & (t[:-1] <= t_b + span)
+        slower = np.ones(steps.shape[0]) if slower is None else slower
+        slower = np.where(steps, slower * SLOWER, slower)
+    return res, motion
+
+
+def _at_rest_on_limits(
+    res: ReproductionResult, bounds: tuple[Float, Float], moving: bool
+) -> tuple[Float, Float]:
+    """The samples' velocities and accelerations (the spline's), 0 for a joint on a joint limit
+    at a sample (Table II clips a path there): the spline through a path that arrives at a
+    limit and stays overshoots it, and so would a motion through its derivatives."""
+    assert res.velocities is not None and res.accelerations is not None
+    on = (res.joints <= bounds[0] + BOUNDS_TOL) | (res.joints >= bounds[1] - BOUNDS_TOL)
+    on[0] &= not moving  # a start that moves keeps its velocity
+    if not on.any():
+        return res.velocities, res.accelerations
+    return np.where(on, 0.0, res.velocities), np.where(on, 0.0, res.accelerations)
 
 
 class Planner:
@@ -257,6 +339,10 @@ class ProcessPlanner(Planner):
             self.close()
             raise RuntimeError(f"the planner process could not start: {status[1]}")
         self.pid: int = self._proc.pid
+        # The motions come back with Ruckig segments this process plans again where it first
+        # samples one: import Ruckig now, not in the loop (4 ms, measured).
+        import ruckig  # noqa: F401
+
         self._reader = threading.Thread(target=self._read, name="pbdkit-planner", daemon=True)
         self._reader.start()
 
@@ -307,6 +393,11 @@ def serve(fd: int) -> None:
     try:
         _, robot, run, limits, plan_limits, dt, delay, nice = pickle.loads(conn.recv_bytes())
         os.nice(nice)
+        # SCHED_IDLE: the loop's process is never preempted by it, not even by its wake-up
+        # when a request comes (under the default policy, at niceness +5 or +10, that held
+        # the call that sent the request for a whole time slice: 3.7 ms, measured).
+        with contextlib.suppress(AttributeError, OSError):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
         # A first plan, from the start, warms what the first plan would pay for (imports,
         # caches): the first reply comes in the time of the others.
         zeros = np.zeros_like(run.theta0)

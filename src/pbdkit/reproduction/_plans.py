@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..motion._limits import LIMIT_SAFETY, MotionLimits
-from ..motion._otg import Motion
+from ..motion._motion import Motion
 from ._planner import Planner, PlanReply, PlanRequest
 from ._result import ReproductionResult
 
@@ -89,6 +89,7 @@ class _Timed:
         # objects of the last plan asked for, and a plan waiting for its hand-over time.
         self.plan: _Plan | None = None
         self.active = False
+        self.braking = False  # after a push, until the next plan takes over
         self.planned_objects: dict[str, Float] | None = None
         self.handover: tuple[float, _Plan, Motion] | None = None
         # The motion the commands are samples of (from the first command's time, 0), and how
@@ -105,7 +106,8 @@ class _Timed:
         self.fault: str | None = None
         # The process planner: the request on its way (and the cycle it was made at), whether
         # one is wanted, the number of the state plans start from (a push starts a new one),
-        # and the last latencies (s of the controller's clock, from a request to its reply).
+        # and the last latencies (s of the controller's clock from a request to its reply, per
+        # step the plan made).
         self.pending: tuple[PlanRequest, float] | None = None
         self.want = False
         self.generation = 0

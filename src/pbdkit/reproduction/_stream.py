@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -12,12 +14,12 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import check_array
-from ..motion._limits import MotionLimits
+from ..motion._limits import MotionLimits, last_differences
 from ._command import Command
 from ._planner import Planner, PlannerKind
 from ._plans import _Timed
 
-__all__ = ["CommandStream"]
+__all__ = ["CommandStream", "LimitViolation"]
 
 Float = NDArray[np.float64]
 
@@ -56,6 +58,31 @@ class _Controller(Protocol):
 
     def _service(self, st: _Timed, now: float) -> None: ...
 
+    def _guard(
+        self, p: Float, v: Float, a: Float
+    ) -> tuple[Float, Float, Float, NDArray[np.bool_] | None]: ...
+
+
+@dataclass(frozen=True)
+class LimitViolation:
+    """A setpoint whose divided difference exceeds a motion limit because a joint was stopped
+    on its position limit (:attr:`CommandStream.limit_violations`).
+
+    Attributes
+    ----------
+    time : float
+        The setpoint's time (s from the stream's start, one period before the first setpoint).
+    joint : int
+    quantity : {"velocity", "acceleration", "jerk"}
+    ratio : float
+        Over the limit (> 1).
+    """
+
+    time: float
+    joint: int
+    quantity: str
+    ratio: float
+
 
 class CommandStream:
     """Setpoints at a fast rate following a :class:`Controller`'s plans (``ctrl.stream(rate)``).
@@ -64,10 +91,12 @@ class CommandStream:
     setpoint. The controller is stepped at its cycles (every ``ctrl.dt``), with the measured
     posture and the object positions given since, before any setpoint after that cycle is
     given. The setpoints are samples of the motion the controller follows (its commands are
-    samples of the same motion every ``ctrl.dt``: :class:`pbdkit.motion._otg.Motion`), so they are
-    one continuous jerk-limited motion, through its re-plans, consecutive ones within the limits at
-    this rate. A held command (:attr:`Command.held`: a push) restarts them from the measured
-    state.
+    samples of the same motion every ``ctrl.dt``: :class:`pbdkit.motion._motion.Motion`), so
+    they are one continuous jerk-limited motion, through its re-plans, consecutive ones within
+    the limits at this rate, and within the joint limits. A held command (:attr:`Command.held`:
+    a push) restarts them from the measured state, braking as hard as the limits allow; a joint
+    the brake cannot stop before its limit is stopped on it (:attr:`at_position_limit`, and the
+    excess that forces in :attr:`limit_violations`).
 
     Call ``m`` (from 0) returns the setpoint for ``(m + 1) / rate_hz`` s after the first call:
     the motion starts at rest at the posture measured at the first call, one period before the
@@ -101,8 +130,16 @@ class CommandStream:
     rate : float
     velocity, acceleration : ndarray, shape (n,)
         Of the last setpoint (e.g. as a servo's velocity feed-forward).
-    command : Command or None
-        The controller's last command.
+    command, last_command : Command or None
+        The controller's last command (the same object). Its ``at_position_limit`` also marks
+        the joints a setpoint since was stopped on a joint limit.
+    at_position_limit : ndarray of bool, shape (n,)
+        The joints the last setpoint stopped on a joint limit (the motion would have crossed
+        it: a push toward it that the brake could not stop in the room left).
+    limit_violations : list of LimitViolation
+        Each velocity, acceleration or jerk excess a stop on a joint limit forced (divided
+        differences of consecutive setpoints at this rate): the only excess the setpoints
+        have. Precedence: joint position limits, then velocity, then jerk, then acceleration.
     """
 
     def __init__(
@@ -139,6 +176,21 @@ class CommandStream:
         self._state: tuple[Float, Float, Float] | None = None
         self._pending: dict[str, Float] = {}
         self.command: Command | None = None
+        n = controller._lower.shape[0]
+        self.at_position_limit = np.zeros(n, dtype=bool)
+        self.limit_violations: list[LimitViolation] = []
+        # The last four setpoints, and the ticks since one was stopped on a limit (the
+        # divided differences are checked while one is in their window).
+        self._recent: deque[Float] = deque(maxlen=4)
+        self._since_stop = 4
+        self._started = False  # the first setpoint was given (its rest before it counted)
+        limits = controller.limits
+        self._bounds = (limits.velocity, limits.acceleration, limits.jerk)
+
+    @property
+    def last_command(self) -> Command | None:
+        """The controller's last command (:attr:`command`)."""
+        return self.command
 
     @property
     def done(self) -> bool:
@@ -197,6 +249,9 @@ class CommandStream:
                 self._pending = {}
             self.command = ctrl.step(q)
             self._cycles += 1
+            if self.command.held:  # a push: the setpoints restart from the measured state
+                self._recent.clear()
+                self._started = True
         st = self._timed
         if st.planner.kind == "process" and self._cycles > 0:
             # Between the controller's cycles too: a moved object is planned for, and a plan
@@ -206,6 +261,32 @@ class CommandStream:
                 self._pending = {}
             ctrl._service(st, self._ticks * self.period)
         self._ticks += 1
-        p, v, a = self._timed.motion.at(t)
+        p, v, a, stopped = ctrl._guard(*self._timed.motion.at(t))
         self._state = (p, v, a)
+        if not self._started:  # at rest at the first posture before the first setpoint
+            self._recent.extend([st.motion.at(0.0)[0]] * 3)
+            self._started = True
+        self._recent.append(p)
+        if stopped is not None:
+            self._since_stop = 0
+            self.at_position_limit = stopped
+            if self.command is not None:
+                self.command.at_position_limit |= stopped
+        else:
+            self._since_stop += 1
+            if self.at_position_limit.any():
+                self.at_position_limit = np.zeros_like(self.at_position_limit)
+        if self._since_stop < 4 and len(self._recent) == 4:
+            self._check_forced(t)
         return p.copy()
+
+    def _check_forced(self, t: float) -> None:
+        """Record the excess of the last setpoints' divided differences (a stop on a joint
+        limit in their window)."""
+        diffs = last_differences(list(self._recent), self.period)
+        for quantity, d, lim in zip(
+            ("velocity", "acceleration", "jerk"), diffs, self._bounds, strict=True
+        ):
+            ratio = np.abs(d) / lim
+            for j in np.flatnonzero(ratio > 1.0 + 1e-9):
+                self.limit_violations.append(LimitViolation(t, int(j), quantity, float(ratio[j])))

@@ -54,6 +54,7 @@ def timed_path(
     theta: Float | None = None,
     phase: float = 0.0,
     velocity: Float | None = None,
+    slower: Float | None = None,
 ) -> ReproductionResult:
     """The reproduction within motion limits (:doc:`/reproduction`, "Motion limits and
     lead-in"), from the start or from a state along the way.
@@ -62,7 +63,9 @@ def timed_path(
     ``run.theta0``) to the skill's first posture (:func:`first_posture`), then Table II from
     there. Along the way (what the online controller re-plans from): Table II from ``theta``
     at ``phase`` (steps floor(phase) + 1 .. T - 1 follow), the path starting at ``velocity``
-    (rad/s). Either way the samples are timed by :func:`pbdkit.motion._limits.retime` (within
+    (rad/s). ``slower``: a factor (>= 1) on the nominal duration of each of the path's steps
+    (the online controller's plans where the motion would otherwise leave a joint limit).
+    Either way the samples are timed by :func:`pbdkit.motion._limits.retime` (within
     ``limits`` times :data:`pbdkit.motion._limits.LIMIT_SAFETY`, at rest at the end), and their
     velocities and accelerations are those of the cubic spline through them at those times.
 
@@ -114,6 +117,8 @@ def timed_path(
     nominal = np.full(joints.shape[0] - 1, float(dt))
     if n_lead:
         nominal[:n_lead] = lead_dt
+    if slower is not None:
+        nominal = nominal * slower
     h = retime(joints, nominal, plan, start_velocity=v0)
     times = times_from_durations(h)
     limited = np.concatenate([[False], h > nominal * (1.0 + 1e-9)])

@@ -360,7 +360,7 @@ def _servo_motion(
     n_steps: int | None = None,
 ) -> tuple[Float, Float, Float]:
     """:func:`servo_stream`'s targets (limits given) and when the motion reaches each sample
-    (:attr:`pbdkit.motion._otg.Motion.sample_times`: later than t where the limits kept it
+    (:attr:`pbdkit.motion._motion.Motion.sample_times`: later than t where the limits kept it
     behind)."""
     motion = follow(
         t,
