@@ -330,6 +330,7 @@ def main(out: Path) -> None:
     res = skill.reproduce({"mug": mug}, q0=START)
     trajectory = out / "trajectory"
     t = skill.times(res)
+    limits = MotionLimits.from_robot(robot, robot.n_joints)  # Franka's published limits
     pbdkit.write_trajectory_bag(
         trajectory,
         t,
@@ -338,8 +339,8 @@ def main(out: Path) -> None:
         gripper=res.gripper,
         velocities=res.velocities,
         accelerations=res.accelerations,
+        limits=limits,  # checked as the arm checks its stream: refused rather than written
     )
-    limits = MotionLimits.from_robot(robot, robot.n_joints)  # Franka's published limits
     offline = motion_peaks(t, res.joints, limits)
 
     # 6. Online: the skill in the arm's 1 kHz loop, from "ready", every setpoint checked.

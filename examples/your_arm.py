@@ -18,10 +18,12 @@ Every step a user of another arm takes, on a 4-DOF arm this script describes its
    send the next target. Your driver replaces ``ServoArm`` (a simulated arm whose servos lag
    behind their references).
 
-The limits the skill keeps are the arm's: here the URDF's velocity limits only. Give
-``Robot.from_urdf`` your arm's acceleration and jerk limits too (``joint_limits=`` a MoveIt /
-ros2_control ``joint_limits.yaml``) and the trajectory and the commands keep those as well
-(``panda_from_bags.py`` runs a Panda within Franka's, streamed at 1 kHz).
+The limits the skill keeps are the arm's: here the URDF's velocity limits, and, as a URDF has
+no field for them, acceleration and jerk limits pbdkit derives from those (a = v / 0.25 s,
+j = a / 0.1 s; a ``DefaultLimitsWarning`` says so). Give ``Robot.from_urdf`` your arm's own
+(``joint_limits=`` a MoveIt / ros2_control ``joint_limits.yaml``) and the trajectory and the
+commands keep those instead (``panda_from_bags.py`` runs a Panda within Franka's, streamed at
+1 kHz).
 
 The task: pick a cup and put it into a bin; cup and bin are somewhere else each time.
 """
@@ -156,6 +158,7 @@ def main(out: Path) -> None:
         gripper=res.gripper,
         velocities=res.velocities,
         accelerations=res.accelerations,
+        limits=skill.motion_limits(),  # checked against the limits it was timed within
     )
 
     # Online: one command per ctrl.dt from the measured joints (your loop runs at that rate).

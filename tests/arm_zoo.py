@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from pbdkit import Robot, Skill
 from pbdkit.datasets import ReachGraspReturn, reach_grasp_return
+from pbdkit.motion._limits import MotionLimits, with_defaults
 
 ARMS_DIR = Path(__file__).parent / "data" / "arms"
 NARROW, WIDE = 0.15, 0.40  # side of the square of placements (m): 5-20 cm and 20-56 cm apart
@@ -34,7 +35,24 @@ class Arm:
     spreads: tuple[float, ...]  # the placement squares it reaches
 
     def robot(self) -> Robot:
-        return Robot.from_urdf(ARMS_DIR / self.urdf, tip=self.tip)
+        """The arm from its URDF, with explicit acceleration and jerk limits: pbdkit's defaults
+        for an arm without them (a = v / 0.25 s, j = a / 0.1 s), given as a joint_limits file
+        would, so that no DefaultLimitsWarning fires (issue 35)."""
+        bare = Robot.from_urdf(ARMS_DIR / self.urdf, tip=self.tip)
+        limits = with_defaults(MotionLimits.from_robot(bare, bare.n_joints), warn=False)
+        names = bare.joint_names
+        table = {
+            name: {
+                "has_acceleration_limits": True,
+                "max_acceleration": float(limits.acceleration[i]),
+                "has_jerk_limits": True,
+                "max_jerk": float(limits.jerk[i]),
+            }
+            for i, name in enumerate(names)
+        }
+        return Robot.from_urdf(
+            ARMS_DIR / self.urdf, tip=self.tip, joint_limits={"joint_limits": table}
+        )
 
     def demos(self, robot: Robot, spread: float, seed: int) -> ReachGraspReturn:
         return reach_grasp_return(robot, self.center, self.home, spread=spread, seed=seed)

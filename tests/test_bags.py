@@ -32,6 +32,7 @@ from pbdkit.apps._cli import app
 from pbdkit.data import check_trajectory_bag
 from pbdkit.data._bag_write import write_demonstration_bag
 from pbdkit.data._placement import is_pose, position_of, rotation_of
+from pbdkit.motion._limits import MotionLimits
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # ROS time of the first joint state in the hand-written bags (ns)
@@ -303,7 +304,13 @@ def test_trajectory_bag_holds_the_reproduction(
     times = skill.times(res)
     path = tmp_path / "trajectory"
     write_trajectory_bag(
-        path, times, res.joints, robot.joint_names, gripper=res.gripper, storage=storage
+        path,
+        times,
+        res.joints,
+        robot.joint_names,
+        gripper=res.gripper,
+        storage=storage,
+        limits=MotionLimits.from_robot(robot, 5),  # the Katana's, the reproduction's timing's
     )
     assert not list(tmp_path.glob(".*"))  # the temporary directory is gone
     with AnyReader([path], default_typestore=TS) as reader:
@@ -355,6 +362,7 @@ def test_trajectory_bag_carries_the_timing_velocities_and_accelerations(
         velocities=res.velocities,
         accelerations=res.accelerations,
         storage=storage,
+        limits=MotionLimits.from_robot(robot, 5),
     )
     ((_, msg),) = _raw(path, "/joint_trajectory")
     vel, acc = _derivatives(msg)
@@ -371,13 +379,48 @@ def test_trajectory_bag_with_velocities_alone(tmp_path: Path, robot: Robot) -> N
     rng = np.random.default_rng(3)
     q, v = rng.normal(size=(4, 5)), rng.normal(size=(4, 5)) * 1e-7
     v[1, 2] = -0.0
+    unlimited = MotionLimits.from_robot(robot, 5, velocity=None, acceleration=None, jerk=None)
     write_trajectory_bag(
-        tmp_path / "v", [0.0, 0.1, 0.25, 0.5], q, robot.joint_names, velocities=v.tolist()
+        tmp_path / "v",
+        [0.0, 0.1, 0.25, 0.5],
+        q,
+        robot.joint_names,
+        velocities=v.tolist(),
+        limits=unlimited,  # checked against none: written as given
     )
     ((_, msg),) = _raw(tmp_path / "v", "/joint_trajectory")
     np.testing.assert_array_equal(np.stack([p.velocities for p in msg.points]), v)
     assert np.signbit(msg.points[1].velocities[2])
     assert all(len(p.accelerations) == 0 for p in msg.points)
+
+
+def test_trajectory_bag_refuses_a_jump(tmp_path: Path, skill: Skill, robot: Robot) -> None:
+    # Issue 35: a URDF-only arm's reproduction went from rest to speed in one sample and was
+    # written without a word. Without limits= the bag is checked against those an arm without
+    # any is assumed to have (from the trajectory's own top speed); with them, against them.
+    res = skill.reproduce({"glass": [0.47, 0.18, 0.175], "coaster": [0.49, -0.17, 0.006]})
+    times = skill.times(res)
+    katana = MotionLimits.from_robot(robot, 5)
+    write_trajectory_bag(tmp_path / "ok", times, res.joints, robot.joint_names, limits=katana)
+    # The same postures at one step per 10 ms: from rest to speed in one step.
+    fast = 0.01 * np.arange(len(times))
+    for limits in (None, katana):
+        with pytest.raises(
+            ValueError, match=r"exceeds the limit.* on '.*': (velocity|acceleration)"
+        ):
+            write_trajectory_bag(
+                tmp_path / "jump", fast, res.joints, robot.joint_names, limits=limits
+            )
+        with pytest.raises(ValueError, match="exceeds"):
+            check_trajectory_bag(fast, res.joints, robot.joint_names, limits=limits)
+    assert not (tmp_path / "jump").exists()
+    # A step from rest at the first point: refused without limits too.
+    q = np.zeros((20, 5))
+    q[10:, 1] = 0.1
+    with pytest.raises(
+        ValueError, match=r"assumed for an arm without one on 'lift1': acceleration"
+    ):
+        write_trajectory_bag(tmp_path / "step", 0.01 * np.arange(20), q, robot.joint_names)
 
 
 # ----------------------------------------------------------------------------- object sources

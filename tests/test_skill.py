@@ -31,7 +31,7 @@ from synthetic_teacher import (
 import pbdkit
 from pbdkit._defaults import MAX_COMPONENTS
 from pbdkit.data._demonstration import Demonstration, LimitWarning, save_demonstrations
-from pbdkit.motion._limits import MotionLimits, count_reversals, motion_peaks
+from pbdkit.motion._limits import DefaultLimitsWarning, MotionLimits, count_reversals, motion_peaks
 from pbdkit.prob import SelectionWarning
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.reproduction._setup import ReachWarning
@@ -826,3 +826,30 @@ def test_learn_aligns_in_time_when_asked_and_says_so(
     assert Skill.load(tmp_path / "aligned.npz").aligned_ == record
     with pytest.raises(ValueError, match=r"align must be True, False or 'auto', got 'yes'"):
         Skill.learn(demos, robot, align="yes")  # type: ignore[arg-type]
+
+
+def test_an_arm_without_acceleration_limits_gets_defaults_and_a_warning(
+    robot: Robot, demos: list[Demonstration]
+) -> None:
+    # Issue 35: a URDF has no acceleration or jerk field, and a URDF-only arm's reproduction
+    # went from rest to speed in one sample (264-556 rad/s^2 on the iiwa) without a word.
+    inf = np.full(5, np.inf)
+    urdf_only = KinematicOnly(robot, acceleration_limit=inf, jerk_limit=inf)
+    skill = Skill.learn(demos, urdf_only, n_steps=N_STEPS, random_state=0)  # type: ignore[arg-type]
+    glass, _ = unseen_glass(demos)
+    with pytest.warns(DefaultLimitsWarning, match=r"pan, lift1, lift2 and 2 more .*joint_limits"):
+        res = skill.reproduce({"glass": glass})
+    v = robot.velocity_limit
+    assumed = MotionLimits(v, v / 0.25, v / 0.25 / 0.1)
+    times = skill.times(res)
+    assert motion_peaks(times, res.joints, assumed).worst <= 1.0 + 1e-9
+    # Given explicitly (as a joint_limits.yaml would): the same timing, no warning.
+    quiet = skill.reproduce(
+        {"glass": glass}, acceleration_limit=assumed.acceleration, jerk_limit=assumed.jerk
+    )
+    np.testing.assert_array_equal(skill.times(quiet), times)
+    # Acceleration limits without velocity limits: refused for timed motion.
+    bare = KinematicOnly(robot, velocity_limit=inf)
+    unclocked = Skill.learn(demos, bare, n_steps=N_STEPS, random_state=0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="has acceleration or jerk limits but no velocity limit"):
+        unclocked.reproduce({"glass": glass})

@@ -84,11 +84,17 @@ class BagTiming(NamedTuple):
 
 def bag_extras(skill: Skill, res: ReproductionResult) -> dict[str, Any]:
     """The gripper, velocities and accelerations of the trajectory bag of `reproduce`."""
+    from ..motion._limits import MotionLimits, with_defaults
+
+    declared = MotionLimits.from_robot(skill.robot, skill.n_joints)
     return {
         "gripper": res.gripper if skill.has_gripper else None,
         # Velocities and accelerations of the timing (None without limits: positions only).
         "velocities": res.velocities,
         "accelerations": res.accelerations if res.velocities is not None else None,
+        # Checked against the limits it was timed within (none declared: the bag's check
+        # refuses a jump).
+        "limits": with_defaults(declared, warn=False) if declared.any else None,
     }
 
 

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from .._rotations import quaternion_from_matrix
 from .._validation import check_array, check_positive_float
+from ..motion._limits import PAD_REST, MotionLimits, divided_differences, with_defaults
 from ._demonstration import Demonstration
 from ._placement import position_of, rotation_of
 from ._ros import _NS, GRIPPER_THRESHOLD, JOINT_STATE_TYPE, TRAJECTORY_TYPE, _typestore
@@ -144,6 +145,7 @@ def write_trajectory_bag(
     storage: Storage = "sqlite3",
     topic: str = _TRAJECTORY_TOPIC,
     gripper_topic: str = _GRIPPER_TOPIC,
+    limits: MotionLimits | None = None,
 ) -> None:
     """Write a joint trajectory as a rosbag2 bag a ``ros2_control`` controller can replay.
 
@@ -184,12 +186,21 @@ def write_trajectory_bag(
         rosbag2 storage plugin.
     topic, gripper_topic : str
         Topic names, fully qualified (``"/name"``); with a gripper, two different topics.
+    limits : MotionLimits, optional
+        The arm's velocity, acceleration and jerk limits: the trajectory (from rest at its
+        first point, to rest at its last) must be within them, checked as a drive checks its
+        stream (divided differences at the points), e.g. ``MotionLimits.from_robot(robot, n)``.
+        None: within the limits assumed for an arm that declares none, from the trajectory's
+        own top speed per joint (acceleration v / 0.25 s, jerk that / 0.1 s:
+        :func:`pbdkit.motion._limits.with_defaults`), which a jump from rest to speed
+        exceeds by far.
 
     Raises
     ------
     ValueError
-        An existing ``path``, or a shape, value or name that does not fit (named). Every
-        argument is checked before anything is written.
+        An existing ``path``, or a shape, value or name that does not fit (named), or a
+        trajectory beyond ``limits`` (the joint, the quantity and where). Every argument is
+        checked before anything is written.
     """
     p = _check_new_path(path)
     plugin = _check_storage(storage)
@@ -202,6 +213,7 @@ def write_trajectory_bag(
         accelerations=accelerations,
         topic=topic,
         gripper_topic=gripper_topic,
+        limits=limits,
     )
     ts = _typestore()
 
@@ -227,6 +239,7 @@ def check_trajectory_bag(
     storage: Storage = "sqlite3",
     topic: str = _TRAJECTORY_TOPIC,
     gripper_topic: str = _GRIPPER_TOPIC,
+    limits: MotionLimits | None = None,
 ) -> None:
     """Check what :func:`write_trajectory_bag` would write, writing nothing.
 
@@ -249,7 +262,44 @@ def check_trajectory_bag(
         accelerations=accelerations,
         topic=topic,
         gripper_topic=gripper_topic,
+        limits=limits,
     )
+
+
+def _check_motion(t: Float, q: Float, names: Sequence[str], limits: MotionLimits | None) -> None:
+    """The trajectory within ``limits`` (or the limits assumed from its own top speeds), from
+    rest to rest: else a ValueError that names the joint, the quantity and where."""
+    if t.shape[0] < 2:
+        return
+    v, a, j = divided_differences(t, q, pad_rest=PAD_REST)
+    assumed = limits is None
+    if limits is None:
+        top = np.abs(v).max(axis=0)
+        unbounded = np.full(q.shape[1], np.inf)
+        limits = with_defaults(
+            MotionLimits(np.where(top > 0, top, np.inf), unbounded, unbounded), warn=False
+        )
+    elif limits.n_joints != q.shape[1]:
+        raise ValueError(
+            f"limits are for {limits.n_joints} joints, the trajectory has {q.shape[1]}"
+        )
+    kinds = [("acceleration", a, limits.acceleration), ("jerk", j, limits.jerk)]
+    if not assumed:
+        kinds.insert(0, ("velocity", v, limits.velocity))
+    for quantity, d, bound in kinds:
+        ratio = np.abs(d) / bound
+        k, joint = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        if ratio[k, joint] > 1.0 + 1e-6:
+            where = float(t[min(max(int(k) - PAD_REST, 0), t.shape[0] - 1)])
+            whose = "the limit assumed for an arm without one" if assumed else "the limit"
+            raise ValueError(
+                f"the trajectory exceeds {whose} on {names[int(joint)]!r}: {quantity} "
+                f"{float(np.abs(d[k, joint])):.4g} against {float(bound[joint]):.4g} near "
+                f"t = {where:.4g} s (from rest at the first point, to rest at the last); time "
+                "it within the arm's limits (e.g. skill.times(res) of a reproduction within "
+                "them) and pass limits= (MotionLimits.from_robot(robot, n)) to check it "
+                "against them"
+            )
 
 
 def _trajectory_messages(
@@ -262,6 +312,7 @@ def _trajectory_messages(
     accelerations: npt.ArrayLike | None,
     topic: str = _TRAJECTORY_TOPIC,
     gripper_topic: str = _GRIPPER_TOPIC,
+    limits: MotionLimits | None = None,
 ) -> tuple[memoryview, list[tuple[int, memoryview]]]:
     """The checked arguments of :func:`write_trajectory_bag` as its serialized messages: the
     JointTrajectory, and (log time ns, Bool) of the gripper's (:func:`check_trajectory_bag`
@@ -290,6 +341,7 @@ def _trajectory_messages(
     if q.shape[1] == 0:
         raise ValueError(f"joints must have one column per joint, at least 1, got shape {q.shape}")
     names = _check_names(joint_names, q.shape[1], "joint_names")
+    _check_motion(t_, q, names, limits)
     closed: NDArray[np.bool_] | None = None
     if gripper is not None:
         closed = check_array(gripper, "gripper", shape=(t_.shape[0],)) > GRIPPER_THRESHOLD

@@ -61,18 +61,23 @@ from numpy.typing import NDArray
 from .._validation import check_array
 
 __all__ = [
+    "DEFAULT_ACCELERATION_TIME",
+    "DEFAULT_JERK_TIME",
     "LIMIT_SAFETY",
+    "DefaultLimitsWarning",
     "MotionLimits",
     "MotionPeaks",
     "RetimeWarning",
     "StreamMonitor",
     "count_reversals",
+    "defaults_where_declared",
     "divided_differences",
     "last_differences",
     "motion_peaks",
     "positive_bounds",
     "retime",
     "times_from_durations",
+    "with_defaults",
 ]
 
 Float = NDArray[np.float64]
@@ -230,6 +235,88 @@ class MotionLimits:
             else:
                 out[kind] = positive_bounds(spec, n, name, units[kind])
         return cls(out["velocity"], out["acceleration"], out["jerk"])
+
+
+#: A robot that declares velocity limits but no acceleration or jerk limits (a URDF has no
+#: field for them) moves within a = v / DEFAULT_ACCELERATION_TIME and j = a / DEFAULT_JERK_TIME
+#: per joint: to full speed in 0.25 s, to full acceleration in 0.1 s (:func:`with_defaults`).
+DEFAULT_ACCELERATION_TIME = 0.25
+DEFAULT_JERK_TIME = 0.1
+
+
+class DefaultLimitsWarning(UserWarning):
+    """A robot without acceleration or jerk limits moves within defaults derived from its
+    velocity limits (:func:`with_defaults`)."""
+
+
+def with_defaults(
+    limits: MotionLimits, names: Sequence[str] | None = None, *, warn: bool = True
+) -> MotionLimits:
+    """``limits`` with the acceleration and jerk limits a joint lacks derived from its velocity
+    limit (:data:`DEFAULT_ACCELERATION_TIME`, :data:`DEFAULT_JERK_TIME`), and a
+    :class:`DefaultLimitsWarning` that names the joints and says how to give real ones.
+
+    A joint without a velocity limit keeps what it has (nothing to derive from)."""
+    v, a, j = limits.velocity, limits.acceleration, limits.jerk
+    known = np.isfinite(v)
+    need_a = known & ~np.isfinite(a)
+    a_new = np.where(need_a, v / DEFAULT_ACCELERATION_TIME, a)
+    need_j = np.isfinite(a_new) & ~np.isfinite(j)
+    j_new = np.where(need_j, a_new / DEFAULT_JERK_TIME, j)
+    if not (need_a.any() or need_j.any()):
+        return limits
+    if warn:
+        idx = np.flatnonzero(need_a | need_j).tolist()
+        label = [names[k] if names is not None else f"joint {k}" for k in idx]
+        shown = ", ".join(label[:3]) + (f" and {len(label) - 3} more" if len(label) > 3 else "")
+        i = idx[0]
+        warnings.warn(
+            f"{shown} have no acceleration or jerk limit (a URDF has no field for them): "
+            f"assumed a = v / {DEFAULT_ACCELERATION_TIME:g} s and j = a / {DEFAULT_JERK_TIME:g} s "
+            f"per joint ({label[0]}: {a_new[i]:.3g} rad/s^2, {j_new[i]:.3g} rad/s^3). Give the "
+            "arm's own with Robot.from_urdf(..., joint_limits='joint_limits.yaml') (MoveIt's "
+            "file) or acceleration_limit= and jerk_limit=",
+            DefaultLimitsWarning,
+            stacklevel=3,
+        )
+    return MotionLimits(v, a_new, j_new)
+
+
+def defaults_where_declared(
+    limits: MotionLimits,
+    names: Sequence[str],
+    velocity: LimitSpec,
+    acceleration: LimitSpec,
+    jerk: LimitSpec,
+) -> MotionLimits:
+    """A robot's limits (:meth:`MotionLimits.from_robot` with these specs), its missing
+    acceleration and jerk limits derived from its velocity limits (:func:`with_defaults`, with
+    a warning) where they are the robot's ("robot"); a robot that declares acceleration or
+    jerk limits but no velocity limits is refused (no timing can start from it)."""
+
+    def robot_spec(spec: LimitSpec) -> bool:
+        return isinstance(spec, str) and spec == "robot"
+
+    if robot_spec(velocity):
+        bare = ~np.isfinite(limits.velocity) & (
+            np.isfinite(limits.acceleration) | np.isfinite(limits.jerk)
+        )
+        if bare.any():
+            name = names[int(np.argmax(bare))]
+            raise ValueError(
+                f"joint {name!r} has acceleration or jerk limits but no velocity limit: "
+                "timed motion needs one (give it in the URDF's <limit velocity=...> or "
+                "velocity_limit=), or pass acceleration_limit=None and jerk_limit=None for "
+                "the paper's loop"
+            )
+    if not (robot_spec(acceleration) or robot_spec(jerk)):
+        return limits
+    filled = with_defaults(limits, names)
+    return MotionLimits(
+        limits.velocity,
+        filled.acceleration if robot_spec(acceleration) else limits.acceleration,
+        filled.jerk if robot_spec(jerk) else limits.jerk,
+    )
 
 
 def positive_bounds(value: npt.ArrayLike, n: int, name: str, unit: str) -> Float:

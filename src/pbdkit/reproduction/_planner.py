@@ -7,8 +7,8 @@ A plan is the reproduction within the motion limits from a state along the way
 loop. :class:`ProcessPlanner` makes them in a separate process, so that the loop never waits:
 
 - The process is a new interpreter (``python -c``), started once per controller, at lower
-  priority (``os.nice`` and ``SCHED_IDLE``: it runs where a core is otherwise idle, and never
-  preempts the loop), BLAS on one thread, the robot and the skill's run set-up sent once. Not
+  priority (``os.nice`` and ``SCHED_BATCH``: its wake-up never preempts the loop), BLAS on
+  one thread, the robot and the skill's run set-up sent once. Not
   ``multiprocessing``'s spawn or forkserver: both import the user's main script again in the
   worker, which runs a script without an ``if __name__ == "__main__"`` guard a second time. Not
   a thread: the GIL holds the loop for whole numpy calls (a numpy thread beside a 1 kHz loop
@@ -321,7 +321,9 @@ class ProcessPlanner(Planner):
         self._conn = Connection(os.dup(ours.fileno()))
         self._finalizer = weakref.finalize(self, _stop, self._proc, self._conn, ours)
         self._inbox: collections.deque[PlanReply] = collections.deque()
-        self._gone: str | None = None
+        # Why the process is gone (set by the reading thread, which holds no reference to the
+        # planner: collecting it ends the process, and the thread with it).
+        self._gone: list[str] = []
         try:
             self._conn.send_bytes(setup)
             if not self._conn.poll(timeout):
@@ -343,34 +345,45 @@ class ProcessPlanner(Planner):
         # samples one: import Ruckig now, not in the loop (4 ms, measured).
         import ruckig  # noqa: F401
 
-        self._reader = threading.Thread(target=self._read, name="pbdkit-planner", daemon=True)
+        self._reader = threading.Thread(
+            target=_read_replies,
+            args=(self._conn, self._proc, self._inbox, self._gone),
+            name="pbdkit-planner",
+            daemon=True,
+        )
         self._reader.start()
-
-    def _read(self) -> None:
-        conn = self._conn
-        while True:
-            try:
-                reply = pickle.loads(conn.recv_bytes())
-            except (EOFError, OSError):
-                self._gone = f"the planner process stopped (exit code {self._proc.poll()})"
-                return
-            self._inbox.append(reply)
 
     def submit(self, request: PlanRequest) -> None:
         try:
             self._conn.send_bytes(pickle.dumps(request, protocol=pickle.HIGHEST_PROTOCOL))
         except OSError:
-            self._gone = self._gone or "the planner process stopped"
+            self._gone.append("the planner process stopped")
 
     def poll(self) -> PlanReply | None:
         if self._inbox:
             return self._inbox.popleft()
-        if self._gone is not None:
-            return PlanReply(-1, math.nan, None, None, self._gone, 0.0)
+        if self._gone:
+            return PlanReply(-1, math.nan, None, None, self._gone[0], 0.0)
         return None
 
     def close(self) -> None:
         self._finalizer()
+
+
+def _read_replies(
+    conn: Connection,
+    proc: subprocess.Popen[bytes],
+    inbox: collections.deque[PlanReply],
+    gone: list[str],
+) -> None:
+    """The reading thread: each reply unpickled into ``inbox``; at the end, why in ``gone``."""
+    while True:
+        try:
+            reply = pickle.loads(conn.recv_bytes())
+        except (EOFError, OSError):
+            gone.append(f"the planner process stopped (exit code {proc.poll()})")
+            return
+        inbox.append(reply)
 
 
 def _stop(proc: subprocess.Popen[bytes], conn: Connection, sock: socket.socket) -> None:
@@ -393,11 +406,12 @@ def serve(fd: int) -> None:
     try:
         _, robot, run, limits, plan_limits, dt, delay, nice = pickle.loads(conn.recv_bytes())
         os.nice(nice)
-        # SCHED_IDLE: the loop's process is never preempted by it, not even by its wake-up
-        # when a request comes (under the default policy, at niceness +5 or +10, that held
-        # the call that sent the request for a whole time slice: 3.7 ms, measured).
+        # SCHED_BATCH: its wake-up when a request comes never preempts the loop's process (under
+        # the default policy, at niceness +5 or +10, that held the call that sent the request
+        # for a whole time slice: 3.7 ms, measured); it still gets its share of the CPU
+        # (SCHED_IDLE, tried, starved it when every core was busy: no plan came).
         with contextlib.suppress(AttributeError, OSError):
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
         # A first plan, from the start, warms what the first plan would pay for (imports,
         # caches): the first reply comes in the time of the others.
         zeros = np.zeros_like(run.theta0)

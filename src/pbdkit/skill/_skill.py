@@ -37,7 +37,7 @@ from .._validation import check_int
 from ..data._align import align as align_demos
 from ..data._demonstration import Demonstration, check_demonstrations
 from ..data._placement import is_pose
-from ..motion._limits import LimitSpec, MotionLimits
+from ..motion._limits import LimitSpec, MotionLimits, defaults_where_declared
 from ..prob import GMM, ModelSelection, SelectionWarning
 from ..prob._gmr import CovarianceMode
 from ..reproduction._constraints import JOINT, Constraints
@@ -594,7 +594,24 @@ class Skill:
                     "in rad with max_step"
                 )
             return dt, None
-        return dt, (limits if limits.any else None)
+        if not limits.any:
+            return dt, None
+        return dt, defaults_where_declared(
+            limits, self.robot.joint_names, velocity, acceleration, jerk
+        )
+
+    def motion_limits(
+        self,
+        velocity_limit: LimitSpec = "robot",
+        acceleration_limit: LimitSpec = "robot",
+        jerk_limit: LimitSpec = "robot",
+    ) -> MotionLimits | None:
+        """The velocity, acceleration and jerk limits :meth:`reproduce` and :meth:`controller`
+        keep with these arguments (the robot's by default; a robot that declares no
+        acceleration or jerk limit gets defaults derived from its velocity limits, with a
+        :class:`~pbdkit.motion._limits.DefaultLimitsWarning`); None where none apply. E.g. to
+        check a trajectory bag: ``write_trajectory_bag(..., limits=skill.motion_limits())``."""
+        return self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)[1]
 
     @property
     def step_seconds(self) -> float:
