@@ -20,6 +20,7 @@ from pbdkit.reproduction._planner import (
     InlinePlanner,
     PlanReply,
     PlanRequest,
+    PlanSetup,
     ProcessPlanner,
     one_line,
 )
@@ -78,9 +79,8 @@ def test_no_call_waits_for_a_slow_planner_and_the_stream_stays_continuous(
     # the loop runs in real time at 1 kHz and moves the glass 0.3 s in.
     glass, _ = unseen_glass(demos)
     ctrl = skill.controller({"glass": glass})
-    planner = ProcessPlanner(
-        ctrl._robot, ctrl._run, ctrl._timed.limits, ctrl._timed.plan_limits, ctrl.dt, delay=0.2
-    )
+    assert ctrl._timed is not None
+    planner = ProcessPlanner(ctrl._timed.setup, delay=0.2)
     moved = glass + np.array([0.01, -0.01, 0.0])
     with ctrl.stream(1000, planner=planner) as stream:
         q = demos[1].joints[0].copy()
@@ -138,8 +138,8 @@ def test_a_push_brakes_from_the_measured_state_and_plans_from_where_it_stops(
 class _Failing(InlinePlanner):
     """Every plan fails after the first."""
 
-    def __init__(self, *args: object) -> None:
-        super().__init__(*args)  # type: ignore[arg-type]
+    def __init__(self, setup: PlanSetup) -> None:
+        super().__init__(setup)
         self.count = 0
 
     def submit(self, request: PlanRequest) -> None:
@@ -158,7 +158,8 @@ def test_a_plan_that_cannot_be_made_brings_the_arm_to_rest_with_one_line(
     glass, _ = unseen_glass(demos)
     ctrl = skill.controller({"glass": glass})
     t = ctrl._timed
-    failing = _Failing(ctrl._robot, ctrl._run, t.limits, t.plan_limits, ctrl.dt)
+    assert t is not None
+    failing = _Failing(t.setup)
     stream = ctrl.stream(1000, planner=failing)
     q = demos[1].joints[0].copy()
     setpoints = [q]

@@ -105,9 +105,10 @@ class Motion:
             )
         duration = self._durations[k]
         if interface < 0:
-            return _Quintic(None, (rows[0], rows[1], rows[2]), duration, rows)
+            return _Quintic(None, None, duration, rows)
         assert self._limits is not None
-        traj = _ruckig_plan(rows, min_duration, interface, self._limits)
+        lim = self._limits
+        traj = _ruckig_plan(rows, min_duration, interface, lim.velocity, lim.acceleration, lim.jerk)
         if float(traj.duration) != duration:
             raise RuntimeError("a motion's segment planned again differs from the original")
         return traj
@@ -195,7 +196,7 @@ class Motion:
             c = np.stack([self._segment(k).c for k in quintics], axis=1)  # (6, m, n)
             h = np.array([self._durations[k] for k in quintics])[None, :, None]
             s_ = np.linspace(0.0, 1.0, 257)[:, None, None] * h
-            pos = ((((c[5] * s_ + c[4]) * s_ + c[3]) * s_ + c[2]) * s_ + c[1]) * s_ + c[0]
+            pos = _quintic_positions(c, s_)
             bad = ((pos < lower) | (pos > upper)).any(axis=(0, 2))
             out += [
                 (
@@ -245,14 +246,22 @@ _RECIPE_ROWS = (
 )
 
 
-def _ruckig_plan(rows: Float, min_duration: float, interface: int, limits: MotionLimits) -> Any:
-    """The Ruckig trajectory of a recipe (:meth:`Motion.append`)."""
+def _ruckig_plan(
+    rows: Float,
+    min_duration: float,
+    interface: int,
+    velocity: Float,
+    acceleration: Float,
+    jerk: Float,
+) -> Any:
+    """The Ruckig trajectory of a recipe (:meth:`Motion.append`), within these limits (a
+    :class:`MotionLimits`' arrays, or a slice of them)."""
     rk = _ruckig()
     n = rows.shape[1]
     inp = rk.InputParameter(n)
-    inp.max_velocity = limits.velocity.tolist()
-    inp.max_acceleration = limits.acceleration.tolist()
-    inp.max_jerk = limits.jerk.tolist()
+    inp.max_velocity = velocity.tolist()
+    inp.max_acceleration = acceleration.tolist()
+    inp.max_jerk = jerk.tolist()
     if interface == 1:
         inp.control_interface = rk.ControlInterface.Velocity
     for name, row in zip(_RECIPE_ROWS, rows.tolist(), strict=True):
@@ -284,7 +293,8 @@ def brake(t0: float, state: tuple[Float, Float, Float], limits: MotionLimits) ->
         return motion
     zeros = np.zeros(p.shape[0])
     rows = np.array([p, v, a, p, zeros, zeros])
-    motion.append(_ruckig_plan(rows, math.nan, 1, limits), (rows, math.nan, 1))
+    stop = _ruckig_plan(rows, math.nan, 1, limits.velocity, limits.acceleration, limits.jerk)
+    motion.append(stop, (rows, math.nan, 1))
     return motion
 
 
@@ -295,16 +305,25 @@ class _Quintic:
     def __init__(
         self,
         start: tuple[Float, Float, Float] | None,
-        end: tuple[Float, Float, Float],
+        end: tuple[Float, Float, Float] | None,
         duration: float,
         coefficients: Float | None = None,
     ) -> None:
         if coefficients is None:
-            assert start is not None
+            assert start is not None and end is not None
             coefficients = _quintic_coefficients(start, end, np.full(1, duration))
         self.c = coefficients  # (6, n)
         self.duration = duration
-        self.end = end
+        self._end = end
+
+    @property
+    def end(self) -> tuple[Float, Float, Float]:
+        """The state it ends in: the one it was built to end in, else (planned again from its
+        coefficients) its own at its duration."""
+        if self._end is None:
+            p, v, a = self.at_time(self.duration)
+            self._end = (p, v, a)
+        return self._end
 
     def at_time(self, t: float) -> Float:
         """Position, velocity and acceleration at ``t``: rows of a (3, n) array (one product
@@ -346,3 +365,9 @@ def _quintic_coefficients(
             (6.0 * d - 3.0 * e * h + 0.5 * f * h * h) / h**5,
         ]
     )
+
+
+def _quintic_positions(c: Float, s: Float) -> Float:
+    """Positions of quintics (coefficients ``c``, leading axis c_0..c_5) at times ``s`` from
+    their starts (broadcast against ``c[k]``; Horner's scheme)."""
+    return np.asarray(((((c[5] * s + c[4]) * s + c[3]) * s + c[2]) * s + c[1]) * s + c[0])

@@ -34,6 +34,7 @@ from ._motion import (
     Motion,
     _Quintic,
     _quintic_coefficients,
+    _quintic_positions,
     _ruckig,
     _ruckig_plan,
     brake,
@@ -358,7 +359,9 @@ def follow(
                 # limits allow (the least any motion from here can pass), then go on from
                 # there (from rest, stopping at a sample within the limits never leaves them).
                 rows = np.array([*state, state[0], zeros, zeros], dtype=np.float64)
-                stop = _ruckig_plan(rows, math.nan, 1, limits)
+                stop = _ruckig_plan(
+                    rows, math.nan, 1, limits.velocity, limits.acceleration, limits.jerk
+                )
                 if beyond(stop, i, i, p_now, False) < best:
                     motion.append(stop, (rows, math.nan, 1))
                     end_p = stop.at_time(float(stop.duration))[0]
@@ -422,7 +425,7 @@ def _quintics_within(
     )
     ok = within.all(axis=1)
     if bounds is not None:
-        pos = ((((c5 * s_v + c4) * s_v + c3) * s_v + c[2]) * s_v + c[1]) * s_v + c[0]
+        pos = _quintic_positions(c, s_v)
         # Between two of the 33 points, a position passes the straight line through them by at
         # most (largest |acceleration|) (spacing)^2 / 8: a bound, not an estimate.
         gap = big * (h / 32.0) ** 2 / 8.0
@@ -459,21 +462,13 @@ def _stop_overshoot(
     rows, cols = np.nonzero(far > room - BOUNDS_TOL)
     if rows.size == 0:
         return out
-    rk = _ruckig()
     for r, k in zip(rows.tolist(), cols.tolist(), strict=True):
-        inp = rk.InputParameter(1)
-        inp.control_interface = rk.ControlInterface.Velocity
-        inp.max_velocity = [float(limits.velocity[k])]
-        inp.max_acceleration = [float(amax[k])]
-        inp.max_jerk = [float(jmax[k])]
-        inp.current_position = [float(p[r, k])]
-        inp.current_velocity = [float(v[r, k])]
-        inp.current_acceleration = [float(a[r, k])]
-        inp.target_velocity = [0.0]
-        inp.target_acceleration = [0.0]
-        traj = rk.Trajectory(1)
-        if rk.Ruckig(1).calculate(inp, traj) not in (rk.Result.Working, rk.Result.Finished):
-            out[r] = max(out[r], np.inf)
+        one = slice(k, k + 1)
+        recipe = np.array([p[r, one], v[r, one], a[r, one], p[r, one], [0.0], [0.0]])
+        try:  # the brake() of one joint
+            traj = _ruckig_plan(recipe, math.nan, 1, limits.velocity[one], amax[one], jmax[one])
+        except RuntimeError:
+            out[r] = np.inf
             continue
         e = traj.position_extrema[0]
         out[r] = max(out[r], bounds[0][k] - BOUNDS_TOL - e.min, e.max - bounds[1][k] - BOUNDS_TOL)

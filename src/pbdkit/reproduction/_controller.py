@@ -221,8 +221,9 @@ class Controller:
             distance = float(replan_distance)
             if not (distance >= 0):
                 raise ValueError(f"replan_distance must be >= 0 (m), got {replan_distance!r}")
-            self._timed = _Timed(limits, distance)
-            self._use_planner(planner)
+            self._timed = _Timed(limits, distance, robot, run, self.dt)
+            if planner != "inline":
+                self._use_planner(planner)
             plan = self._timed.plan_limits
             # A lag counts in steps at top speed (max_step where no speed limit).
             self._step_bound = np.where(
@@ -301,11 +302,11 @@ class Controller:
         elif planner not in PLANNERS:
             raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
         elif planner == "process":
-            new = ProcessPlanner(self._robot, self._run, st.limits, st.plan_limits, self.dt)
+            new = ProcessPlanner(st.setup)
         else:
-            new = InlinePlanner(self._robot, self._run, st.limits, st.plan_limits, self.dt)
-        old, st.planner = getattr(st, "planner", None), new
-        if old is not None and old is not new:
+            new = InlinePlanner(st.setup)
+        old, st.planner = st.planner, new
+        if old is not new:
             old.close()
 
     @property
@@ -553,7 +554,7 @@ class Controller:
         plan = _Plan.of(reply, request.objects)
         if st.plan is not None:
             st.replans += 1
-        assert reply.motion is not None
+        assert reply.motion is not None  # (the reply may be the shifted one)
         st.handover = (reply.t0, plan, reply.motion)
         st.motion = _Handover(st.motion, reply.motion, reply.t0)
 
@@ -569,17 +570,11 @@ class Controller:
         p = np.minimum(np.maximum(p, lower), upper)
         return p, np.where(out, 0.0, v), np.where(out, 0.0, a), out
 
-    def _fault(
-        self,
-        st: _Timed,
-        now: float,
-        reason: str,
-        state: tuple[Float, Float, Float] | None = None,
-    ) -> None:
-        """No plan: bring the arm to rest from ``state`` at ``now`` (default: where the
-        commands are then), and say why."""
+    def _fault(self, st: _Timed, now: float, reason: str) -> None:
+        """No plan: bring the arm to rest from where the commands are at ``now``, and say
+        why."""
         st.fault = reason
-        st.motion = brake(now, st.motion.at(now) if state is None else state, st.plan_limits)
+        st.motion = brake(now, st.motion.at(now), st.plan_limits)
         st.last = st.motion.at(now)
         st.handover, st.active, st.want = None, False, False
         warnings.warn(

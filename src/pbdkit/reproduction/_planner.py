@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..motion._limits import MotionLimits
-from ..motion._motion import Motion
+from ..motion._motion import Motion, _ruckig
 from ..motion._otg import BOUNDS_TOL, follow
 from ..robots._protocols import KinematicModel
 from ._result import ReproductionResult
@@ -62,6 +62,7 @@ __all__ = [
     "InlinePlanner",
     "PlanReply",
     "PlanRequest",
+    "PlanSetup",
     "Planner",
     "ProcessPlanner",
     "make_plan",
@@ -81,6 +82,20 @@ def one_line(err: BaseException) -> str:
     """An exception as one line (its type and first line)."""
     text = str(err).strip().splitlines()
     return f"{type(err).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+@dataclass(frozen=True)
+class PlanSetup:
+    """What every plan of a controller is made with, sent once to a planner process: the
+    robot, the run set-up (its objects and start replaced per request), the motion limits the
+    path is timed within and the (safety-scaled) ones the motion follows it within, and the
+    seconds per step."""
+
+    robot: KinematicModel
+    run: RunSetup
+    limits: MotionLimits
+    plan_limits: MotionLimits
+    dt: float
 
 
 @dataclass(frozen=True)
@@ -123,17 +138,10 @@ SLOWER_TRIES = 8
 SLOWER_SPAN = 0.25
 
 
-def make_plan(
-    robot: KinematicModel,
-    run: RunSetup,
-    limits: MotionLimits,
-    plan_limits: MotionLimits,
-    dt: float,
-    request: PlanRequest,
-) -> PlanReply:
+def make_plan(setup: PlanSetup, request: PlanRequest) -> PlanReply:
     """The plan of a request (in any process): Table II from the state at the phase, timed
-    within ``limits`` (:func:`~pbdkit.reproduction._timing.timed_path`), and the motion
-    through it from the state within ``plan_limits`` and the joint limits.
+    within ``setup.limits`` (:func:`~pbdkit.reproduction._timing.timed_path`), and the motion
+    through it from the state within ``setup.plan_limits`` and the joint limits.
 
     A path that brakes onto a joint limit harder than the jerk limit lets a motion follow can
     only be followed by passing the limit (its samples are within the limits; the motion
@@ -142,16 +150,14 @@ def make_plan(
     """
     start = time.perf_counter()
     q = request.state[0]
-    setup = dataclasses.replace(run, objects=dict(request.objects), theta0=q)
+    run = dataclasses.replace(setup.run, objects=dict(request.objects), theta0=q)
     # From where the request starts: a start beyond a limit is the controller's guard's.
     lower = np.minimum(run.lower, q) - BOUNDS_TOL
     upper = np.maximum(run.upper, q) + BOUNDS_TOL
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         try:
-            res, motion = _plan_within_bounds(
-                robot, setup, limits, plan_limits, dt, request, (lower, upper)
-            )
+            res, motion = _plan_within_bounds(setup, run, request, (lower, upper))
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
             took = time.perf_counter() - start
             return PlanReply(request.generation, request.t0, None, None, one_line(err), took)
@@ -161,26 +167,21 @@ def make_plan(
 
 
 def _plan_within_bounds(
-    robot: KinematicModel,
-    setup: RunSetup,
-    limits: MotionLimits,
-    plan_limits: MotionLimits,
-    dt: float,
-    request: PlanRequest,
-    within: tuple[Float, Float],
+    setup: PlanSetup, run: RunSetup, request: PlanRequest, within: tuple[Float, Float]
 ) -> tuple[ReproductionResult, Motion]:
-    """:func:`make_plan`'s reproduction and motion, the steps around where the motion would
-    leave ``within`` (the joint limits, or the start where it is beyond them) slowed."""
+    """:func:`make_plan`'s reproduction and motion (Table II of ``run``, the request's), the
+    steps around where the motion would leave ``within`` (the joint limits, or the start where
+    it is beyond them) slowed."""
     q, v, a = request.state
     moving = bool(np.any(v))
-    bounds = (setup.lower, setup.upper)
+    bounds = (run.lower, run.upper)
     slower: Float | None = None
     for attempt in range(SLOWER_TRIES + 1):
         res = timed_path(
-            robot,
-            setup,
-            limits,
-            dt,
+            setup.robot,
+            run,
+            setup.limits,
+            setup.dt,
             phase=request.phase,
             velocity=v if moving else None,
             slower=slower,
@@ -191,7 +192,7 @@ def _plan_within_bounds(
         motion = follow(
             t,
             res.joints,
-            plan_limits,
+            setup.plan_limits,
             velocities=velocities,
             accelerations=accelerations,
             start=(q, v, a),
@@ -245,19 +246,12 @@ class InlinePlanner(Planner):
 
     kind: PlannerKind = "inline"
 
-    def __init__(
-        self,
-        robot: KinematicModel,
-        run: RunSetup,
-        limits: MotionLimits,
-        plan_limits: MotionLimits,
-        dt: float,
-    ) -> None:
-        self._args = (robot, run, limits, plan_limits, dt)
+    def __init__(self, setup: PlanSetup) -> None:
+        self._setup = setup
         self._reply: PlanReply | None = None
 
     def submit(self, request: PlanRequest) -> None:
-        self._reply = make_plan(*self._args, request)
+        self._reply = make_plan(self._setup, request)
 
     def poll(self) -> PlanReply | None:
         reply, self._reply = self._reply, None
@@ -270,8 +264,8 @@ class ProcessPlanner(Planner):
 
     Parameters
     ----------
-    robot, run, limits, plan_limits, dt
-        As :func:`make_plan` (the robot and the run set-up are sent once: both must pickle).
+    setup : PlanSetup
+        As :func:`make_plan`, sent once (its robot and run set-up must pickle).
     delay : float
         Seconds the process sleeps before each plan (tests: a slow planner).
     nice : int
@@ -282,19 +276,15 @@ class ProcessPlanner(Planner):
 
     def __init__(
         self,
-        robot: KinematicModel,
-        run: RunSetup,
-        limits: MotionLimits,
-        plan_limits: MotionLimits,
-        dt: float,
+        setup: PlanSetup,
         *,
         delay: float = 0.0,
         nice: int = PLANNER_NICE,
         timeout: float = PLANNER_START_TIMEOUT,
     ) -> None:
         try:
-            setup = pickle.dumps(
-                ("setup", robot, run, limits, plan_limits, dt, float(delay), int(nice)),
+            message = pickle.dumps(
+                ("setup", setup, float(delay), int(nice)),
                 protocol=pickle.HIGHEST_PROTOCOL,
             )
         except (pickle.PicklingError, TypeError, AttributeError) as err:
@@ -325,7 +315,7 @@ class ProcessPlanner(Planner):
         # planner: collecting it ends the process, and the thread with it).
         self._gone: list[str] = []
         try:
-            self._conn.send_bytes(setup)
+            self._conn.send_bytes(message)
             if not self._conn.poll(timeout):
                 raise RuntimeError(f"the planner process did not start in {timeout:g} s")
             status = self._conn.recv()
@@ -343,7 +333,7 @@ class ProcessPlanner(Planner):
         self.pid: int = self._proc.pid
         # The motions come back with Ruckig segments this process plans again where it first
         # samples one: import Ruckig now, not in the loop (4 ms, measured).
-        import ruckig  # noqa: F401
+        _ruckig()
 
         self._reader = threading.Thread(
             target=_read_replies,
@@ -404,7 +394,7 @@ def serve(fd: int) -> None:
     """The planner process: plans for requests on the socket ``fd`` until it closes."""
     conn = Connection(fd)
     try:
-        _, robot, run, limits, plan_limits, dt, delay, nice = pickle.loads(conn.recv_bytes())
+        _, setup, delay, nice = pickle.loads(conn.recv_bytes())
         os.nice(nice)
         # SCHED_BATCH: its wake-up when a request comes never preempts the loop's process (under
         # the default policy, at niceness +5 or +10, that held the call that sent the request
@@ -414,9 +404,9 @@ def serve(fd: int) -> None:
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
         # A first plan, from the start, warms what the first plan would pay for (imports,
         # caches): the first reply comes in the time of the others.
+        run = setup.run
         zeros = np.zeros_like(run.theta0)
-        warm = PlanRequest(0, 0.0, (run.theta0, zeros, zeros), 0.0, run.objects)
-        make_plan(robot, run, limits, plan_limits, dt, warm)
+        make_plan(setup, PlanRequest(0, 0.0, (run.theta0, zeros, zeros), 0.0, run.objects))
     except Exception as err:  # said to the controller, which raises it
         conn.send(("error", one_line(err)))
         return
@@ -428,7 +418,7 @@ def serve(fd: int) -> None:
             os._exit(0)  # the controller closed: nothing to tidy (no interpreter teardown)
         if delay > 0:
             time.sleep(delay)
-        reply = make_plan(robot, run, limits, plan_limits, dt, request)
+        reply = make_plan(setup, request)
         try:
             conn.send_bytes(pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL))
         except OSError:

@@ -13,8 +13,10 @@ from numpy.typing import NDArray
 
 from ..motion._limits import LIMIT_SAFETY, MotionLimits
 from ..motion._motion import Motion
-from ._planner import Planner, PlanReply, PlanRequest
+from ..robots._protocols import KinematicModel
+from ._planner import InlinePlanner, Planner, PlanReply, PlanRequest, PlanSetup
 from ._result import ReproductionResult
+from ._setup import RunSetup
 
 __all__ = ["_Handover", "_Plan", "_Timed"]
 
@@ -77,14 +79,22 @@ class _Handover:
 class _Timed:
     """The state of a controller with motion limits."""
 
-    def __init__(self, limits: MotionLimits, replan_distance: float) -> None:
+    def __init__(
+        self,
+        limits: MotionLimits,
+        replan_distance: float,
+        robot: KinematicModel,
+        run: RunSetup,
+        dt: float,
+    ) -> None:
         self.limits = limits
         self.plan_limits = limits.scaled(LIMIT_SAFETY)
+        self.setup = PlanSetup(robot, run, limits, self.plan_limits, dt)
         self.velocity = np.where(
             np.isfinite(self.plan_limits.velocity), self.plan_limits.velocity, np.inf
         )
         self.replan_distance = replan_distance
-        self.planner: Planner
+        self.planner: Planner = InlinePlanner(self.setup)
         # The plan the phase follows (with ``active``: not while braking after a push), the
         # objects of the last plan asked for, and a plan waiting for its hand-over time.
         self.plan: _Plan | None = None

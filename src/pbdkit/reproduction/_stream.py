@@ -244,9 +244,7 @@ class CommandStream:
         # The controller decides at its cycles (plans again, holds), before any setpoint after
         # that cycle is given: the setpoints are samples of the motion it plans.
         while not ctrl.done and self._cycles * ctrl.dt < t - 1e-12:
-            if self._pending:
-                ctrl._apply_objects(self._pending)
-                self._pending = {}
+            self._hand_over_objects()
             self.command = ctrl.step(q)
             self._cycles += 1
             if self.command.held:  # a push: the setpoints restart from the measured state
@@ -256,9 +254,7 @@ class CommandStream:
         if st.planner.kind == "process" and self._cycles > 0:
             # Between the controller's cycles too: a moved object is planned for, and a plan
             # that is ready taken, at once (the setpoints given so far reach ticks * period).
-            if self._pending:
-                ctrl._apply_objects(self._pending)
-                self._pending = {}
+            self._hand_over_objects()
             ctrl._service(st, self._ticks * self.period)
         self._ticks += 1
         p, v, a, stopped = ctrl._guard(*self._timed.motion.at(t))
@@ -279,6 +275,12 @@ class CommandStream:
         if self._since_stop < 4 and len(self._recent) == 4:
             self._check_forced(t)
         return p.copy()
+
+    def _hand_over_objects(self) -> None:
+        """Give the controller the object positions checked since its last step."""
+        if self._pending:
+            self.controller._apply_objects(self._pending)
+            self._pending = {}
 
     def _check_forced(self, t: float) -> None:
         """Record the excess of the last setpoints' divided differences (a stop on a joint
