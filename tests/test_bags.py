@@ -33,6 +33,7 @@ from pbdkit.data import check_trajectory_bag
 from pbdkit.data._bag_write import write_demonstration_bag
 from pbdkit.data._placement import is_pose, position_of, rotation_of
 from pbdkit.motion._limits import MotionLimits
+from pbdkit.robots import panda
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000 * 10**9  # ROS time of the first joint state in the hand-written bags (ns)
@@ -421,6 +422,11 @@ def test_trajectory_bag_refuses_a_jump(tmp_path: Path, skill: Skill, robot: Robo
         ValueError, match=r"assumed for an arm without one on 'lift1': acceleration"
     ):
         write_trajectory_bag(tmp_path / "step", 0.01 * np.arange(20), q, robot.joint_names)
+    # Limits for another arm: refused, named.
+    with pytest.raises(ValueError, match="limits are for 7 joints, the trajectory has 5"):
+        check_trajectory_bag(
+            times, res.joints, robot.joint_names, limits=MotionLimits.from_robot(panda(), 7)
+        )
 
 
 # ----------------------------------------------------------------------------- object sources
