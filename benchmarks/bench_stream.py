@@ -17,10 +17,11 @@ thread is pinned to CPU 0; the planner process may run on either (at niceness +1
 
 Reported, over 3 runs each (medians of the runs, and the worst): the cost of ``stream.step``
 (p50, p99, p99.9, max); the time from the call that passes a move to the first setpoint of the
-plan made for it; the peak velocity, acceleration and jerk of the setpoints over the limits
-(divided differences at 1 kHz; across the push, from the measured posture: the push itself is
-not the stream's); and the cost of ``ctrl.step`` with the objects unchanged against without
-them (the controller's own cycle, 10 Hz-100 Hz).
+plan made for it (and how many plans came after their hand-over time and were joined from the
+setpoints, :func:`pbdkit.motion._otg.join`); the peak velocity, acceleration and jerk of the
+setpoints over the limits (divided differences at 1 kHz; across the push, from the measured
+posture: the push itself is not the stream's); and the cost of ``ctrl.step`` with the objects
+unchanged against without them (the controller's own cycle, 10 Hz-100 Hz).
 
 Targets (issue 35): process planner p99.9 <= 0.5 ms and max <= 2 ms; move to setpoint <= 100
 ms; peaks <= 1.0; ``ctrl.step`` with unchanged objects <= 1.2x without.
@@ -159,6 +160,7 @@ def run_once(
         "forced": max((v.ratio for v in stream.limit_violations), default=0.0),
         "outside": float(np.maximum(lower - s, s - upper).max()),
         "replans": ctrl.replans,
+        "joins": ctrl._timed.joins if ctrl._timed is not None else 0,
         "fault": ctrl.fault,
     }
 
@@ -219,9 +221,10 @@ def main() -> None:
                 taken = [t for x in runs for t in x["taken"]]  # type: ignore[attr-defined]
                 never = sum(int(x["missing"]) for x in runs)  # type: ignore[call-overload]
                 replans = np.median([x["replans"] for x in runs])
+                joins = sum(int(x["joins"]) for x in runs)  # type: ignore[call-overload]
                 faults = ", ".join(sorted({str(x["fault"]) for x in runs}))
                 row = [name, planner, f"{np.median(taken):.0f}", f"{max(taken):.0f}"]
-                rows_move.append([*row, f"{never}", f"{replans:.0f}", faults])
+                rows_move.append([*row, f"{never}", f"{replans:.0f}", f"{joins}", faults])
             a, b, ratio = step_costs(skill, objects, q0)
             rows_step.append([name, f"{a * 1e3:.4f}", f"{b * 1e3:.4f}", f"{ratio:.2f}x"])
     finally:
@@ -234,7 +237,8 @@ def main() -> None:
     headers = ["skill", "planner", "p50", "p99", "p99.9", "max", "peak v/a/j over limits"]
     print_table([*headers, "forced at a joint limit", "beyond a joint limit (rad)"], rows)
     print("\nFrom the call that passes a move to the first setpoint of its plan (ms):")
-    print_table(["skill", "planner", "median", "max", "never", "re-plans", "fault"], rows_move)
+    headers = ["skill", "planner", "median", "max", "never", "re-plans", "late, joined", "fault"]
+    print_table(headers, rows_move)
     print("\nctrl.step (the controller's cycle), median ms:")
     print_table(["skill", "objects unchanged", "no objects", "ratio"], rows_step)
 

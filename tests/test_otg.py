@@ -494,3 +494,82 @@ def test_follow_with_bounds_never_passes_a_joint_limit_the_path_stops_on(seed: i
     s = held.every(1e-3)[0]
     assert motion_peaks(1e-3 * np.arange(len(s)), s, lim).worst <= 1.0 + 1e-6
     np.testing.assert_allclose(held.at(held.end + 1.0)[0], [bound], atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_out_of_finds_the_segments_a_dense_check_finds(seed: int) -> None:
+    # Motion.out_of skips a quintic whose bound on its range (|c_k| h^k summed) keeps within the
+    # limits: the same answer as checking every segment densely (here: 2001 points of each),
+    # before and after pickling (the recipes as arrays).
+    import pickle
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 3.0, 61)
+    q = 0.2 * np.sin(np.outer(t, [1.0, 2.0, 3.0]) + rng.uniform(0.0, 6.0, 3))
+    start = (q[0] + 0.03, rng.normal(0.0, 0.2, 3), np.zeros(3))
+    motion = follow(t, q, LIM, start=start)
+    kinds = {type(s).__name__ for s in motion._segments}
+    assert {"_Quintic", "Trajectory"} <= kinds
+    dense = []  # (start, end, lowest, highest) of each segment
+    for s0, d in zip(motion._starts, motion._durations, strict=True):
+        pos = np.array([motion.at(float(x))[0] for x in np.linspace(s0, s0 + d, 2001)])
+        dense.append((s0, s0 + d, pos.min(axis=0), pos.max(axis=0)))
+    lo_all = np.min([x[2] for x in dense], axis=0)
+    hi_all = np.max([x[3] for x in dense], axis=0)
+    copy = pickle.loads(pickle.dumps(motion))
+    found_some = False
+    for frac in (0.0, 0.05, 0.2, 0.45):
+        # Limits that cut a fraction of the range off at both ends (0: the range itself, padded).
+        span = hi_all - lo_all
+        lower, upper = lo_all + frac * span - 1e-6, hi_all - frac * span + 1e-6
+        # A segment within 1e-7 of a limit is borderline for a dense check: none is counted.
+        expected = [
+            (a, b)
+            for a, b, lo, hi in dense
+            if np.any(lo < lower - 1e-7) or np.any(hi > upper + 1e-7)
+        ]
+        near = [
+            (a, b)
+            for a, b, lo, hi in dense
+            if np.any(np.abs(lo - lower) <= 1e-7) or np.any(np.abs(hi - upper) <= 1e-7)
+        ]
+        for m in (motion, copy):
+            got = m.out_of(lower, upper)
+            assert set(expected) <= set(got) <= set(expected) | set(near)
+        found_some |= bool(expected)
+    assert found_some
+
+
+def test_join_lands_on_a_motion_exactly_within_the_limits() -> None:
+    # The late-plan join (issue 35): from a state moving along one motion onto another, a
+    # segment that reaches the other's state (position, velocity, acceleration) at the
+    # duration it says, within the limits; None where no duration given can.
+    from pbdkit.motion._otg import join
+
+    t = np.linspace(0.0, 2.0, 41)
+    base = 0.3 * np.sin(np.outer(t, [1.0, 1.5, 2.0]))
+    old = follow(t, base, LIM)
+    new = follow(t, base + 0.01 * t[:, None], LIM, start=old.at(0.0))  # drifts 1 cm/s away
+    start = old.at(0.5)
+    joined = join(0.5, start, new, LIM, (0.005, 0.05, 0.1, 0.2, 0.4))
+    assert joined is not None
+    d = round(joined.end - 0.5, 9)
+    assert d in (0.05, 0.1, 0.2, 0.4)  # 5 ms is too short to take up the drift of 0.5 s
+    for a, b in zip(joined.at(0.5), start, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    for a, b in zip(joined.at(joined.end), new.at(joined.end), strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-8)
+    # Sampled at 1 kHz from the old motion through the join onto the new one: within the limits.
+    grid = np.arange(0.4, joined.end + 0.1, 1e-3)
+    s = np.array(
+        [(old if x < 0.5 else joined if x < joined.end else new).at(float(x))[0] for x in grid]
+    )
+    assert motion_peaks(grid - grid[0], s, LIM, pad_rest=0).worst <= 1.0 + 1e-6
+    # Too short for any, or a joint limit in the way (just short of where it lands): None.
+    assert join(0.5, start, new, LIM, (0.005,)) is None
+    land = new.at(0.5 + d)[0]
+    upper = np.maximum(land, start[0]) + 1.0
+    k = int(np.argmax(land - start[0]))
+    upper[k] = land[k] - 1e-4
+    assert join(0.5, start, new, LIM, (d,), bounds=(land - 1.0, upper)) is None
+    assert join(0.5, start, new, LIM, (d,), bounds=(land - 1.0, upper + 2e-4)) is not None

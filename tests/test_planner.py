@@ -4,6 +4,7 @@ braking to rest; a plan that cannot be made brings the arm to rest with a one-li
 
 from __future__ import annotations
 
+import math
 import pickle
 import time
 
@@ -15,7 +16,7 @@ from pbdkit import Skill
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion._limits import MotionLimits, motion_peaks
 from pbdkit.motion._otg import brake, follow
-from pbdkit.reproduction._controller import CommandStream, PlanFailedWarning
+from pbdkit.reproduction._controller import LATE_JOINS, CommandStream, PlanFailedWarning
 from pbdkit.reproduction._planner import (
     InlinePlanner,
     PlanReply,
@@ -24,6 +25,7 @@ from pbdkit.reproduction._planner import (
     ProcessPlanner,
     one_line,
 )
+from pbdkit.reproduction._plans import _Handover
 
 
 def _peaks(s: np.ndarray, limits: MotionLimits) -> float:
@@ -267,3 +269,69 @@ def test_the_commands_say_which_joints_a_limit_stopped(
     assert {v.quantity for v in stream.limit_violations} <= {"acceleration", "jerk"}
     assert stream.last_command is stream.command
     assert np.all(s[:, joint] >= lower[joint]) and np.any(s[:, joint] == lower[joint])
+
+
+class _Late(InlinePlanner):
+    """Plans made at once and held back for a given number of polls each (one poll per
+    setpoint in a stream: a planner process whose replies take that many milliseconds)."""
+
+    kind = "process"
+
+    def __init__(self, setup: PlanSetup, polls: list[int]) -> None:
+        super().__init__(setup)
+        self.polls, self.wait, self.submitted = list(polls), 0, 0
+
+    def submit(self, request: PlanRequest) -> None:
+        super().submit(request)
+        self.submitted += 1
+        self.wait = self.polls.pop(0)
+
+    def poll(self) -> PlanReply | None:
+        if self._reply is None:
+            return None
+        self.wait -= 1
+        return super().poll() if self.wait <= 0 else None
+
+
+@pytest.mark.parametrize("late", [5, 15])
+def test_a_late_plan_is_joined_from_the_commands_not_asked_again(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits, late: int
+) -> None:
+    # A reply that comes after its hand-over time (the planner slower than the last ones) was
+    # asked for again: 215 ms from a move to its plan in bench_stream. It is joined instead by
+    # a jerk-limited segment from where the commands are onto the plan's motion.
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    st = ctrl._timed
+    assert st is not None
+    planner = _Late(st.setup, [20, 20, 0])
+    stream = ctrl.stream(1000, planner=planner)
+    q = demos[1].joints[0].copy()
+    setpoints, given, lead = [q], glass, -1.0
+    replied, handover = -1, None
+    for k in range(1200):
+        if k in (300, 700):
+            given = given + np.array([0.01, 0.0, 0.0])
+        q = stream.step(q, objects={"glass": given})
+        setpoints.append(q)
+        if k == 700:  # the request for the second move: its reply comes `late` polls late
+            assert st.pending is not None
+            lead = st.pending[0].t0 - k * 1e-3
+            planner.wait = round(lead * 1000) + late
+        if k > 700 and replied < 0 and st.handover is not None:
+            replied, handover = k, st.handover
+    assert 0.01 < lead < 0.1
+    assert planner.submitted == 3 and st.joins == 1  # joined, not asked again
+    assert handover is not None and np.array_equal(handover[1].objects["glass"], given)
+    # It takes over in the call its reply came in, after its hand-over time (some calls poll
+    # twice: the controller's cycle and the stream's).
+    assert 700 + lead * 1000 < replied <= 700 + round(lead * 1000) + late
+    assert handover[0] == pytest.approx(replied * 1e-3)
+    assert _peaks(np.array(setpoints), limits) <= 1.0 + 1e-9
+    # From the join's end on, the setpoints are the plan's motion.
+    joined = handover[2]
+    assert isinstance(joined, _Handover)  # the join, then the plan's motion
+    landed, plan_motion = joined.t0, joined.new
+    assert 0.0 < landed - handover[0] <= max(LATE_JOINS) + 1e-9
+    for k in range(math.ceil(landed * 1000), len(setpoints)):
+        np.testing.assert_array_equal(setpoints[k], plan_motion.at(k * 1e-3)[0])

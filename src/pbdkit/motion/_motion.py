@@ -181,30 +181,40 @@ class Motion:
 
     def out_of(self, lower: Float, upper: Float) -> list[tuple[float, float]]:
         """The segments (start and end times) that pass a joint's ``lower`` or ``upper``
-        position limit: Ruckig's at their extrema, quintics at 257 points each."""
+        position limit: Ruckig's at their extrema, quintics at 257 points each (those a bound
+        on their whole range, |c_k| h^k summed, keeps within the limits skipped: the same
+        answer)."""
         out: list[tuple[float, float]] = []
-        quintics: list[int] = []
-        for k in range(len(self._segments)):
-            seg = self._segment(k)
-            if isinstance(seg, _Quintic):
-                quintics.append(k)
-                continue
-            ext = seg.position_extrema
+        recipes = self._recipes
+        if isinstance(recipes, list):
+            kinds = np.fromiter((r[2] for r in recipes), dtype=np.int8, count=len(recipes))
+        else:
+            kinds = recipes[2]
+        quintics = np.flatnonzero(kinds < 0)
+        for k in np.flatnonzero(kinds >= 0).tolist():
+            ext = self._segment(k).position_extrema
             if any(e.min < lower[j] or e.max > upper[j] for j, e in enumerate(ext)):
                 out.append((self._starts[k], self._starts[k] + self._durations[k]))
-        if quintics:
-            c = np.stack([self._segment(k).c for k in quintics], axis=1)  # (6, m, n)
-            h = np.array([self._durations[k] for k in quintics])[None, :, None]
-            s_ = np.linspace(0.0, 1.0, 257)[:, None, None] * h
-            pos = _quintic_positions(c, s_)
-            bad = ((pos < lower) | (pos > upper)).any(axis=(0, 2))
-            out += [
-                (
-                    self._starts[quintics[i]],
-                    self._starts[quintics[i]] + self._durations[quintics[i]],
-                )
-                for i in np.flatnonzero(bad)
-            ]
+        if quintics.size:
+            if isinstance(recipes, list):
+                c = np.stack([recipes[k][0] for k in quintics.tolist()], axis=1)  # (6, m, n)
+            else:
+                c = np.swapaxes(recipes[0][quintics], 0, 1)
+            h = np.array(self._durations)[quintics][:, None]
+            reach = np.zeros_like(c[0])
+            power = np.ones_like(h)
+            for k in range(1, 6):
+                power = power * h
+                reach += np.abs(c[k]) * power
+            near = ((c[0] - reach < lower) | (c[0] + reach > upper)).any(axis=1)
+            if near.any():
+                cn = c[:, near]
+                s_ = np.linspace(0.0, 1.0, 257)[:, None, None] * h[near][None]
+                pos = _quintic_positions(cn, s_)
+                bad = quintics[near][((pos < lower) | (pos > upper)).any(axis=(0, 2))]
+                out += [
+                    (self._starts[k], self._starts[k] + self._durations[k]) for k in bad.tolist()
+                ]
         return sorted(out)
 
     def shifted(self, offset: float) -> Motion:

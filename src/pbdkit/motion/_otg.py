@@ -47,6 +47,7 @@ __all__ = [
     "brake",
     "follow",
     "follow_samples",
+    "join",
     "point_to_point",
     "spline_derivatives",
     "valid_target",
@@ -287,10 +288,13 @@ def follow(
         motion.append(traj, None if isinstance(traj, _Quintic) else recipes[id(traj)])
         recipes.clear()  # the other candidates are dropped (their ids may be reused)
         end = motion.end
-        # Merged samples: reached in proportion to their times.
-        span = t[i - 1 : j + 1]
-        w = (span[1:] - span[0]) / (span[-1] - span[0]) if span[-1] > span[0] else 1.0
-        reached[i : j + 1] = reached[i - 1] + w * (end - reached[i - 1])
+        if i == j:  # the common case, as the general one computes it (w = 1 exactly)
+            prev = float(reached[i - 1])
+            reached[i] = prev + 1.0 * (end - prev)
+        else:  # merged samples: reached in proportion to their times
+            span = t[i - 1 : j + 1]
+            w = (span[1:] - span[0]) / (span[-1] - span[0]) if span[-1] > span[0] else 1.0
+            reached[i : j + 1] = reached[i - 1] + w * (end - reached[i - 1])
         delay = max(delay, end - float(t[j]))
         if isinstance(traj, _Quintic):
             return traj.end_state()
@@ -373,6 +377,43 @@ def follow(
         i = j + 1
     motion.sample_times = reached
     return motion
+
+
+def join(
+    t: float,
+    start: tuple[Float, Float, Float],
+    target: Any,
+    limits: MotionLimits,
+    durations: tuple[float, ...],
+    bounds: tuple[Float, Float] | None = None,
+) -> Motion | None:
+    """A jerk-limited segment from ``start`` (position, velocity, acceleration at ``t``) onto
+    the motion ``target`` (anything with ``at(time)``: its state then), lasting exactly the
+    first of ``durations`` (s) that Ruckig can (within ``limits``, and ``bounds``: the joint
+    position limits, (lower, upper)): a :class:`Motion` from ``t``, or None.
+
+    Continuous in position, velocity and acceleration at both ends: the online controller
+    joins a plan whose reply came after its hand-over time this way, instead of asking again.
+    """
+    p0, v0, a0 = (np.asarray(x, dtype=np.float64) for x in start)
+    for d in durations:
+        p1, v1, a1 = target.at(t + d)
+        rows = np.array([p0, v0, a0, p1, v1, a1], dtype=np.float64)
+        try:
+            traj = _ruckig_plan(rows, d, 0, limits.velocity, limits.acceleration, limits.jerk)
+        except RuntimeError:
+            continue
+        if abs(float(traj.duration) - d) > 1e-9 * max(1.0, d):
+            continue  # it cannot arrive then (too soon, or a blocked duration)
+        if bounds is not None and any(
+            e.min < bounds[0][k] - BOUNDS_TOL or e.max > bounds[1][k] + BOUNDS_TOL
+            for k, e in enumerate(traj.position_extrema)
+        ):
+            continue
+        motion = Motion(t, (p0, v0, a0), limits)
+        motion.append(traj, (rows, d, 0))
+        return motion
+    return None
 
 
 def _quintics_within(

@@ -35,6 +35,7 @@ from .._validation import check_array
 from ..data._placement import position_of, rotation_of
 from ..motion._limits import MotionLimits, RetimeWarning
 from ..motion._motion import Motion, brake
+from ..motion._otg import join
 from ..robots._protocols import KinematicModel
 from ._command import Command
 from ._constraints import Constraints
@@ -81,6 +82,10 @@ FIRST_LEAD = 0.1
 #: planned, times the steps the new plan makes) ahead, plus :data:`LEAD_MARGIN` s.
 LEAD_FACTOR = 1.25
 LEAD_MARGIN = 0.005
+#: A plan whose reply comes after its hand-over time is joined from the commands' state by a
+#: jerk-limited segment lasting the first of these (s) it can (:func:`pbdkit.motion._otg.join`);
+#: where none can, it is asked for again, further ahead.
+LATE_JOINS = (0.02, 0.04, 0.07, 0.1, 0.15, 0.2)
 
 Float = NDArray[np.float64]
 
@@ -545,18 +550,32 @@ class Controller:
             warnings.warn(message, _WARNINGS.get(category, RuntimeWarning), stacklevel=4)
         assert reply.motion is not None and reply.result is not None
         t0 = reply.t0
+        motion: Motion | _Handover = reply.motion
         if t0 < now - 1e-9:
-            if not st.motion.at_rest_after(t0):
-                st.want = True  # late: ask again, further ahead (the latency is measured)
-                return
-            # Made from rest, and still there: it starts now.
-            reply = dataclasses.replace(reply, t0=now, motion=reply.motion.shifted(now - t0))
+            if st.motion.at_rest_after(t0):
+                # Made from rest, and still there: it starts now.
+                reply = dataclasses.replace(reply, t0=now, motion=reply.motion.shifted(now - t0))
+                assert reply.motion is not None
+                t0, motion = now, reply.motion
+            else:
+                # Late: joined from where the commands are by a short segment onto it, where
+                # one within the limits exists; else asked again, further ahead (the latency is
+                # measured).
+                p, v, a, _ = self._guard(*st.motion.at(now))
+                run = st.setup.run
+                bounds = (np.minimum(run.lower, p), np.maximum(run.upper, p))
+                joined = join(now, (p, v, a), reply.motion, st.plan_limits, LATE_JOINS, bounds)
+                if joined is None:
+                    st.want = True
+                    return
+                assert reply.motion is not None
+                t0, motion = now, _Handover(joined, reply.motion, joined.end)
+                st.joins += 1
         plan = _Plan.of(reply, request.objects)
         if st.plan is not None:
             st.replans += 1
-        assert reply.motion is not None  # (the reply may be the shifted one)
-        st.handover = (reply.t0, plan, reply.motion)
-        st.motion = _Handover(st.motion, reply.motion, reply.t0)
+        st.handover = (t0, plan, motion)
+        st.motion = _Handover(st.motion, motion, t0)
 
     def _guard(
         self, p: Float, v: Float, a: Float

@@ -62,7 +62,7 @@ class _Handover:
     motion before it, the new plan's from it on (continuous: the new one starts in the state
     the current one is in then)."""
 
-    def __init__(self, current: Motion | _Handover, new: Motion, t0: float) -> None:
+    def __init__(self, current: Motion | _Handover, new: Motion | _Handover, t0: float) -> None:
         self.current, self.new, self.t0 = current, new, t0
 
     @property
@@ -101,7 +101,7 @@ class _Timed:
         self.active = False
         self.braking = False  # after a push, until the next plan takes over
         self.planned_objects: dict[str, Float] | None = None
-        self.handover: tuple[float, _Plan, Motion] | None = None
+        self.handover: tuple[float, _Plan, Motion | _Handover] | None = None
         # The motion the commands are samples of (from the first command's time, 0), and how
         # many commands were given (the last one's time is cycle * dt).
         n = limits.n_joints
@@ -111,6 +111,7 @@ class _Timed:
         self.phase = 0.0
         self.moved = False
         self.replans = 0
+        self.joins = 0  # late plans joined (:data:`~._controller.LATE_JOINS`)
         self.q_measured: Float | None = None
         self.done = False
         self.fault: str | None = None
