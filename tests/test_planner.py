@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 import pickle
 import time
+import warnings
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -26,6 +28,7 @@ from pbdkit.reproduction._planner import (
     one_line,
 )
 from pbdkit.reproduction._plans import _Handover
+from pbdkit.robots import katana
 
 
 def _peaks(s: np.ndarray, limits: MotionLimits) -> float:
@@ -335,3 +338,45 @@ def test_a_late_plan_is_joined_from_the_commands_not_asked_again(
     assert 0.0 < landed - handover[0] <= max(LATE_JOINS) + 1e-9
     for k in range(math.ceil(landed * 1000), len(setpoints)):
         np.testing.assert_array_equal(setpoints[k], plan_motion.at(k * 1e-3)[0])
+
+
+def test_the_issues_coaster_push_stops_lift2_on_its_limit(
+    fast_demos: Callable[..., list[Demonstration]],
+) -> None:
+    # Issue 35's case: the coaster skill, the measured posture pushed by +0.15 rad on lift1 and
+    # -0.1 rad on lift2 at step 229 (held until the controller notices). The commands left
+    # lift2's lower limit for 6 steps (by up to 0.076 rad), then snapped back by 3.3x the
+    # velocity limit in one step.
+    demos = fast_demos("coaster", 5, 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the K cap's SelectionWarning
+        skill = Skill.learn(demos, katana())
+    objects = {k: np.mean([d.objects[k] for d in demos], axis=0) for k in demos[0].objects}
+    ctrl = skill.controller(objects)
+    q = skill.constraints().joint_mean[0].copy()
+    commands, stopped, held_at, offset = [q], [], -1, np.zeros(5)
+    while not ctrl.done and len(commands) < 3000:
+        if len(commands) == 230:
+            offset = np.array([0.0, 0.15, -0.1, 0.0, 0.0])
+        cmd = ctrl.step(q + offset)
+        if cmd.held and held_at < 0:
+            held_at, offset = len(commands), np.zeros(5)
+        stopped.append(cmd.at_position_limit.copy())
+        commands.append(cmd.q)
+        q = cmd.q
+    s = np.array(commands)
+    lower, upper = skill.robot.lower, skill.robot.upper
+    assert held_at == 230
+    assert np.all(s >= lower) and np.all(s <= upper)
+    stops = np.array(stopped)
+    assert stops[:, 2].any() and not stops[:, [0, 1, 3, 4]].any()  # lift2, on its limit
+    assert np.any(s[:, 2] == lower[2])
+    # No snap back: every step within the velocity limit (a stop forces acceleration and jerk
+    # only), from the pushed posture on.
+    limits = ctrl.limits
+    assert limits is not None
+    pushed = s[held_at - 1] + np.array([0.0, 0.15, -0.1, 0.0, 0.0])  # measured at that call
+    after = np.vstack([pushed, s[held_at:]])
+    speed = np.abs(np.diff(after, axis=0)) / ctrl.dt
+    assert np.all(speed <= limits.velocity * (1.0 + 1e-9))
+    assert ctrl.fault is None and ctrl.done
