@@ -57,6 +57,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from ._validation import short
+
 if TYPE_CHECKING:
     from . import datasets, robots
     from .data import (
@@ -133,7 +135,7 @@ def __getattr__(name: str) -> Any:
         return importlib.import_module(f".{_SUBMODULES[name]}", __name__)
     where = _WHERE.get(name)
     if where is None:
-        raise AttributeError(f"module 'pbdkit' has no attribute {name!r}")
+        raise AttributeError(f"module 'pbdkit' has no attribute {short(name)}")
     value = getattr(importlib.import_module(f".{where}", __name__), name)
     globals()[name] = value  # the next look-up is a plain attribute
     return value

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._validation import short
+
 __all__ = [
     "MAX_NPZ_BYTES",
     "NpyHeader",
@@ -117,7 +119,7 @@ def save_npz_atomic(path: str | os.PathLike[str], arrays: Mapping[str, NDArray[A
     """Save arrays to an ``.npz`` file atomically; object arrays are refused (no pickle)."""
     for key, value in arrays.items():
         if np.asarray(value).dtype == object:
-            raise TypeError(f"array {key!r} has dtype object, which would need pickle")
+            raise TypeError(f"array {short(key)} has dtype object, which would need pickle")
     buf = io.BytesIO()
     payload: dict[str, Any] = {k: np.asarray(v) for k, v in arrays.items()}
     np.savez_compressed(buf, **payload)
@@ -213,7 +215,7 @@ class NpzArchive(Mapping[str, NDArray[Any]]):
                 return np.lib.format.read_array(member, allow_pickle=False)
         except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
             raise ValueError(
-                f"{self.path} is not a valid {self.what} (key {key!r} does not read): {exc}"
+                f"{self.path} is not a valid {self.what} (key {short(key)} does not read): {exc}"
             ) from exc
 
     def check_keys(self, allowed: Callable[[str], bool] | Collection[str]) -> None:
@@ -232,7 +234,7 @@ class NpzArchive(Mapping[str, NDArray[Any]]):
         known = allowed if callable(allowed) else frozenset(allowed).__contains__
         unknown = [k for k in self.headers if not known(k)]
         if unknown:
-            shown = ", ".join(f"{k!r} ({_size(self.headers[k].nbytes)})" for k in unknown[:4])
+            shown = ", ".join(f"{short(k)} ({_size(self.headers[k].nbytes)})" for k in unknown[:4])
             more = f" and {len(unknown) - 4} more" if len(unknown) > 4 else ""
             raise ValueError(
                 f"{self.path} is not a valid {self.what}: unknown key(s) {shown}{more}; "
@@ -364,22 +366,22 @@ def _check_members(
         # np.savez stores the array of key k as the member k.npy.
         if not info.filename.endswith(".npy"):
             raise ValueError(
-                f"{p} is not a valid {what}: the member {info.filename!r} is not an .npy array"
+                f"{p} is not a valid {what}: the member {short(info.filename)} is not an .npy array"
             )
         key = info.filename[: -len(".npy")]
         if key in members:
-            raise ValueError(f"{p} is not a valid {what}: the key {key!r} is stored twice")
+            raise ValueError(f"{p} is not a valid {what}: the key {short(key)} is stored twice")
         try:
             header = _npy_header(archive, info)
         except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
-            raise ValueError(f"{p} is not a valid {what}: key {key!r}: {exc}") from exc
+            raise ValueError(f"{p} is not a valid {what}: key {short(key)}: {exc}") from exc
         headers[key], members[key] = header, info
         total += header.nbytes
         if total > max_bytes:
             biggest = max(headers, key=lambda k: headers[k].nbytes)
             raise ValueError(
                 f"{p} is not a valid {what}: its arrays would take more than {_size(max_bytes)} "
-                f"once loaded (at least {_size(total)}; key {biggest!r}: "
+                f"once loaded (at least {_size(total)}; key {short(biggest)}: "
                 f"{_size(headers[biggest].nbytes)})"
             )
     return headers, members

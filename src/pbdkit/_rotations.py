@@ -30,6 +30,8 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from ._validation import short
+
 __all__ = [
     "as_pose",
     "check_rotation",
@@ -228,7 +230,7 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     except (TypeError, ValueError) as exc:
         raise ValueError(
             f"{name} must be a position (3,), a 4x4 transform or (x, y, z, qw, qx, qy, qz), "
-            f"got {value!r}"
+            f"got {short(value)}"
         ) from exc
     if arr.shape not in ((3,), (4, 4), (7,)):
         raise ValueError(
@@ -271,7 +273,7 @@ def check_rotation(value: object, name: str = "rotation") -> Float:
     try:
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a rotation matrix (3, 3), got {value!r}") from exc
+        raise ValueError(f"{name} must be a rotation matrix (3, 3), got {short(value)}") from exc
     if arr.shape != (3, 3):
         raise ValueError(f"{name} must be a rotation matrix (3, 3), got shape {arr.shape}")
     _, rot = as_pose(pose_matrix(np.zeros(3), arr), name)

@@ -6,6 +6,7 @@ Each ``check_*`` function returns the cleaned array (float64, C-contiguous) or r
 
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -22,7 +23,28 @@ __all__ = [
     "check_positive_float",
     "check_trajectories",
     "shape_str",
+    "short",
 ]
+
+#: How messages show a value: bounded in length and depth, whatever it is (a YAML alias bomb
+#: of 0.5 KB expands into a nested list whose full repr is 312 MB).
+_SHORT = reprlib.Repr()  # (keyword arguments only from Python 3.12)
+_SHORT.maxlevel = 3
+_SHORT.maxtuple = _SHORT.maxlist = _SHORT.maxarray = _SHORT.maxdeque = 8
+_SHORT.maxdict = _SHORT.maxset = _SHORT.maxfrozenset = 8
+_SHORT.maxstring = _SHORT.maxother = 200
+_SHORT.maxlong = 40
+
+
+def short(value: object) -> str:
+    """``repr(value)`` for a message, bounded: at most 8 items a level, 3 levels, strings and
+    other values (a path) at most 200 characters, and 300 in all (longer ones elided in the
+    middle)."""
+    try:
+        text = _SHORT.repr(value)
+    except Exception:  # a repr that raises: its type instead
+        return f"<{type(value).__name__}>"
+    return text if len(text) <= 300 else f"{text[:200]}...{text[-80:]}"
 
 
 def shape_str(shape: Sequence[int | str | None]) -> str:
@@ -127,7 +149,7 @@ def check_int(
 ) -> int:
     """Check that ``value`` is an integer (not a bool) in [``minimum``, ``maximum``]."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
+        raise ValueError(f"{name} must be an integer, got {short(value)}")
     v = int(value)
     if minimum is not None and v < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {v}")
@@ -139,11 +161,11 @@ def check_int(
 def check_positive_float(value: object, name: str, *, allow_zero: bool = False) -> float:
     """Check that ``value`` is a finite real number > 0 (or >= 0 with ``allow_zero``)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
+        raise ValueError(f"{name} must be a number, got {short(value)}")
     v = float(value)
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
+        raise ValueError(f"{name} must be finite and {bound}, got {short(value)}")
     return v
 
 
@@ -184,7 +206,7 @@ def check_positions(
             f"got {type(objects).__name__}"
         )
     keys = check_object_names(objects, name, expected=expected, what=what)
-    return {k: check_array(objects[k], f"{name}[{k!r}]", shape=(3,)).copy() for k in keys}
+    return {k: check_array(objects[k], f"{name}[{short(k)}]", shape=(3,)).copy() for k in keys}
 
 
 def check_object_names(
@@ -198,10 +220,11 @@ def check_object_names(
     (exactly ``expected`` if given, in its order; else the names given, none reserved)."""
     for key in objects:
         if not isinstance(key, str) or not key:
-            raise ValueError(f"{name} keys must be non-empty strings, got {key!r}")
+            raise ValueError(f"{name} keys must be non-empty strings, got {short(key)}")
         if key in RESERVED_NAMES:
             raise ValueError(
-                f"{name}: {key!r} is reserved for the joint-space constraint; rename the object"
+                f"{name}: {short(key)} is reserved for the joint-space constraint; rename the "
+                "object"
             )
     keys: list[str] = list(objects)
     if expected is not None:
@@ -256,7 +279,7 @@ def check_trajectories(
             k = int(np.argmax(dt <= 0))
             raise ValueError(
                 f"{name}[{i}][:, 0] (time) must be strictly increasing, got "
-                f"t[{k}]={float(x[k, 0])!r} >= t[{k + 1}]={float(x[k + 1, 0])!r}"
+                f"t[{k}]={short(float(x[k, 0]))} >= t[{k + 1}]={short(float(x[k + 1, 0]))}"
             )
         out.append(x)
     return out

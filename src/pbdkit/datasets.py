@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from ._validation import check_array, check_int, check_positive_float
+from ._validation import check_array, check_int, check_positive_float, short
 from .data._demonstration import Demonstration
 from .robots._ik import damped_least_squares
 from .robots._protocols import KinematicModel, check_robot
@@ -85,7 +85,7 @@ def lasa(name: str) -> list[LasaDemo]:
 
     names = lasa_names()
     if name not in names:
-        raise ValueError(f"name must be a LASA shape, one of {names}; got {name!r}")
+        raise ValueError(f"name must be a LASA shape, one of {names}; got {short(name)}")
     mat = loadmat(str(_lasa_dir() / f"{name}.mat"))
     demos = []
     for d in mat["demos"][0]:
@@ -285,10 +285,10 @@ def reach_grasp_return(
     rate = check_positive_float(rate, "rate")
     posture_spread = check_positive_float(posture_spread, "posture_spread", allow_zero=True)
     if not segment_timing < 1.0:
-        raise ValueError(f"segment_timing must be in [0, 1), got {segment_timing!r}")
+        raise ValueError(f"segment_timing must be in [0, 1), got {short(segment_timing)}")
     segment_timing = check_positive_float(segment_timing, "segment_timing", allow_zero=True)
     if not 0.0 <= pauses <= 1.0:  # NaN too
-        raise ValueError(f"pauses must be a probability in [0, 1], got {pauses!r}")
+        raise ValueError(f"pauses must be a probability in [0, 1], got {short(pauses)}")
     dwell = check_array(pause_seconds, "pause_seconds", shape=(2,))
     if not 0.0 <= dwell[0] <= dwell[1]:
         raise ValueError(f"pause_seconds must be (low, high), 0 <= low <= high, got {dwell}")
@@ -297,7 +297,7 @@ def reach_grasp_return(
     )
     place_spread = check_positive_float(place_spread, "place_spread", allow_zero=True)
     if place_c is not None and place_name == object_name:
-        raise ValueError(f"place_name must differ from object_name, both are {place_name!r}")
+        raise ValueError(f"place_name must differ from object_name, both are {short(place_name)}")
     vlim = np.asarray(robot.velocity_limit, dtype=np.float64)
     rng = np.random.default_rng(seed)
     # The harder teachers' draws: a stream of their own, so that the default ones are unchanged.

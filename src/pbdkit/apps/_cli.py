@@ -19,6 +19,7 @@ from rich.text import Text
 
 from .._defaults import MAX_COMPONENTS
 from .._io import write_json
+from .._validation import short
 from ._cli_files import bag_extras, bag_timing, load_demos, timing_text
 from ._cli_options import (
     PERTURBATIONS,
@@ -277,7 +278,7 @@ def learn(
         arm = Robot.from_urdf(Path(robot), tip=tip, joint_limits=joint_limits)
     else:
         raise typer.BadParameter(
-            f"robot must be one of {robots.available()} or a URDF file, got {robot!r}",
+            f"robot must be one of {robots.available()} or a URDF file, got {short(robot)}",
             param_hint="--robot",
         )
     items = load_demos(demos, arm, sources, joint_topic, gripper_topic, start, end)

@@ -13,6 +13,7 @@ import numpy as np
 import typer
 from typer.core import TyperCommand
 
+from .._validation import short
 from ._cli_output import console, fail
 
 if TYPE_CHECKING:
@@ -136,7 +137,7 @@ def robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
     except ValueError:
         choices = ", ".join([*task_names(), *also])
         raise typer.BadParameter(
-            f"task must be one of {choices}; got {task!r}", param_hint="--task"
+            f"task must be one of {choices}; got {short(task)}", param_hint="--task"
         ) from None
 
 
@@ -197,7 +198,7 @@ def check_perturb(perturb: str) -> None:
 
     if perturb not in perturbation_names():
         raise typer.BadParameter(
-            f"must be one of {', '.join(perturbation_names())}, got {perturb!r}",
+            f"must be one of {', '.join(perturbation_names())}, got {short(perturb)}",
             param_hint="--perturb",
         )
 
@@ -249,7 +250,7 @@ def check_lasa_shape(shape: str) -> None:
     except (ModuleNotFoundError, FileNotFoundError) as exc:  # the data are an optional extra
         fail(f"--task lasa: {exc}")
     if shape not in names:
-        fail(f"--shape must be a LASA shape, one of {', '.join(names)}; got {shape!r}")
+        fail(f"--shape must be a LASA shape, one of {', '.join(names)}; got {short(shape)}")
 
 
 # ----------------------------------------------------------------------------- objects
@@ -284,7 +285,7 @@ def parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
     forms = "NAME=x,y,z (metres) or NAME=x,y,z,qw,qx,qy,qz (a pose, quaternion w first)"
     if not sep or not name or not rest:
         want = "NAME=SOURCE (a topic, tf:frame, x,y,z or x,y,z,qw,qx,qy,qz)" if sources else forms
-        raise typer.BadParameter(f"expected {want}, got {text!r}", param_hint="--object")
+        raise typer.BadParameter(f"expected {want}, got {short(text)}", param_hint="--object")
     try:
         values = [float(v) for v in rest.split(",")]
     except ValueError:
@@ -293,5 +294,7 @@ def parse_object(text: str, *, sources: bool) -> tuple[str, str | np.ndarray]:
         values = []
     if len(values) not in (3, 7):
         got = f"{len(values)} numbers" if values else "not numbers"
-        raise typer.BadParameter(f"expected {forms}, got {text!r} ({got})", param_hint="--object")
+        raise typer.BadParameter(
+            f"expected {forms}, got {short(text)} ({got})", param_hint="--object"
+        )
     return name, np.array(values)

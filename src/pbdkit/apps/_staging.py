@@ -10,6 +10,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from .._validation import short
+
 __all__ = ["staged_output"]
 
 
@@ -68,5 +70,7 @@ def _missing_folders(out: Path) -> list[Path]:
         missing.append(folder)
         folder = folder.parent
     if folder.exists() and not folder.is_dir():
-        raise ValueError(f"out must be a directory, got {str(out)!r}: {str(folder)!r} is a file")
+        raise ValueError(
+            f"out must be a directory, got {short(str(out))}: {short(str(folder))} is a file"
+        )
     return missing[::-1]

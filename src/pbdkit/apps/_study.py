@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import atomic_write_bytes, write_json
-from .._validation import check_int, check_positive_float
+from .._validation import check_int, check_positive_float, short
 from ..sim._task_skill import constrained_objects, learn_task
 from ..sim._tasks import PlacementRange, TaskSpec, check_task, yaw_of, yaw_pose
 from ..sim._trials import TrialConditions, run_trials
@@ -66,7 +66,7 @@ def _as_tuple(name: str, value: object, *, empty: str = "") -> tuple[Any, ...]:
     """``value`` as a non-empty tuple, or a ValueError naming ``name`` (``empty``: what to give
     instead of an empty one)."""
     if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
-        raise ValueError(f"{name} must be a tuple, got {value!r}")
+        raise ValueError(f"{name} must be a tuple, got {short(value)}")
     items = tuple(value)
     if not items:
         hint = f" ({empty})" if empty else ""
@@ -76,7 +76,7 @@ def _as_tuple(name: str, value: object, *, empty: str = "") -> tuple[Any, ...]:
 
 def _check_unique(name: str, items: tuple[Any, ...]) -> None:
     if len(set(items)) != len(items):
-        raise ValueError(f"{name} must not repeat a value, got {items!r}")
+        raise ValueError(f"{name} must not repeat a value, got {short(items)}")
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ class StudySize:
             )
             if not all(isinstance(k, str) for k in names):
                 raise ValueError(
-                    f"StudySize.map_controllers must hold controller names, got {names!r}"
+                    f"StudySize.map_controllers must hold controller names, got {short(names)}"
                 )
             _check_unique("StudySize.map_controllers", names)
             object.__setattr__(self, "map_controllers", names)
@@ -179,7 +179,9 @@ def grid_placements(
     """
     r = spec.ranges[obj]
     if r.fixed:
-        raise ValueError(f"{obj!r} is fixed in the {spec.name!r} task: there is nothing to map")
+        raise ValueError(
+            f"{short(obj)} is fixed in the {short(spec.name)} task: there is nothing to map"
+        )
     c, h = r.center, 0.5 * (r.high - r.low)
     xs = np.linspace(c[0] - 2 * h[0], c[0] + 2 * h[0], n)
     if r.yaw is not None:
@@ -307,7 +309,7 @@ def check_study(
     """
     spec = check_task(spec, "spec")
     if not isinstance(size, StudySize):
-        raise ValueError(f"size must be a StudySize (SMALL, FULL or your own), got {size!r}")
+        raise ValueError(f"size must be a StudySize (SMALL, FULL or your own), got {short(size)}")
     check_int(seed, "seed", minimum=0)
     # An injected learner may constrain any object of the task (the fixed basin too).
     objects = constrained_objects(spec) if learn is None else list(spec.ranges)
@@ -315,7 +317,7 @@ def check_study(
     for name in size.map_controllers or ():
         if name not in known:
             raise ValueError(
-                f"StudySize.map_controllers must name controllers of {known}, got {name!r}"
+                f"StudySize.map_controllers must name controllers of {known}, got {short(name)}"
             )
     return spec
 

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._rotations import exp_map, matrix_from_quaternion, pose_matrix
+from .._validation import short
 from ..data._placement import position_of
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import PoseKinematicModel
@@ -384,7 +385,9 @@ class ViewApp:
         moves in the physics too.
         """
         if name not in self.handles:
-            raise ValueError(f"object {name!r} cannot be moved here; movable: {list(self.handles)}")
+            raise ValueError(
+                f"object {short(name)} cannot be moved here; movable: {list(self.handles)}"
+            )
         value = np.asarray(placement, dtype=np.float64)
         if value.shape != self.objects[name].shape or not np.isfinite(value).all():
             raise ValueError(

@@ -37,7 +37,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._threads import one_blas_thread
-from .._validation import check_trajectories
+from .._validation import check_trajectories, short
 from ..robots._protocols import KinematicModel, check_robot
 from ._demonstration import Demonstration, check_demonstrations
 from ._placement import position_of
@@ -177,20 +177,20 @@ def _check_band(band: object) -> float:
     if isinstance(band, bool) or not isinstance(band, (int, float, np.integer, np.floating)):
         raise ValueError(
             "band must be a number in (0, 1] (the half-width of the DTW band as a fraction of "
-            f"the duration), got {band!r}"
+            f"the duration), got {short(band)}"
         )
     b = float(band)
     if not 0.0 < b <= 1.0:  # also rejects NaN
         raise ValueError(
             "band must be in (0, 1] (the half-width of the DTW band as a fraction of the "
-            f"duration), got {band!r}"
+            f"duration), got {short(band)}"
         )
     return b
 
 
 def _check_reference(reference: object) -> Warp:
     if not isinstance(reference, str) or reference not in REFERENCES:
-        raise ValueError(f"reference must be one of {sorted(REFERENCES)}, got {reference!r}")
+        raise ValueError(f"reference must be one of {sorted(REFERENCES)}, got {short(reference)}")
     return REFERENCES[reference]
 
 

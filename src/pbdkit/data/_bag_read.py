@@ -22,7 +22,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._rotations import as_pose, mean_rotation, pose_matrix
-from .._validation import check_array, check_positive_float
+from .._validation import check_array, check_positive_float, short
 from ..robots._protocols import BagRobot, check_robot
 from ._bag_stream import _PASSED_THROUGH, _Bag, _open_reader, _unreadable
 from ._demonstration import Demonstration
@@ -165,11 +165,11 @@ def _check_sources(objects: object) -> dict[str, str | Float]:
     out: dict[str, str | Float] = {}
     for name, source in objects.items():
         if not isinstance(name, str) or not name:
-            raise ValueError(f"objects keys must be non-empty strings, got {name!r}")
-        what = f"objects[{name!r}]"
+            raise ValueError(f"objects keys must be non-empty strings, got {short(name)}")
+        what = f"objects[{short(name)}]"
         if isinstance(source, str):
             if not source or source == TF_PREFIX:
-                raise ValueError(f"{what} must be {_SOURCE_FORMS}, got {source!r}")
+                raise ValueError(f"{what} must be {_SOURCE_FORMS}, got {short(source)}")
             out[name] = source
         else:
             # Numbers only (check_array refuses strings, dates, complex), then the forms.
@@ -200,7 +200,7 @@ def _check_window(start: float | None, end: float | None) -> _Window:
     s = 0.0 if start is None else check_positive_float(start, "start", allow_zero=True)
     e = None if end is None else check_positive_float(end, "end", allow_zero=True)
     if e is not None and e <= s:
-        raise ValueError(f"end must be > start ({s!r} s), got {e!r}")
+        raise ValueError(f"end must be > start ({short(s)} s), got {short(e)}")
     text = f"[{s:g}, {'end' if e is None else f'{e:g}'}]"
     start_ns = round(min(s, _MAX_SPAN_S) * _NS)
     return _Window(start_ns, None if e is None else round(min(e, _MAX_SPAN_S) * _NS), text)
@@ -220,7 +220,7 @@ def _read_demonstration(
     # Check every topic before reading any message: a wrong name fails at once.
     for name, source in sources.items():
         if isinstance(source, str) and not source.startswith(TF_PREFIX):
-            bag.check_topic(source, tuple(OBJECT_TYPES), f"objects[{name!r}]")
+            bag.check_topic(source, tuple(OBJECT_TYPES), f"objects[{short(name)}]")
     if gripper_topic is not None:
         bag.check_topic(gripper_topic, GRIPPER_TYPES, "gripper_topic")
 
@@ -237,7 +237,7 @@ def _read_demonstration(
 
     placements: dict[str, Float] = {}  # positions (3,) and poses (4, 4)
     for name, source in sources.items():
-        what = f"objects[{name!r}]"
+        what = f"objects[{short(name)}]"
         if not isinstance(source, str):
             placements[name] = source
         elif source.startswith(TF_PREFIX):
@@ -299,7 +299,7 @@ def _joint_states(
         stamp = _stamp_ns(msg.header.stamp)
         if previous is not None and stamp <= previous[1]:
             raise ValueError(
-                f"joint_topic: the header stamps of {topic!r} must increase strictly in "
+                f"joint_topic: the header stamps of {short(topic)} must increase strictly in "
                 f"recording order; message {i} is stamped {_seconds(stamp)} s, not after "
                 f"message {previous[0]} ({_seconds(previous[1])} s)"
             )
@@ -312,7 +312,7 @@ def _joint_states(
         position = np.asarray(msg.position, dtype=np.float64)
         if position.shape != (len(names),):
             raise ValueError(
-                f"joint_topic: message {i} of {topic!r} has {len(names)} names and "
+                f"joint_topic: message {i} of {short(topic)} has {len(names)} names and "
                 f"{position.shape[0]} positions; they must match"
             )
         rows.append(position[idx])
@@ -322,12 +322,12 @@ def _joint_states(
     if origin is None or (n_robot < 2 and not n_skipped):
         seen = sorted({n for names in order for n in names})
         raise ValueError(
-            f"joint_topic: {n_robot} message(s) of {topic!r} (of {n_messages}) name the "
+            f"joint_topic: {n_robot} message(s) of {short(topic)} (of {n_messages}) name the "
             f"robot's joints {joint_names}, need at least 2; the messages name {seen}"
         )
     if len(rows) < 2:
         raise ValueError(
-            f"start/end: {len(rows)} joint state(s) of {topic!r} within {window.text} s, "
+            f"start/end: {len(rows)} joint state(s) of {short(topic)} within {window.text} s, "
             f"need at least 2; the joint states span [0, {last * 1e-9:.3f}] s"
         )
     stamps_ = np.array(stamps, dtype=np.int64)
@@ -336,7 +336,8 @@ def _joint_states(
     if long.size:
         k = int(long[0]) + 1
         raise ValueError(
-            f"joint_topic: the joint states of {topic!r} stop for {_seconds(int(gaps[k - 1]))} "
+            f"joint_topic: the joint states of {short(topic)} stop for "
+            f"{_seconds(int(gaps[k - 1]))} "
             f"s after message {index[k - 1]} ({_seconds(stamps[k - 1] - origin)} s after the "
             f"first joint state); they must come at least every {MAX_JOINT_GAP_NS * 1e-9:g} s "
             "(a longer gap is a paused recording or a lost driver: cut it off with start/end)"
@@ -354,13 +355,13 @@ def _joint_order(
     names: tuple[str, ...], joint_names: list[str], topic: str, i: int
 ) -> NDArray[np.intp]:
     if len(set(names)) != len(names):
-        raise ValueError(f"joint_topic: message {i} of {topic!r} names a joint twice: {names}")
+        raise ValueError(f"joint_topic: message {i} of {short(topic)} names a joint twice: {names}")
     where = {n: k for k, n in enumerate(names)}
     missing = [n for n in joint_names if n not in where]
     if missing:
         raise ValueError(
             f"joint_topic: joint(s) {missing} of the robot missing from message {i} of "
-            f"{topic!r}, which names {list(names)}"
+            f"{short(topic)}, which names {list(names)}"
         )
     return np.array([where[n] for n in joint_names], dtype=np.intp)
 
@@ -426,23 +427,24 @@ def _object_placement(
             else "it has no messages"
         )
         raise ValueError(
-            f"{what}: no message of {topic!r} stamped within the first second of the "
+            f"{what}: no message of {short(topic)} stamped within the first second of the "
             f"demonstration ([0, 1] s after the first joint state); {span}. Give the position "
             "as x,y,z, or choose start"
         )
     if not finite:
         raise ValueError(
-            f"{what}: the {len(window)} message(s) of {topic!r} stamped within the first "
+            f"{what}: the {len(window)} message(s) of {short(topic)} stamped within the first "
             "second of the demonstration all hold NaN or infinite positions. Give the position "
             "as x,y,z, or choose start"
         )
     if len(frames) > 1:
         raise ValueError(
-            f"{what}: the messages of {topic!r} are in several frames {sorted(frames)}"
+            f"{what}: the messages of {short(topic)} are in several frames {sorted(frames)}"
         )
     if msgtype in POSE_TYPES and not rotations:
         raise ValueError(
-            f"{what}: none of the {len(finite)} message(s) of {topic!r} with a finite position "
+            f"{what}: none of the {len(finite)} message(s) of {short(topic)} with a finite "
+            "position "
             "stamped within the first second of the demonstration holds an orientation: their "
             f"quaternions ({POSE_TYPES[msgtype]}: x, y, z, w) are all zero, NaN or infinite. "
             "Give the pose as x,y,z,qw,qx,qy,qz (quaternion w first), or choose start"
@@ -451,7 +453,9 @@ def _object_placement(
     rotation = mean_rotation(np.stack(rotations)) if rotations else None
     (frame,) = frames
     if frame not in ("", base):
-        rot, trans = tf_tree().transform(frame, base, f"{what} (frame {frame!r} of {topic!r})")
+        rot, trans = tf_tree().transform(
+            frame, base, f"{what} (frame {short(frame)} of {short(topic)})"
+        )
         position = np.asarray(rot @ position + trans, dtype=np.float64)
         rotation = None if rotation is None else rot @ rotation
     return position if rotation is None else pose_matrix(position, rotation)
@@ -479,7 +483,7 @@ def _gripper(bag: _Bag, topic: str, joint_logs: NDArray[np.int64]) -> Float:
         if not np.isfinite(value):
             # NaN > 0.5 is False: it would read as "open" where the signal is unknown.
             raise ValueError(
-                f"gripper_topic: message {i} of {topic!r} holds {value}; the gripper signal "
+                f"gripper_topic: message {i} of {short(topic)} holds {value}; the gripper signal "
                 f"must be finite (closed where > {GRIPPER_THRESHOLD})"
             )
         closed[k] = value > GRIPPER_THRESHOLD

@@ -14,6 +14,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .._validation import short
 from ._ros import _NS, _stamp_ns, _typestore
 
 if TYPE_CHECKING:
@@ -53,13 +54,13 @@ class _Bag:
         """The message type of ``topic``, or a ValueError naming what was expected."""
         if topic not in self.topics:
             raise ValueError(
-                f"{what}: the bag {self.path} has no topic {topic!r}; {self.listing()}"
+                f"{what}: the bag {self.path} has no topic {short(topic)}; {self.listing()}"
             )
         actual = self.topics[topic]
         if actual is None or actual not in expected:
             want = " or ".join(expected)
             got = actual or "several types"
-            raise ValueError(f"{what}: topic {topic!r} must be of type {want}, got {got}")
+            raise ValueError(f"{what}: topic {short(topic)} must be of type {want}, got {got}")
         return actual
 
     def unreadable(self, exc: BaseException) -> ValueError:

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._rotations import quaternion_from_matrix
-from .._validation import check_array, check_positive_float
+from .._validation import check_array, check_positive_float, short
 from ..motion._limits import PAD_REST, MotionLimits, divided_differences, with_defaults
 from ._demonstration import Demonstration
 from ._placement import position_of, rotation_of
@@ -55,7 +55,7 @@ def _check_new_path(path: str | os.PathLike[str], name: str = "path") -> Path:
 
 def _check_storage(storage: object) -> Storage:
     if storage not in STORAGES:
-        raise ValueError(f"storage must be one of {list(STORAGES)}, got {storage!r}")
+        raise ValueError(f"storage must be one of {list(STORAGES)}, got {short(storage)}")
     return storage
 
 
@@ -87,11 +87,11 @@ def _check_topics(topics: Mapping[str, object]) -> None:
         if not isinstance(topic, str) or not _TOPIC_NAME.fullmatch(topic):
             raise ValueError(
                 f"{name} must be a ROS topic name ('/' then names of letters, digits and _, "
-                f"not starting with a digit, e.g. '/joint_trajectory'), got {topic!r}"
+                f"not starting with a digit, e.g. '/joint_trajectory'), got {short(topic)}"
             )
         if topic in seen:
             raise ValueError(
-                f"{name} must differ from {seen[topic]} ({topic!r}): a topic carries one "
+                f"{name} must differ from {seen[topic]} ({short(topic)}): a topic carries one "
                 "message type"
             )
         seen[topic] = name
@@ -293,7 +293,7 @@ def _check_motion(t: Float, q: Float, names: Sequence[str], limits: MotionLimits
             where = float(t[min(max(int(k) - PAD_REST, 0), t.shape[0] - 1)])
             whose = "the limit assumed for an arm without one" if assumed else "the limit"
             raise ValueError(
-                f"the trajectory exceeds {whose} on {names[int(joint)]!r}: {quantity} "
+                f"the trajectory exceeds {whose} on {short(names[int(joint)])}: {quantity} "
                 f"{float(np.abs(d[k, joint])):.4g} against {float(bound[joint]):.4g} near "
                 f"t = {where:.4g} s (from rest at the first point, to rest at the last); time "
                 "it within the arm's limits (e.g. skill.times(res) of a reproduction within "
@@ -320,12 +320,12 @@ def _trajectory_messages(
     _check_topics({"topic": topic, **({} if gripper is None else {"gripper_topic": gripper_topic})})
     t_ = check_array(t, "t", ndim=1, min_rows=1)
     if t_[0] < 0:
-        raise ValueError(f"t must be >= 0 (time from start), got t[0]={float(t_[0])!r}")
+        raise ValueError(f"t must be >= 0 (time from start), got t[0]={short(float(t_[0]))}")
     if np.any(t_ >= _MAX_ROS_SECONDS):
         i = int(np.argmax(t_ >= _MAX_ROS_SECONDS))
         raise ValueError(
             f"t must be < {_MAX_ROS_SECONDS} s (2**31: time_from_start holds int32 seconds), "
-            f"got t[{i}]={float(t_[i])!r}"
+            f"got t[{i}]={short(float(t_[i]))}"
         )
     ns = np.round(t_ * _NS).astype(np.int64)  # < 2**31 s: within int64 ns
     if np.any(np.diff(ns) <= 0):
@@ -334,9 +334,11 @@ def _trajectory_messages(
         if b > a:  # increasing, but not at the resolution of the stamps
             raise ValueError(
                 f"t must increase by at least 1 ns (the resolution of time_from_start), got "
-                f"t[{i}]={a!r} and t[{i + 1}]={b!r}, {b - a:.3g} s apart"
+                f"t[{i}]={short(a)} and t[{i + 1}]={short(b)}, {b - a:.3g} s apart"
             )
-        raise ValueError(f"t must increase strictly, got t[{i}]={a!r} and t[{i + 1}]={b!r}")
+        raise ValueError(
+            f"t must increase strictly, got t[{i}]={short(a)} and t[{i + 1}]={short(b)}"
+        )
     q = check_array(joints, "joints", shape=(t_.shape[0], None))
     if q.shape[1] == 0:
         raise ValueError(f"joints must have one column per joint, at least 1, got shape {q.shape}")
@@ -460,7 +462,7 @@ def write_demonstration_bag(
         raise ValueError(
             f"start_time + the demonstration's duration ({demo.duration:g} s) must be < "
             f"{_MAX_ROS_SECONDS} s (2**31: ROS 2 stamps hold int32 seconds), got "
-            f"start_time={start_time!r}"
+            f"start_time={short(start_time)}"
         )
     t0 = round(start * _NS)
     topics: dict[str, str | None] = {n: f"/{n}/pose" for n in demo.object_names}
@@ -475,7 +477,7 @@ def write_demonstration_bag(
     _check_topics(
         {
             "joint_topic": joint_topic,
-            **{f"object_topics[{n!r}]": v for n, v in topics.items() if v is not None},
+            **{f"object_topics[{short(n)}]": v for n, v in topics.items() if v is not None},
             **({} if gripper_topic is None else {"gripper_topic": gripper_topic}),
         }
     )

@@ -32,7 +32,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._io import check_format, open_npz, save_npz_atomic
-from .._validation import check_array, check_int
+from .._validation import check_array, check_int, short
 from ._placement import check_placements, is_pose, position_of
 
 __all__ = [
@@ -142,8 +142,8 @@ class Demonstration:
         if np.any(dt <= 0):
             i = int(np.argmax(dt <= 0))
             raise ValueError(
-                f"t must be strictly increasing, got t[{i}]={float(t_[i])!r} "
-                f">= t[{i + 1}]={float(t_[i + 1])!r}"
+                f"t must be strictly increasing, got t[{i}]={short(float(t_[i]))} "
+                f">= t[{i + 1}]={short(float(t_[i + 1]))}"
             )
         joints_ = check_array(joints, "joints", ndim=2, allow_bool=False).copy()
         if joints_.shape[0] != t_.shape[0] or joints_.shape[1] < 1:
@@ -157,7 +157,7 @@ class Demonstration:
                 i = int(np.argmax(outside))
                 raise ValueError(
                     f"gripper[{i}] must be within [0, 1] (0 open, 1 closed), "
-                    f"got {float(gripper_[i])!r}"
+                    f"got {short(float(gripper_[i]))}"
                 )
             gripper_.setflags(write=False)
         t_.setflags(write=False)
@@ -278,7 +278,7 @@ def check_demonstrations(demos: object, *, min_demos: int = 2) -> list[Demonstra
             if is_pose(d.objects[k]) != is_pose(ref.objects[k]):
                 kind = "a pose" if is_pose(d.objects[k]) else "a position"
                 raise ValueError(
-                    f"demos[{i}].objects[{k!r}] is {kind}, unlike in demos[0]: give each "
+                    f"demos[{i}].objects[{short(k)}] is {kind}, unlike in demos[0]: give each "
                     "object as a pose in every demonstration or as a position in every one"
                 )
         if (d.gripper is None) != (ref.gripper is None):
@@ -384,13 +384,13 @@ def _demonstrations_from_arrays(
         raise ValueError(f"n_demos must be an integer >= 1, got {value}")
     names_arr = np.asarray(data["object_names"])
     if names_arr.ndim != 1 or (names_arr.size and names_arr.dtype.kind != "U"):
-        raise ValueError(f"object_names must be a 1-D array of strings, got {names_arr!r}")
+        raise ValueError(f"object_names must be a 1-D array of strings, got {short(names_arr)}")
     names = [str(s) for s in names_arr]
     if len(set(names)) != len(names):
         raise ValueError(f"object_names must be distinct, got {names}")
     grip_arr = np.asarray(data["has_gripper"])
     if grip_arr.shape != () or grip_arr.dtype.kind != "b":
-        raise ValueError(f"has_gripper must be a boolean, got {grip_arr!r}")
+        raise ValueError(f"has_gripper must be a boolean, got {short(grip_arr)}")
     has_gripper = bool(grip_arr)
     fields: tuple[str, ...] = ("t", "joints", "objects")
     if posed:
@@ -564,7 +564,7 @@ def _check_delimiter(delimiter: object) -> None:
     ):
         raise ValueError(
             "delimiter must be one character that cannot occur in a number, such as ',', ';' "
-            f"or a tab, got {delimiter!r}"
+            f"or a tab, got {short(delimiter)}"
         )
 
 
@@ -576,11 +576,11 @@ def _check_joint_columns(joint_columns: object) -> list[str]:
     cols = list(joint_columns)
     bad = [c for c in cols if not isinstance(c, str)]
     if bad:
-        raise ValueError(f"joint_columns must be column names (strings), got {bad[0]!r}")
+        raise ValueError(f"joint_columns must be column names (strings), got {short(bad[0])}")
     roles = {"t": "the time", "gripper": "the gripper signal"}
     taken = [c for c in cols if c in roles]
     if taken:
-        raise ValueError(f"joint_columns: {taken[0]!r} is {roles[taken[0]]}, not a joint")
+        raise ValueError(f"joint_columns: {short(taken[0])} is {roles[taken[0]]}, not a joint")
     twice = sorted({c for c in cols if cols.count(c) > 1})
     if twice:
         raise ValueError(f"joint_columns must name each column once, got {twice} more than once")

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._rotations import as_pose, pose_matrix
-from .._validation import check_object_names
+from .._validation import check_object_names, short
 
 __all__ = ["check_placements", "is_pose", "position_of", "rotation_of"]
 
@@ -61,7 +61,7 @@ def check_placements(
     keys = check_object_names(objects, name, expected=expected, what=what)
     out: dict[str, Float] = {}
     for k in keys:
-        p, rot = as_pose(objects[k], f"{name}[{k!r}]")
+        p, rot = as_pose(objects[k], f"{name}[{short(k)}]")
         out[k] = p if rot is None else pose_matrix(p, rot)
     return out
 

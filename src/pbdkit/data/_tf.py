@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._rotations import pose_matrix
+from .._validation import short
 from ._bag_stream import _Bag
 from ._ros import (
     OBJECT_WINDOW_NS,
@@ -71,7 +72,8 @@ class _TfTree:
         for (parent, child), items in samples.items():
             if child in links:
                 raise ValueError(
-                    f"tf: frame {child!r} has two parents, {links[child].parent!r} and {parent!r}"
+                    f"tf: frame {short(child)} has two parents, {short(links[child].parent)} and "
+                    f"{short(parent)}"
                 )
             links[child] = _Link(parent, *_mean_transform(items, parent, child))
         return cls(links, " and ".join(present))
@@ -95,7 +97,7 @@ class _TfTree:
         chain_b, rot_b, trans_b = self._to_root(base)
         if chain_f[-1] != chain_b[-1]:
             raise ValueError(
-                f"{what}: tf does not join {frame!r} to the robot's base {base!r}: "
+                f"{what}: tf does not join {short(frame)} to the robot's base {short(base)}: "
                 f"{' <- '.join(chain_f)} and {' <- '.join(chain_b)} end in different roots "
                 f"(transforms of {self.source} during the first second)"
             )
@@ -118,7 +120,8 @@ def _mean_transform(
     items = [(p, q) for p, q in items if np.all(np.isfinite(p)) and np.all(np.isfinite(q))]
     if not items:  # non-finite samples are dropped as outliers, as an object topic's are
         raise ValueError(
-            f"tf: the transforms {parent!r} -> {child!r} of the first second are all NaN or "
+            f"tf: the transforms {short(parent)} -> {short(child)} of the first second are all NaN "
+            "or "
             "infinite"
         )
     trans = np.median(np.stack([p for p, _ in items]), axis=0)
@@ -127,5 +130,7 @@ def _mean_transform(
     q = quats.mean(axis=0)
     norm = float(np.linalg.norm(q))
     if not (np.isfinite(norm) and norm > 1e-9 and np.all(np.isfinite(trans))):
-        raise ValueError(f"tf: the transform {parent!r} -> {child!r} is not a valid rotation")
+        raise ValueError(
+            f"tf: the transform {short(parent)} -> {short(child)} is not a valid rotation"
+        )
     return _ros_rotation(q / norm), np.asarray(trans, dtype=np.float64)

@@ -58,7 +58,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_array, short
 
 __all__ = [
     "DEFAULT_ACCELERATION_TIME",
@@ -148,7 +148,7 @@ class MotionLimits:
             bad = np.flatnonzero(~(arr > 0))
             if bad.size:
                 i = int(bad[0])
-                raise ValueError(f"{name}[{i}] must be > 0 (inf: no limit), got {arr[i]!r}")
+                raise ValueError(f"{name}[{i}] must be > 0 (inf: no limit), got {short(arr[i])}")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
@@ -228,7 +228,7 @@ class MotionLimits:
                 if spec != "robot":
                     raise ValueError(
                         f"{name} must be 'robot', a number or an array of shape ({n},) in "
-                        f"{units[kind]}, or None, got {spec!r}"
+                        f"{units[kind]}, or None, got {short(spec)}"
                     )
                 arr = check_array(declared[kind], f"robot.{name}", shape=(n,), finite=False)
                 out[kind] = np.where(np.isfinite(arr) & (arr > 0), arr, np.inf)
@@ -304,7 +304,7 @@ def defaults_where_declared(
         if bare.any():
             name = names[int(np.argmax(bare))]
             raise ValueError(
-                f"joint {name!r} has acceleration or jerk limits but no velocity limit: "
+                f"joint {short(name)} has acceleration or jerk limits but no velocity limit: "
                 "timed motion needs one (give it in the URDF's <limit velocity=...> or "
                 "velocity_limit=), or pass acceleration_limit=None and jerk_limit=None for "
                 "the paper's loop"
@@ -562,7 +562,9 @@ def retime(
             f"{nominal.shape}"
         )
     if not np.all(np.isfinite(nominal) & (nominal > 0)):
-        raise ValueError(f"dt must be a positive number of seconds (or one per step), got {dt!r}")
+        raise ValueError(
+            f"dt must be a positive number of seconds (or one per step), got {short(dt)}"
+        )
     h = np.broadcast_to(nominal, (k_steps,)).astype(np.float64)
     if not limits.any:
         return h
@@ -664,8 +666,8 @@ def _start_velocity(v0: Float, vlim: Float) -> Float:
     if over.any():
         i = int(np.argmax(over))
         raise ValueError(
-            f"start_velocity[{i}] is {float(v0[i])!r} rad/s, beyond the velocity limit "
-            f"{float(vlim[i])!r}: no timing of the path can start from it"
+            f"start_velocity[{i}] is {short(float(v0[i]))} rad/s, beyond the velocity limit "
+            f"{short(float(vlim[i]))}: no timing of the path can start from it"
         )
     cap = vlim * (1.0 - START_VELOCITY_TOLERANCE)
     return np.clip(v0, -cap, cap)
@@ -704,7 +706,7 @@ class StreamMonitor:
 
     def __init__(self, limits: MotionLimits, period: float) -> None:
         if not (np.isfinite(period) and period > 0):
-            raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+            raise ValueError(f"period must be a positive number of seconds, got {short(period)}")
         self.limits, self.period = limits, float(period)
         self._q: list[Float] = []
         self._ok: list[bool] = []

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ._limits import MotionLimits
 from ._motion import (
     Motion,
@@ -94,7 +95,7 @@ def point_to_point(
         first sample at or after the move's end).
     """
     if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        raise ValueError(f"dt must be a positive number of seconds, got {short(dt)}")
     p0 = np.asarray(start, dtype=np.float64)
     p1 = np.asarray(goal, dtype=np.float64)
     n = p0.shape[0]

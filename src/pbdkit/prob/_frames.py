@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from .._defaults import MAX_COMPONENTS
 from .._io import NpzArchive, check_format, open_npz, save_npz_atomic
-from .._validation import check_array, check_int, check_trajectories
+from .._validation import check_array, check_int, check_trajectories, short
 from ._gmm import GMM
 from ._gmr import CovarianceMode
 from .gaussian import precision_from_covariance, product_information
@@ -200,7 +200,7 @@ class FrameModel:
             raise ValueError("gmms must hold one fitted GMM per frame, got none")
         for p, g in enumerate(items):
             if not isinstance(g, GMM) or not hasattr(g, "covariances_"):
-                raise ValueError(f"gmms[{p}] must be a fitted GMM, got {g!r}")
+                raise ValueError(f"gmms[{p}] must be a fitted GMM, got {short(g)}")
         dims = [int(g.n_dims_) for g in items]
         if dims[0] < 2 or any(d != dims[0] for d in dims):
             raise ValueError(
@@ -427,12 +427,12 @@ class FrameModel:
             n_frames = _stored_int(data["n_frames"])
             n_dims = _stored_int(data["n_dims"])
             if n_frames is None or n_frames < 1:
-                raise ValueError(f"n_frames must be an integer >= 1, got {data['n_frames']!r}")
+                raise ValueError(f"n_frames must be an integer >= 1, got {short(data['n_frames'])}")
             if n_dims is None or n_dims < 1:
-                raise ValueError(f"n_dims must be an integer >= 1, got {data['n_dims']!r}")
+                raise ValueError(f"n_dims must be an integer >= 1, got {short(data['n_dims'])}")
             extra = [k for k in data if k.startswith("gmm_") and int(k.split("_")[1]) >= n_frames]
             if extra:
-                raise ValueError(f"key {extra[0]!r} for a frame beyond n_frames = {n_frames}")
+                raise ValueError(f"key {short(extra[0])} for a frame beyond n_frames = {n_frames}")
             gmms = [
                 GMM.from_params(
                     data[f"gmm_{i}_weights"], data[f"gmm_{i}_means"], data[f"gmm_{i}_covariances"]

@@ -26,7 +26,7 @@ from sklearn.exceptions import NotFittedError
 
 from .._defaults import MAX_COMPONENTS
 from .._threads import one_blas_thread
-from .._validation import check_array, check_int, check_positive_float
+from .._validation import check_array, check_int, check_positive_float, short
 from ._calibration import normalized_residuals
 from ._em import (
     MAX_TIME_SPREAD,
@@ -73,8 +73,8 @@ def _check_max_time_spread(value: object, min_time_spread: float) -> float:
         if v >= min_time_spread:
             return v
     raise ValueError(
-        f"max_time_spread must be a number >= min_time_spread ({min_time_spread!r}) and > 0, "
-        f"or inf for no ceiling, got {value!r}"
+        f"max_time_spread must be a number >= min_time_spread ({short(min_time_spread)}) and > 0, "
+        f"or inf for no ceiling, got {short(value)}"
     )
 
 
@@ -90,7 +90,7 @@ def _check_rng(
         return np.random.default_rng(random_state)
     raise ValueError(
         "random_state must be None, an integer, a numpy Generator or a numpy RandomState, "
-        f"got {random_state!r}"
+        f"got {short(random_state)}"
     )
 
 
@@ -244,9 +244,9 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         check_int(self.max_iter, "max_iter", minimum=1)
         check_positive_float(self.tol, "tol", allow_zero=True)
         if self.cv_scale not in ("local", "pooled"):
-            raise ValueError(f"cv_scale must be 'local' or 'pooled', got {self.cv_scale!r}")
+            raise ValueError(f"cv_scale must be 'local' or 'pooled', got {short(self.cv_scale)}")
         if self.init not in ("time", "kmeans"):
-            raise ValueError(f"init must be 'time' or 'kmeans', got {self.init!r}")
+            raise ValueError(f"init must be 'time' or 'kmeans', got {short(self.init)}")
         if self.time_dim is not None:
             td = check_int(self.time_dim, "time_dim", minimum=0)
             if td >= n_dims:
@@ -256,7 +256,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             if self.n_components not in ("auto", "bic"):
                 raise ValueError(
                     "n_components must be a positive integer, 'auto' or 'bic', "
-                    f"got {self.n_components!r}"
+                    f"got {short(self.n_components)}"
                 )
             if self.n_components == "auto" and self.time_dim is None:
                 raise ValueError(
@@ -334,7 +334,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             j = int(flat[0])
             also = f" (so are dimensions {flat[1:].tolist()})" if flat.size > 1 else ""
             raise ValueError(
-                f"X[:, {j}] is constant ({float(x_raw[0, j])!r}) and reg_covar is 0 there"
+                f"X[:, {j}] is constant ({short(float(x_raw[0, j]))}) and reg_covar is 0 there"
                 f"{also}: every component would have zero variance in that dimension; "
                 "increase reg_covar (e.g. 1e-6, or one value per dimension), or drop the column"
             )
@@ -670,7 +670,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         dims: list[int] = []
         for i in dims_seq:
             if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
-                raise ValueError(f"in_dims must hold integers, got {i!r}")
+                raise ValueError(f"in_dims must hold integers, got {short(i)}")
             dims.append(int(i))
         if not dims:
             raise ValueError("in_dims must hold at least one dimension, got []")
@@ -692,7 +692,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
     @staticmethod
     def _check_covariance_mode(covariance: str) -> CovarianceMode:
         if covariance not in ("exact", "paper"):
-            raise ValueError(f"covariance must be 'exact' or 'paper', got {covariance!r}")
+            raise ValueError(f"covariance must be 'exact' or 'paper', got {short(covariance)}")
         return covariance  # type: ignore[return-value]
 
     def regress(
@@ -767,7 +767,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
             if x.shape[0] != d_in or not np.isfinite(x).all():
                 raise ValueError(
                     f"x_in must be {d_in} finite value(s) for in_dims={list(model.in_dims)}, "
-                    f"got {np.asarray(x_in)!r}"
+                    f"got {short(np.asarray(x_in))}"
                 )
             mean, cov = gmr_step(model, x, covariance)
         assert cov is not None

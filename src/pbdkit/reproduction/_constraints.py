@@ -21,7 +21,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._rotations import check_rotation, exp_map, left_jacobian
-from .._validation import check_array
+from .._validation import check_array, short
 from ..prob._frames import precision_to_world
 from ..prob.gaussian import inverse_cholesky_factor
 
@@ -105,21 +105,23 @@ class Constraints:
                 f"and {sorted(task_cov)}"
             )
         if JOINT in task_mean:
-            raise ValueError(f"task_mean: {JOINT!r} is reserved for the joint-space constraint")
+            raise ValueError(
+                f"task_mean: {short(JOINT)} is reserved for the joint-space constraint"
+            )
         bases = {} if rotation_base is None else dict(rotation_base)
         unknown = [k for k in bases if k not in task_mean]
         if unknown:
             raise ValueError(f"rotation_base: {unknown} are not task constraints")
         self.rotation_base: dict[str, Float] = {}
         for k, m in bases.items():
-            self.rotation_base[k] = check_rotation(m, f"rotation_base[{k!r}]")
+            self.rotation_base[k] = check_rotation(m, f"rotation_base[{short(k)}]")
         dims = {k: 6 if k in bases else 3 for k in task_mean}
         self.task_mean = {
-            k: check_array(v, f"task_mean[{k!r}]", shape=(n_steps, dims[k]))
+            k: check_array(v, f"task_mean[{short(k)}]", shape=(n_steps, dims[k]))
             for k, v in task_mean.items()
         }
         self.task_cov = {
-            k: check_array(task_cov[k], f"task_cov[{k!r}]", shape=(n_steps, dims[k], dims[k]))
+            k: check_array(task_cov[k], f"task_cov[{short(k)}]", shape=(n_steps, dims[k], dims[k]))
             for k in task_mean
         }
         self.oriented: list[str] = [k for k in task_mean if k in bases]
@@ -133,7 +135,9 @@ class Constraints:
         self.joint_eta: Float = np.einsum("tij,tj->ti", self.joint_prec, self.joint_mean)
         self.task_prec: dict[str, Float] = {}
         for k, cov in self.task_cov.items():
-            li = inverse_cholesky_factor(cov, message=_not_positive_definite_at(f"task_cov[{k!r}]"))
+            li = inverse_cholesky_factor(
+                cov, message=_not_positive_definite_at(f"task_cov[{short(k)}]")
+            )
             self.task_prec[k] = np.swapaxes(li, -1, -2) @ li
 
     @property

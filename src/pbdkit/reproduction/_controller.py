@@ -31,7 +31,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._rotations import log3
-from .._validation import check_array
+from .._validation import check_array, short
 from ..data._placement import position_of, rotation_of
 from ..motion._limits import MotionLimits, RetimeWarning
 from ..motion._motion import Motion, brake
@@ -191,7 +191,7 @@ class Controller:
         planner: PlannerKind = "inline",
     ) -> None:
         if planner not in PLANNERS:
-            raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+            raise ValueError(f"planner must be one of {PLANNERS}, got {short(planner)}")
         timed = check_timing(limits, dt)
         if timed:
             step_limit = None  # the trajectory generator bounds the speed
@@ -206,7 +206,7 @@ class Controller:
         self._run = run
         lag = float(max_lag)
         if not (lag > 0):  # NaN too
-            raise ValueError(f"max_lag must be > 0 (steps), got {max_lag!r}")
+            raise ValueError(f"max_lag must be > 0 (steps), got {short(max_lag)}")
         c, n = run.constraints, run.constraints.n_joints
         self._c, self._robot = c, robot
         self._objs, self._used, self._tasks = run.objects, run.used, run.tasks
@@ -225,7 +225,7 @@ class Controller:
             assert limits is not None
             distance = float(replan_distance)
             if not (distance >= 0):
-                raise ValueError(f"replan_distance must be >= 0 (m), got {replan_distance!r}")
+                raise ValueError(f"replan_distance must be >= 0 (m), got {short(replan_distance)}")
             self._timed = _Timed(limits, distance, robot, run, self.dt)
             if planner != "inline":
                 self._use_planner(planner)
@@ -305,7 +305,7 @@ class Controller:
         if isinstance(planner, Planner):
             new: Planner = planner
         elif planner not in PLANNERS:
-            raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+            raise ValueError(f"planner must be one of {PLANNERS}, got {short(planner)}")
         elif planner == "process":
             new = ProcessPlanner(st.setup)
         else:

@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_positive_float
+from .._validation import check_array, check_positive_float, short
 from ..data._placement import check_placements, is_pose, position_of
 from ..motion._limits import positive_bounds
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
@@ -163,7 +163,7 @@ def setup_run(
     bound = _check_step_limit(step_limit, n)
     on_unreachable = options.on_unreachable
     if on_unreachable not in ("raise", "warn"):
-        raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {on_unreachable!r}")
+        raise ValueError(f"on_unreachable must be 'raise' or 'warn', got {short(on_unreachable)}")
     if reach is not None:
         # Only the objects whose constraints are in use steer the arm.
         _check_reach({k: o for k, o in objs.items() if k in used}, c, float(reach), on_unreachable)
@@ -233,8 +233,10 @@ def check_objects(
         if k in oriented:
             if not is_pose(v):
                 raise ValueError(
-                    f"{name}[{k!r}] must be a pose (a 4x4 transform or x, y, z, qw, qx, qy, qz): "
-                    f"the skill learned the hand's position and orientation in the frame of {k!r}; "
+                    f"{name}[{short(k)}] must be a pose (a 4x4 transform or x, y, z, qw, qx, qy, "
+                    "qz): "
+                    "the skill learned the hand's position and orientation in the frame of "
+                    f"{short(k)}; "
                     f"got a position {v.tolist()}"
                 )
             out[k] = v
@@ -255,7 +257,7 @@ def _check_use(use: Sequence[str] | str | None, names: Sequence[str]) -> list[st
         or not all(isinstance(u, str) for u in given)
     ):
         raise ValueError(
-            f"use must be None, a constraint name or a sequence of names, got {use!r}; "
+            f"use must be None, a constraint name or a sequence of names, got {short(use)}; "
             f"the constraints are {list(names)}"
         )
     out = [str(u) for u in use]
@@ -289,7 +291,7 @@ def _check_reach(
             dist = float(np.linalg.norm(target))
         if dist > reach:
             msg = (
-                f"objects[{k!r}]: the hand must be at {np.round(target, 4).tolist()} at step "
+                f"objects[{short(k)}]: the hand must be at {np.round(target, 4).tolist()} at step "
                 f"{j} (o + x_hat, where this object's constraint is tightest), "
                 f"{dist:.3f} m from the base, beyond the arm's reach of {reach:.3f} m; "
                 "move the object closer"
@@ -337,7 +339,7 @@ def step_limit_from_velocity(
         if velocity_limit != "robot":
             raise ValueError(
                 f"velocity_limit must be 'robot', a number or an array of shape ({n},) in rad/s, "
-                f"or None, got {velocity_limit!r}"
+                f"or None, got {short(velocity_limit)}"
             )
         if not known:
             return None
@@ -348,7 +350,7 @@ def step_limit_from_velocity(
         if not known:
             raise ValueError(
                 "velocity_limit is in rad/s and needs the duration of a step to bound the steps; "
-                f"it is unknown (dt = {dt!r}: the skill has no known duration): pass "
+                f"it is unknown (dt = {short(dt)}: the skill has no known duration): pass "
                 "velocity_limit=None, or bound the steps in rad with max_step"
             )
         v = positive_bounds(velocity_limit, n, "velocity_limit", "rad/s")

@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_array, short
 from ..motion._limits import MotionLimits, last_differences
 from ._command import Command
 from ._planner import Planner, PlannerKind
@@ -150,7 +150,7 @@ class CommandStream:
     ) -> None:
         rate = float(rate_hz)
         if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"rate_hz must be a positive number of Hz, got {rate_hz!r}")
+            raise ValueError(f"rate_hz must be a positive number of Hz, got {short(rate_hz)}")
         if controller.limits is None or controller._timed is None:
             raise ValueError(
                 "the controller has no motion limits: a stream needs them (give the robot "
@@ -161,7 +161,7 @@ class CommandStream:
         if rate * controller.dt < 1.0:
             raise ValueError(
                 f"rate_hz must give at least one setpoint per controller step "
-                f"(>= {1.0 / controller.dt:.6g} Hz), got {rate_hz!r}"
+                f"(>= {1.0 / controller.dt:.6g} Hz), got {short(rate_hz)}"
             )
         if planner is not None and not (
             isinstance(planner, str) and planner == controller._timed.planner.kind

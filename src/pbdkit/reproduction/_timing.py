@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import short
 from ..motion._limits import LIMIT_SAFETY, MotionLimits, retime, times_from_durations
 from ..motion._otg import point_to_point, spline_derivatives
 from ..robots._protocols import KinematicModel
@@ -40,7 +41,8 @@ def check_timing(limits: MotionLimits | None, dt: float | None) -> bool:
     timed = limits is not None and limits.any
     if timed and (dt is None or not (math.isfinite(dt) and dt > 0)):
         raise ValueError(
-            f"limits are in seconds and need the duration of a step: pass dt > 0 (s), got {dt!r}"
+            "limits are in seconds and need the duration of a step: pass dt > 0 (s), got "
+            f"{short(dt)}"
         )
     return timed
 

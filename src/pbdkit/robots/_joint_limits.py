@@ -47,6 +47,8 @@ import numpy.typing as npt
 import yaml
 from numpy.typing import NDArray
 
+from .._validation import short
+
 __all__ = [
     "JointLimits",
     "JointLimitsSource",
@@ -126,7 +128,7 @@ def read_joint_limits(source: JointLimitsSource) -> dict[str, JointLimits]:
         if not isinstance(entry, Mapping):
             raise ValueError(
                 f"{where} must map keys such as max_velocity to values, got "
-                f"{type(entry).__name__} {entry!r}"
+                f"{type(entry).__name__} {short(entry)}"
             )
         derivatives = {kind: _derivative(entry, kind, where) for kind in KINDS}
         out[str(name)] = JointLimits(**derivatives, position=_position(entry, where))
@@ -199,7 +201,7 @@ def check_limit_array(value: npt.ArrayLike, name: str, n_joints: int) -> NDArray
     bad = np.flatnonzero(~(out > 0))
     if bad.size:
         i = int(bad[0])
-        raise ValueError(f"{name}[{i}] must be > 0 (inf for no limit), got {float(out[i])!r}")
+        raise ValueError(f"{name}[{i}] must be > 0 (inf for no limit), got {short(float(out[i]))}")
     return out
 
 
@@ -242,7 +244,7 @@ def _flag(entry: Mapping[str, Any], key: str, where: str) -> bool | None:
         return None
     value = entry[key]
     if not isinstance(value, bool):
-        raise ValueError(f"{where}: {key} must be true or false, got {value!r}")
+        raise ValueError(f"{where}: {key} must be true or false, got {short(value)}")
     return value
 
 
@@ -251,7 +253,7 @@ def _number(entry: Mapping[str, Any], key: str, where: str, flag: str) -> float:
         raise ValueError(f"{where}: {flag} is true but {key} is missing; give {key}")
     value = entry[key]
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{where}: {key} must be a number, got {value!r}")
+        raise ValueError(f"{where}: {key} must be a number, got {short(value)}")
     return float(value)
 
 
@@ -270,7 +272,8 @@ def _derivative(entry: Mapping[str, Any], kind: str, where: str) -> float | None
     value = _number(entry, key, where, flag)
     if not value > 0:  # also NaN
         raise ValueError(
-            f"{where}: {key} must be a number > 0 ({KINDS[kind]}; .inf for no limit), got {value!r}"
+            f"{where}: {key} must be a number > 0 ({KINDS[kind]}; .inf for no limit), got "
+            f"{short(value)}"
         )
     return value
 
@@ -292,6 +295,6 @@ def _position(entry: Mapping[str, Any], where: str) -> tuple[float, float] | Non
     if not (math.isfinite(lower) and math.isfinite(upper) and lower <= upper):
         raise ValueError(
             f"{where}: min_position and max_position must be finite with min_position <= "
-            f"max_position, got {lower!r} and {upper!r}"
+            f"max_position, got {short(lower)} and {short(upper)}"
         )
     return lower, upper

@@ -41,7 +41,7 @@ import numpy.typing as npt
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from .._validation import check_array, shape_str
+from .._validation import check_array, shape_str, short
 from ._chain import _chain_constants, _chain_fk_jacobian
 from ._ik import ik
 from ._joint_limits import JointLimits, JointLimitsSource, joint_limits_mapping, read_joint_limits
@@ -74,7 +74,7 @@ def _positive_per_joint(
     if bad.size:
         i = int(bad[0])
         got = float(arr[i])
-        raise ValueError(f"{name}[{i}] must be > 0 ({unit}; inf for no limit), got {got!r}")
+        raise ValueError(f"{name}[{i}] must be > 0 ({unit}; inf for no limit), got {short(got)}")
     return arr
 
 
@@ -367,8 +367,8 @@ link_prefix, tip, velocity, effort
 
     def __repr__(self) -> str:
         return (
-            f"Robot(name={self.name!r}, n_joints={self.n_joints}, base={self.base!r}, "
-            f"tip={self.tip!r}, joint_names={self.joint_names})"
+            f"Robot(name={short(self.name)}, n_joints={self.n_joints}, base={short(self.base)}, "
+            f"tip={short(self.tip)}, joint_names={self.joint_names})"
         )
 
     # ---------------------------------------------------------------- validation and limits

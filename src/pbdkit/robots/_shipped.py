@@ -32,6 +32,7 @@ from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 
+from .._validation import short
 from ._robot import Robot
 from ._urdf import urdf_from_dh
 
@@ -173,5 +174,5 @@ def load(name: str) -> Robot:
     try:
         factory = _FACTORIES[name]
     except KeyError:
-        raise ValueError(f"name must be one of {available()}, got {name!r}") from None
+        raise ValueError(f"name must be one of {available()}, got {short(name)}") from None
     return factory()

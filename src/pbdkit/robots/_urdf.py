@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, shape_str
+from .._validation import check_array, shape_str, short
 from ._joint_limits import JointLimits
 
 __all__ = ["urdf_from_dh"]
@@ -194,7 +194,8 @@ def _choose_tip(root: ET.Element, tip: str | None) -> tuple[str, str]:
             link = None if elem is None else elem.get("link")
             if link not in known:
                 raise ValueError(
-                    f"joint '{joint.get('name', '?')}' has {tag} link {link!r}, which is not a "
+                    f"joint '{joint.get('name', '?')}' has {tag} link {short(link)}, which is not "
+                    "a "
                     f"<link> of the URDF; links are {links}"
                 )
     roots = [name for name in links if name not in child_links]
@@ -350,7 +351,7 @@ def urdf_from_dh(
         )
     n = dh.shape[0]
     if convention not in ("modified", "standard"):
-        raise ValueError(f"convention must be 'modified' or 'standard', got {convention!r}")
+        raise ValueError(f"convention must be 'modified' or 'standard', got {short(convention)}")
     if joint_types is None:
         types = ["revolute"] * n
     else:
@@ -364,7 +365,7 @@ def urdf_from_dh(
         if len(raw) != n or any(str(t).lower() not in alias for t in raw):
             raise ValueError(
                 f"joint_types must give {n} entries among 'revolute'/'prismatic' (or 'R'/'P'), "
-                f"got {joint_types!r}"
+                f"got {short(joint_types)}"
             )
         types = [alias[str(t).lower()] for t in raw]
     prismatic = np.array([t == "prismatic" for t in types])
@@ -381,7 +382,7 @@ def urdf_from_dh(
     else:
         jnames = [str(s) for s in joint_names]
         if len(jnames) != n or len(set(jnames)) != n:
-            raise ValueError(f"joint_names must hold {n} distinct names, got {joint_names!r}")
+            raise ValueError(f"joint_names must hold {n} distinct names, got {short(joint_names)}")
     if tip_offset is None:
         t_tip = np.eye(4)
     else:
@@ -421,7 +422,7 @@ def urdf_from_dh(
 
     links = [f"{link_prefix}{i}" for i in range(n + 1)]
     if tip in links or tip in jnames:
-        raise ValueError(f"tip must differ from the link and joint names, got {tip!r}")
+        raise ValueError(f"tip must differ from the link and joint names, got {short(tip)}")
     # Names are user text: quoteattr escapes them (&, <, >, quotes) into attribute values.
     q = quoteattr
     out = [
@@ -436,8 +437,8 @@ def urdf_from_dh(
         out.append(_origin_xml(origins[i], "    "))
         out.append('    <axis xyz="0 0 1"/>\n')
         out.append(
-            f'    <limit lower="{float(lo[i])!r}" upper="{float(hi[i])!r}" '
-            f'effort="{float(eff[i])!r}" velocity="{float(vel[i])!r}"/>\n'
+            f'    <limit lower="{short(float(lo[i]))}" upper="{short(float(hi[i]))}" '
+            f'effort="{short(float(eff[i]))}" velocity="{short(float(vel[i]))}"/>\n'
         )
         out.append("  </joint>\n")
     out.append(f'  <joint name={q(tip + "_joint")} type="fixed">\n')

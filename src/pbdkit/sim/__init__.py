@@ -32,6 +32,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from .._validation import short
+
 if TYPE_CHECKING:
     from ._evaluation import Evaluation, evaluate
     from ._execute import ExecutionResult, execute
@@ -122,7 +124,7 @@ __all__ = [
 def __getattr__(name: str) -> Any:
     where = _WHERE.get(name)
     if where is None:
-        raise AttributeError(f"module 'pbdkit.sim' has no attribute {name!r}")
+        raise AttributeError(f"module 'pbdkit.sim' has no attribute {short(name)}")
     value = getattr(importlib.import_module(f".{where}", __name__), name)
     globals()[name] = value
     return value

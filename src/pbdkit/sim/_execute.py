@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_array, short
 from ..motion._limits import LIMIT_SAFETY, MotionLimits, MotionPeaks, motion_peaks
 from ..motion._otg import follow
 from ..robots import katana
@@ -324,11 +324,11 @@ def servo_stream(
     if np.any(np.diff(t_) <= 0):
         raise ValueError("t must be strictly increasing")
     if not (math.isfinite(period) and period > 0):
-        raise ValueError(f"period must be a positive number of seconds, got {period!r}")
+        raise ValueError(f"period must be a positive number of seconds, got {short(period)}")
     _check_limits(limits, n)
     m = _grid_index(t_, period)
     if n_steps is not None and n_steps < 1:
-        raise ValueError(f"n_steps must be >= 1, got {n_steps!r}")
+        raise ValueError(f"n_steps must be >= 1, got {short(n_steps)}")
     if not limits.any:
         total = int(m[-1]) + 1 if n_steps is None else int(n_steps)
         s = t_[0] + period * np.arange(total)

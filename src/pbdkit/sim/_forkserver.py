@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import os
 
+from .._validation import short
+
 __all__ = ["ENVIRONMENT", "METHOD_KEY", "PRELOAD", "cores", "local_workers", "start"]
 
 #: What the server imports once, for every worker forked from it: Dask's worker, the trials
@@ -93,6 +95,6 @@ def local_workers(workers: object, work: int | None = None) -> int:
         ``workers`` is not an integer >= 1.
     """
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        raise ValueError(f"workers must be an integer >= 1, got {short(workers)}")
     cap = cores() if work is None else min(cores(), work)
     return min(workers, max(cap, 1))

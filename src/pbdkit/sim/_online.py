@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import short
 from ..reproduction._controller import Command, Controller
 from ..vision import TrackFilter
 from ._execute import ExecutionResult, Recorder, start_at
@@ -76,7 +77,7 @@ class Observer:
 
     def __init__(self, names: Sequence[str], rate: float = OBSERVE_RATE) -> None:
         if not (rate > 0 and math.isfinite(rate)):
-            raise ValueError(f"rate must be a positive number of Hz, got {rate!r}")
+            raise ValueError(f"rate must be a positive number of Hz, got {short(rate)}")
         self.names = tuple(names)
         self.rate = float(rate)
         self.grasped = False
@@ -260,7 +261,7 @@ def execute_online(
     """
     dt = float(controller.dt)
     if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"the controller's dt must be known (> 0 s), got {controller.dt!r}")
+        raise ValueError(f"the controller's dt must be known (> 0 s), got {short(controller.dt)}")
     if controller.index != 0:
         raise ValueError("the controller has already run: make a new one for each run")
     if settle < 0:

@@ -42,6 +42,7 @@ from contextlib import AbstractContextManager, ExitStack, contextmanager, nullco
 from typing import Any, NamedTuple, TypeVar
 
 from .._threads import one_blas_thread
+from .._validation import short
 from . import _forkserver
 
 __all__ = ["WORKER_CONFIG", "Session", "connect", "run_fanout", "session"]
@@ -204,14 +205,16 @@ def _remote(scheduler: str | None, timeout: float) -> Any:
     from distributed import Client
 
     if not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
-        raise ValueError(f"timeout must be a number of seconds > 0, got {timeout!r}")
+        raise ValueError(f"timeout must be a number of seconds > 0, got {short(timeout)}")
     if not isinstance(scheduler, str):
-        raise ValueError(f"scheduler must be an address tcp://HOST:PORT, got {scheduler!r}")
+        raise ValueError(f"scheduler must be an address tcp://HOST:PORT, got {short(scheduler)}")
     _probe(scheduler, timeout)
     try:
         client = Client(scheduler, timeout=f"{timeout}s")  # type: ignore[no-untyped-call]
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ValueError(f"scheduler {scheduler!r}: cannot reach a Dask scheduler: {exc}") from exc
+        raise ValueError(
+            f"scheduler {short(scheduler)}: cannot reach a Dask scheduler: {exc}"
+        ) from exc
     # A cluster of the user's imports pbdkit in each worker: have it start now, without
     # waiting, so that the imports overlap the teaching and the learning.
     _warm_up(client)
@@ -253,14 +256,14 @@ def _probe(scheduler: str, timeout: float) -> None:
         host, port = parse_host_port(location) if scheme in _TCP_SCHEMES else ("", 0)
     except ValueError as exc:
         raise ValueError(
-            f"scheduler must be an address tcp://HOST:PORT, got {scheduler!r} ({exc})"
+            f"scheduler must be an address tcp://HOST:PORT, got {short(scheduler)} ({exc})"
         ) from None
     if scheme not in _TCP_SCHEMES:
         return  # Dask's other transports (inproc, ucx) are its own to check.
     if not 0 < port < 65536:
-        raise ValueError(f"scheduler {scheduler!r}: the port must be 1-65535, got {port}")
+        raise ValueError(f"scheduler {short(scheduler)}: the port must be 1-65535, got {port}")
     deadline = time.monotonic() + timeout
-    failed = f"scheduler {scheduler!r}: cannot reach a Dask scheduler:"
+    failed = f"scheduler {short(scheduler)}: cannot reach a Dask scheduler:"
     try:
         sock = socket.create_connection((host, port), timeout=timeout)
     except ConnectionRefusedError:

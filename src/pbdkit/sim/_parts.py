@@ -71,6 +71,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ._gl import mujoco
 from ._tasks import yaw_of
 from ._world import FINGER_HALF, SOLID, TIMESTEP, free_joint
@@ -174,7 +175,7 @@ def block_geom(name: str) -> str:
 def mark_prefix(name: str, end: str) -> str:
     """Name (and prefix) of the geom of the mark at ``end`` ("a" or "b") of object ``name``."""
     if end not in ("a", "b"):
-        raise ValueError(f"end must be 'a' or 'b', got {end!r}")
+        raise ValueError(f"end must be 'a' or 'b', got {short(end)}")
     return f"{name}_mark_{end}"
 
 
@@ -234,7 +235,7 @@ def add_block(world: Any, pose: npt.ArrayLike, *, name: str = "block") -> None:
     ValueError
         A pose that is not a finite 4x4 matrix with a yaw-only rotation.
     """
-    pos, yaw = _check_flat_pose(pose, f"add_block({name!r})")
+    pos, yaw = _check_flat_pose(pose, f"add_block({short(name)})")
     body = world.add_body(name=name, pos=pos.tolist(), quat=_yaw_quat(yaw))
     body.add_freejoint(name=free_joint(name))
     hx, hy, hz = BLOCK_LENGTH / 2, BLOCK_WIDTH / 2, BLOCK_HEIGHT / 2
@@ -280,7 +281,7 @@ def add_tray(world: Any, pose: npt.ArrayLike, *, name: str = "tray", mocap: bool
     ValueError
         A pose that is not a finite 4x4 matrix with a yaw-only rotation.
     """
-    pos, yaw = _check_flat_pose(pose, f"add_tray({name!r})")
+    pos, yaw = _check_flat_pose(pose, f"add_tray({short(name)})")
     body = world.add_body(name=name, pos=pos.tolist(), quat=_yaw_quat(yaw), mocap=mocap)
     solid: dict[str, Any] = {
         "type": mujoco.mjtGeom.mjGEOM_BOX,

@@ -49,6 +49,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import short
 from ._registry import Registry
 from ._scene import Simulation
 from ._tasks import TaskSpec, yaw_of
@@ -219,7 +220,7 @@ class TurnObject(Disturbance):
     def __post_init__(self) -> None:
         self.angle = float(self.angle)
         if not math.isfinite(self.angle):
-            raise ValueError(f"angle must be finite (rad), got {self.angle!r}")
+            raise ValueError(f"angle must be finite (rad), got {short(self.angle)}")
 
 
 @dataclass
@@ -289,7 +290,8 @@ def _slide_direction(
         if np.all(end[:2] >= r.low[:2] - 1e-9) and np.all(end[:2] <= r.high[:2] + 1e-9):
             return d
     raise ValueError(
-        f"no slide of {distance} m keeps {obj!r} inside its placement range from {start.tolist()}"
+        f"no slide of {distance} m keeps {short(obj)} inside its placement range from "
+        f"{start.tolist()}"
     )
 
 
@@ -350,13 +352,13 @@ class Perturbation:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+            raise ValueError(f"name must be a non-empty string, got {short(self.name)}")
         if not isinstance(self.help, str) or not self.help.strip():
-            raise ValueError(f"help of perturbation {self.name!r} must be a non-empty string")
+            raise ValueError(f"help of perturbation {short(self.name)} must be a non-empty string")
         for what in ("make", "check"):
             f = getattr(self, what)
             if f is not None and not callable(f):
-                raise ValueError(f"{what} of perturbation {self.name!r} must be callable")
+                raise ValueError(f"{what} of perturbation {short(self.name)} must be callable")
 
 
 _REGISTRY: Registry[Perturbation] = Registry(
@@ -448,7 +450,7 @@ def _nothing(setup: DisturbanceSetup) -> Disturbance:
 
 def _has_move(spec: TaskSpec) -> None:
     if spec.move is None:
-        raise ValueError(f"task {spec.name!r} has no 'move' disturbance (TaskSpec.move)")
+        raise ValueError(f"task {short(spec.name)} has no 'move' disturbance (TaskSpec.move)")
 
 
 def _slide(setup: DisturbanceSetup) -> Disturbance:
@@ -467,7 +469,7 @@ def _slide(setup: DisturbanceSetup) -> Disturbance:
 
 def _has_rotate(spec: TaskSpec) -> None:
     if spec.rotate is None:
-        raise ValueError(f"task {spec.name!r} has no 'rotate' disturbance (TaskSpec.rotate)")
+        raise ValueError(f"task {short(spec.name)} has no 'rotate' disturbance (TaskSpec.rotate)")
 
 
 def _turn_angle(
@@ -480,7 +482,8 @@ def _turn_angle(
     signs = [s for s in (1.0, -1.0) if r[0] - 1e-9 <= yaw + s * size <= r[1] + 1e-9]
     if not signs:
         raise ValueError(
-            f"no turn of {math.degrees(size):g} degrees keeps {obj!r} inside its yaw range from "
+            f"no turn of {math.degrees(size):g} degrees keeps {short(obj)} inside its yaw range "
+            "from "
             f"{math.degrees(yaw):g} degrees"
         )
     sign = signs[0] if len(signs) == 1 else (1.0 if rng.uniform() < 0.5 else -1.0)
@@ -497,7 +500,7 @@ def _turn(setup: DisturbanceSetup) -> Disturbance:
     placed = np.asarray(setup.objects[turn.obj], dtype=np.float64)
     if placed.shape != (4, 4):
         raise ValueError(
-            f"{turn.obj!r} must be placed as a pose (4, 4) to turn, got {placed.shape}"
+            f"{short(turn.obj)} must be placed as a pose (4, 4) to turn, got {placed.shape}"
         )
     angle = _turn_angle(spec, turn.obj, yaw_of(placed), size, setup.rng)
     if turn.when == "while_carried":

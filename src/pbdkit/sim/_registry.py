@@ -10,6 +10,8 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Generic, Protocol, TypeVar
 
+from .._validation import short
+
 
 class _Named(Protocol):
     @property
@@ -62,7 +64,7 @@ class Registry(Generic[E]):
         known = self._entries.get(entry.name)
         if known is not None and known is not entry:
             raise ValueError(
-                f"{self.kind} {entry.name!r} is already registered; choose another name (or "
+                f"{self.kind} {short(entry.name)} is already registered; choose another name (or "
                 f"unregister_{self.kind} it first)"
             )
         self._entries[entry.name] = entry
@@ -83,6 +85,6 @@ class Registry(Generic[E]):
         entry = self._entries.get(name) if isinstance(name, str) else None
         if entry is None:
             raise ValueError(
-                f"{self.option} must be one of {list(self._entries)}, got {name!r}{self.hint}"
+                f"{self.option} must be one of {list(self._entries)}, got {short(name)}{self.hint}"
             )
         return entry

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ..data._placement import position_of, rotation_of
 from ._gl import mujoco
 from ._glass import GLASS_PATCH_CENTER
@@ -196,7 +197,7 @@ class Simulation:
         """
         q_ = np.asarray(q, dtype=np.float64)
         if q_.shape != (self.n_joints,) or not np.all(np.isfinite(q_)):
-            raise ValueError(f"q must be a finite ({self.n_joints},) vector, got {q_!r}")
+            raise ValueError(f"q must be a finite ({self.n_joints},) vector, got {short(q_)}")
         self.data.qpos[self._qadr] = q_
         self.data.qvel[self._vadr] = 0.0
         self.set_targets(q_, np.zeros(self.n_joints))
@@ -377,10 +378,11 @@ class Simulation:
             or not (np.isfinite(p).all() and np.isfinite(v).all())
         ):
             raise ValueError(
-                f"position and velocity must be finite (3,) vectors, got {position!r}, {velocity!r}"
+                f"position and velocity must be finite (3,) vectors, got {short(position)}, "
+                f"{short(velocity)}"
             )
         if yaw is not None and not math.isfinite(yaw):
-            raise ValueError(f"yaw must be finite (rad) or None, got {yaw!r}")
+            raise ValueError(f"yaw must be finite (rad) or None, got {short(yaw)}")
         if name == self._held:
             a, d = self._glass_qadr, self._glass_vadr
             # Upright, as a hand sliding it would hold it; its reference point is then on the
@@ -402,7 +404,7 @@ class Simulation:
             self.data.mocap_pos[mid] = p - _quat_mat(self.data.mocap_quat[mid]) @ offset
         else:
             movable = [self._held, *self._mocap]
-            raise ValueError(f"object {name!r} cannot move; movable objects: {movable}")
+            raise ValueError(f"object {short(name)} cannot move; movable objects: {movable}")
         mujoco.mj_kinematics(self.model, self.data)
 
     def liquid_positions(self) -> Float:
@@ -443,7 +445,9 @@ class Simulation:
     def camera_id(self, camera: str) -> int:
         """MuJoCo id of a camera of ``info.cameras``; ValueError for another name."""
         if camera not in self.info.cameras:
-            raise ValueError(f"camera must be one of {list(self.info.cameras)}, got {camera!r}")
+            raise ValueError(
+                f"camera must be one of {list(self.info.cameras)}, got {short(camera)}"
+            )
         return int(self.model.camera(camera).id)
 
     def render(self, camera: str) -> NDArray[np.uint8]:

@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ._scene import Simulation
 from ._task_skill import TaskSkill
 from ._tasks import TaskSpec
@@ -96,7 +97,7 @@ def observation_noise(
     (see :func:`pbdkit.sim._trials.run_trial`), drawn from ``seed`` and ``index``; a pose's
     position gets the noise, its orientation is kept."""
     if not (noise_mm >= 0.0 and math.isfinite(noise_mm)):
-        raise ValueError(f"noise_mm must be a finite number >= 0, got {noise_mm!r}")
+        raise ValueError(f"noise_mm must be a finite number >= 0, got {short(noise_mm)}")
     rng = np.random.default_rng([seed, 3, index])
     sd = 1e-3 * noise_mm / math.sqrt(8.0 / math.pi)
     moving = set(task.tracked_objects)

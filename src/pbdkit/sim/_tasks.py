@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_positions
+from .._validation import check_positions, short
 from ..data._placement import check_placements, is_pose, position_of
 from ._glass import patch_prefix
 
@@ -237,11 +237,11 @@ class CameraRig:
         for what in ("left", "right", "target"):
             p = tuple(float(v) for v in getattr(self, what))
             if len(p) != 3 or not all(math.isfinite(v) for v in p):
-                raise ValueError(f"CameraRig.{what} must be 3 finite numbers, got {p!r}")
+                raise ValueError(f"CameraRig.{what} must be 3 finite numbers, got {short(p)}")
             object.__setattr__(self, what, p)
             pts[what] = np.array(p)
         if not (0.0 < float(self.fovy) < 180.0):
-            raise ValueError(f"CameraRig.fovy must be in (0, 180) degrees, got {self.fovy!r}")
+            raise ValueError(f"CameraRig.fovy must be in (0, 180) degrees, got {short(self.fovy)}")
         object.__setattr__(self, "fovy", float(self.fovy))
         if np.array_equal(pts["left"], pts["right"]):
             raise ValueError("CameraRig.left and right must be different positions")
@@ -258,7 +258,7 @@ class CameraRig:
             return self.left
         if camera == "cam_right":
             return self.right
-        raise ValueError(f"camera must be 'cam_left' or 'cam_right', got {camera!r}")
+        raise ValueError(f"camera must be 'cam_left' or 'cam_right', got {short(camera)}")
 
 
 class _GraspedPatch(dict[str, str]):
@@ -279,16 +279,18 @@ def _check_patch(
             or prefix[0] == prefix[1]
         ):
             raise ValueError(
-                f"patches[{obj!r}] of task {task!r}: {obj!r} is placed as a pose (its range has "
+                f"patches[{short(obj)}] of task {short(task)}: {short(obj)} is placed as a pose "
+                "(its range has "
                 "a yaw), so the cameras need two patches, one at each end: a pair (prefix_a, "
                 f"prefix_b) of different geom name prefixes, the yaw pointing from a to b; got "
-                f"{prefix!r}"
+                f"{short(prefix)}"
             )
         return (prefix[0], prefix[1])
     if not isinstance(prefix, str) or not prefix:
         raise ValueError(
-            f"patches[{obj!r}] of task {task!r} must be the name prefix of its patch's geoms (a "
-            f"non-empty string; a pair is for an object placed as a pose), got {prefix!r}"
+            f"patches[{short(obj)}] of task {short(task)} must be the name prefix of its patch's "
+            "geoms (a "
+            f"non-empty string; a pair is for an object placed as a pose), got {short(prefix)}"
         )
     return prefix
 
@@ -316,9 +318,11 @@ class ObjectMove:
 
     def __post_init__(self) -> None:
         if self.when not in ("before_grasp", "while_carried"):
-            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+            raise ValueError(
+                f"when must be 'before_grasp' or 'while_carried', got {short(self.when)}"
+            )
         if not (self.distance > 0):
-            raise ValueError(f"distance must be > 0 (m), got {self.distance!r}")
+            raise ValueError(f"distance must be > 0 (m), got {short(self.distance)}")
 
 
 @dataclass(frozen=True)
@@ -347,16 +351,18 @@ class ObjectTurn:
 
     def __post_init__(self) -> None:
         if self.when not in ("before_grasp", "while_carried"):
-            raise ValueError(f"when must be 'before_grasp' or 'while_carried', got {self.when!r}")
+            raise ValueError(
+                f"when must be 'before_grasp' or 'while_carried', got {short(self.when)}"
+            )
         try:
             lo, hi = (float(v) for v in self.degrees)
         except (TypeError, ValueError):
             raise ValueError(
-                f"degrees must be (min, max) in degrees, got {self.degrees!r}"
+                f"degrees must be (min, max) in degrees, got {short(self.degrees)}"
             ) from None
         if not (math.isfinite(hi) and 0.0 < lo <= hi):
             raise ValueError(
-                f"degrees must be (min, max) with 0 < min <= max, got {self.degrees!r}"
+                f"degrees must be (min, max) with 0 < min <= max, got {short(self.degrees)}"
             )
         object.__setattr__(self, "degrees", (lo, hi))
 
@@ -424,24 +430,25 @@ class TaskSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+            raise ValueError(f"name must be a non-empty string, got {short(self.name)}")
         ranges = dict(self.ranges)
         if not isinstance(self.grasped, str) or self.grasped not in ranges:
             raise ValueError(
-                f"ranges of task {self.name!r} must include {self.grasped!r} (the object the "
+                f"ranges of task {short(self.name)} must include {short(self.grasped)} (the object "
+                "the "
                 f"gripper holds, TaskSpec.grasped), got {list(ranges)}"
             )
         if isinstance(self.patches, _GraspedPatch):
             object.__setattr__(self, "patches", {self.grasped: patch_prefix(self.grasped)})
         for obj, r in ranges.items():
             if not isinstance(r, PlacementRange):
-                raise ValueError(f"ranges[{obj!r}] must be a PlacementRange, got {r!r}")
+                raise ValueError(f"ranges[{short(obj)}] must be a PlacementRange, got {short(r)}")
             if r.low.shape != (3,) or r.high.shape != (3,) or np.any(r.low > r.high):
-                raise ValueError(f"ranges[{obj!r}] must be a box with low <= high, shape (3,)")
+                raise ValueError(f"ranges[{short(obj)}] must be a box with low <= high, shape (3,)")
         unknown = sorted(set(self.patches) - set(ranges))
         if unknown:
             raise ValueError(
-                f"patches of task {self.name!r} name object(s) {unknown} without a range; "
+                f"patches of task {short(self.name)} name object(s) {unknown} without a range; "
                 f"expected some of {list(ranges)}"
             )
         patches: dict[str, str | tuple[str, str]] = {}
@@ -450,8 +457,9 @@ class TaskSpec:
             patches[obj] = _check_patch(self.name, obj, prefix, r.posed, not r.fixed)
         if self.cameras is not None and not isinstance(self.cameras, CameraRig):
             raise ValueError(
-                f"cameras of task {self.name!r} must be a CameraRig or None (the paper's rig), "
-                f"got {self.cameras!r}"
+                f"cameras of task {short(self.name)} must be a CameraRig or None (the paper's "
+                "rig), "
+                f"got {short(self.cameras)}"
             )
         if self.n_liquid < 0:
             raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
@@ -459,19 +467,19 @@ class TaskSpec:
             not isinstance(self.move, ObjectMove) or self.move.obj not in ranges
         ):
             raise ValueError(
-                f"move of task {self.name!r} must be an ObjectMove of one of its objects "
-                f"{list(ranges)}, got {self.move!r}"
+                f"move of task {short(self.name)} must be an ObjectMove of one of its objects "
+                f"{list(ranges)}, got {short(self.move)}"
             )
         if self.rotate is not None:
             _check_turn(self.name, self.rotate, ranges)
         for what in ("add_objects", "via_points", "judge"):
             if not callable(getattr(self, what)):
-                raise ValueError(f"{what} of task {self.name!r} must be callable")
+                raise ValueError(f"{what} of task {short(self.name)} must be callable")
         object.__setattr__(self, "ranges", ranges)
         object.__setattr__(self, "patches", patches)
 
     def __repr__(self) -> str:
-        return f"TaskSpec(name={self.name!r}, objects={list(self.ranges)})"
+        return f"TaskSpec(name={short(self.name)}, objects={list(self.ranges)})"
 
     @property
     def tracked_objects(self) -> tuple[str, ...]:
@@ -488,7 +496,8 @@ class TaskSpec:
         object with one patch (ValueError for one without a patch)."""
         if name not in self.patches:
             raise ValueError(
-                f"objects: no colored patch is known for {name!r} in the {self.name!r} task; "
+                f"objects: no colored patch is known for {short(name)} in the {short(self.name)} "
+                "task; "
                 f"expected one of {sorted(self.patches)}"
             )
         prefix = self.patches[name]
@@ -531,7 +540,7 @@ class TaskSpec:
                 if r is not None and r.posed != is_pose(v):
                     want = "a pose (4x4 or x, y, z, qw, qx, qy, qz)" if r.posed else "a position"
                     raise ValueError(
-                        f"objects[{k!r}] must be {want} for task {self.name!r}, got "
+                        f"objects[{short(k)}] must be {want} for task {short(self.name)}, got "
                         f"{'a pose' if is_pose(v) else 'a position'}"
                     )
         else:
@@ -539,14 +548,14 @@ class TaskSpec:
         unknown = [k for k in given if k not in self.ranges]
         if unknown:
             raise ValueError(
-                f"objects: unknown object(s) {unknown} for task {self.name!r}; expected "
+                f"objects: unknown object(s) {unknown} for task {short(self.name)}; expected "
                 f"{list(self.ranges)}"
             )
         missing = [k for k in self.tracked_objects if k not in given]
         if missing and not fill_moving:
             raise ValueError(
                 f"objects: missing position(s) for {missing}: they move between placements, so "
-                f"the {self.name!r} task needs them (only fixed objects "
+                f"the {short(self.name)} task needs them (only fixed objects "
                 f"{list(self.fixed_objects)} are known)"
             )
         out: dict[str, Float] = {}
@@ -556,7 +565,7 @@ class TaskSpec:
                 continue
             if r.fixed and not np.allclose(position_of(given[name]), r.low, rtol=0.0, atol=1e-6):
                 raise ValueError(
-                    f"objects[{name!r}]: the {name} is fixed at {r.low.tolist()}, "
+                    f"objects[{short(name)}]: the {name} is fixed at {r.low.tolist()}, "
                     f"got {given[name].tolist()}"
                 )
             out[name] = given[name]
@@ -593,20 +602,22 @@ def _check_turn(task: str, turn: object, ranges: Mapping[str, PlacementRange]) -
     or a turn larger than half its yaw range."""
     if not isinstance(turn, ObjectTurn) or turn.obj not in ranges:
         raise ValueError(
-            f"rotate of task {task!r} must be an ObjectTurn of one of its objects "
-            f"{list(ranges)}, got {turn!r}"
+            f"rotate of task {short(task)} must be an ObjectTurn of one of its objects "
+            f"{list(ranges)}, got {short(turn)}"
         )
     yaw = ranges[turn.obj].yaw
     if yaw is None:
         raise ValueError(
-            f"rotate of task {task!r} turns {turn.obj!r}, which is placed as a position: it "
+            f"rotate of task {short(task)} turns {short(turn.obj)}, which is placed as a position: "
+            "it "
             "needs a yaw range (PlacementRange.yaw)"
         )
     half = 0.5 * math.degrees(yaw[1] - yaw[0])
     if turn.degrees[1] > half + 1e-9:
         raise ValueError(
-            f"rotate of task {task!r}: a turn of up to {turn.degrees[1]:g} degrees does not fit "
-            f"in {turn.obj!r}'s yaw range from everywhere in it (at most half its width, "
+            f"rotate of task {short(task)}: a turn of up to {turn.degrees[1]:g} degrees does not "
+            "fit "
+            f"in {short(turn.obj)}'s yaw range from everywhere in it (at most half its width, "
             f"{half:g} degrees)"
         )
 
@@ -617,6 +628,6 @@ def check_task(task: object, name: str = "task") -> TaskSpec:
     if not isinstance(task, TaskSpec):
         raise ValueError(
             f"{name} must be a TaskSpec (pbdkit.sim.get_task turns a registered name into its "
-            f"spec), got {task!r}"
+            f"spec), got {short(task)}"
         )
     return task

@@ -44,6 +44,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ..data._demonstration import Demonstration
 from ..robots import katana
 from ..robots._ik import damped_least_squares
@@ -446,5 +447,5 @@ def teach_one(
         return Demonstration(t=t, joints=joints, objects=objects, gripper=gripper)
     raise ValueError(
         f"objects: no reachable demonstration for {_fmt(objects)} after {MAX_ATTEMPTS} "
-        f"attempts ({error}); keep objects inside the {spec.name!r} task's placement ranges"
+        f"attempts ({error}); keep objects inside the {short(spec.name)} task's placement ranges"
     )

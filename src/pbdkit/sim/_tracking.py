@@ -98,7 +98,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_int, check_positions
+from .._validation import check_array, check_int, check_positions, short
 from ..vision import ColorModel, PinholeCamera, PoseModel, PoseTrack, StereoTracker
 from ..vision._pose import OffsetFrame, ends_heading
 from ..vision._stereo import ObjectTrack
@@ -198,8 +198,8 @@ def patch_geom_ids(sim: Simulation, name: str) -> NDArray[np.intp]:
     obj, _, end = name.partition(":")
     if end and (obj not in spec.patches or spec.patch_ends(obj) is None or end not in "ab"):
         raise ValueError(
-            f"objects: {name!r} is not an end (NAME:a or NAME:b) of a posed object of the "
-            f"{sim.info.task!r} task"
+            f"objects: {short(name)} is not an end (NAME:a or NAME:b) of a posed object of the "
+            f"{short(sim.info.task)} task"
         )
     models = patch_models(spec, [obj])
     prefixes = [models[name]] if end else list(models.values())
@@ -215,7 +215,8 @@ def patch_geom_ids(sim: Simulation, name: str) -> NDArray[np.intp]:
     if ids.size == 0:
         shown = prefixes[0] if len(prefixes) == 1 else prefixes
         raise ValueError(
-            f"objects: the scene has no geom named {shown!r}... for {name!r} (is {obj!r} an "
+            f"objects: the scene has no geom named {short(shown)}... for {short(name)} (is "
+            f"{short(obj)} an "
             "object of this task?)"
         )
     return ids
@@ -315,7 +316,7 @@ class SimTracker:
         if not isinstance(tracker, StereoTracker):
             raise ValueError(f"tracker must be a StereoTracker, got {type(tracker).__name__}")
         if len(cameras) != 2 or cameras[0] == cameras[1]:
-            raise ValueError(f"cameras must be two different camera names, got {cameras!r}")
+            raise ValueError(f"cameras must be two different camera names, got {short(cameras)}")
         self.tracker = tracker
         self.cameras = (str(cameras[0]), str(cameras[1]))
         self.objects = tracker.objects
@@ -401,11 +402,14 @@ class SimTracker:
         spec = sim.info.spec
         names = tuple(spec.tracked_objects if objects is None else objects)
         if not names:
-            raise ValueError(f"objects must name at least one object to track, got {objects!r}")
+            raise ValueError(
+                f"objects must name at least one object to track, got {short(objects)}"
+            )
         unknown = sorted(set(names) - set(sim.info.objects))
         if unknown:
             raise ValueError(
-                f"objects: {unknown} are not objects of the {spec.name!r} task; expected some of "
+                f"objects: {unknown} are not objects of the {short(spec.name)} task; expected some "
+                "of "
                 f"{sorted(sim.info.objects)}"
             )
         for cam in cameras:
@@ -428,8 +432,8 @@ class SimTracker:
                 pixels[key] = counts
                 if min(counts) == 0:
                     raise ValueError(
-                        f"objects: the patch of {key!r} is not visible in camera "
-                        f"{cameras[counts.index(0)]!r} at the calibration placement "
+                        f"objects: the patch of {short(key)} is not visible in camera "
+                        f"{short(cameras[counts.index(0)])} at the calibration placement "
                         f"({counts[0]} and {counts[1]} labelled pixels)"
                     )
                 models[key] = ColorModel.fit(images, [m[key] for m in masks])
@@ -552,7 +556,8 @@ def _turned_views(
             ta, tb = tracks[a], tracks[b]
             if ta.position is None or tb.position is None:
                 raise ValueError(
-                    f"objects: cannot measure the pose model of {name!r} in calibration view {i} "
+                    f"objects: cannot measure the pose model of {short(name)} in calibration view "
+                    f"{i} "
                     f"(turned to {math.degrees(yaw_of(placement[name])):.1f} deg): end a "
                     f"{ta.status}, end b {tb.status}"
                 )
@@ -599,7 +604,8 @@ def observed_objects(
     for name in known:
         if name in tracker.objects:
             raise ValueError(
-                f"fixed[{name!r}]: {name!r} is tracked by the cameras; fixed objects must be "
+                f"fixed[{short(name)}]: {short(name)} is tracked by the cameras; fixed objects "
+                "must be "
                 f"others than {list(tracker.objects)}"
             )
     tracks = tracker.locate(sim)

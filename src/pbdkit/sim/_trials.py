@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_int, check_positive_float
+from .._validation import check_int, check_positive_float, short
 from ._metrics import tracking_errors
 from ._parallel import run_fanout
 from ._perturb import Disturbance, DisturbanceSetup, check_perturb, make_disturbance
@@ -89,9 +89,9 @@ class TrialConditions:
     def __post_init__(self) -> None:
         for flag in ("online", "ground_truth"):
             if not isinstance(getattr(self, flag), bool):
-                raise ValueError(f"{flag} must be True or False, got {getattr(self, flag)!r}")
+                raise ValueError(f"{flag} must be True or False, got {short(getattr(self, flag))}")
         if not isinstance(self.perturb, str):
-            raise ValueError(f"perturb must be a perturbation's name, got {self.perturb!r}")
+            raise ValueError(f"perturb must be a perturbation's name, got {short(self.perturb)}")
         object.__setattr__(self, "seed", check_int(self.seed, "seed", minimum=0))
         noise = check_positive_float(self.noise_mm, "noise_mm", allow_zero=True)
         object.__setattr__(self, "noise_mm", noise)

@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._validation import short
 from ..data._placement import position_of
 from ..robots import katana
 from ._gl import mujoco
@@ -161,7 +162,8 @@ def _check_objects(spec: TaskSpec, objects: Mapping[str, npt.ArrayLike] | None) 
         # Objects rest on their support: the height is not free.
         if abs(p[2] - r.low[2]) > 0.02:
             raise ValueError(
-                f"objects[{name!r}]: z must be {r.low[2]:.4f} (the {name} rests on its support), "
+                f"objects[{short(name)}]: z must be {r.low[2]:.4f} (the {name} rests on its "
+                "support), "
                 f"got {p[2]:.4f}"
             )
         if placed.shape == (4, 4):  # a pose: on its support, turned about the vertical only
@@ -495,8 +497,8 @@ def build_scene(
     held = spec.grasped
     if held not in names or n_liquid != spec.n_liquid:
         raise ValueError(
-            f"task {spec.name!r}: add_objects must add the {held} (add_glass(..., "
-            f"name={held!r})) and n_liquid = {spec.n_liquid} liquid spheres (add_liquid); it "
+            f"task {short(spec.name)}: add_objects must add the {held} (add_glass(..., "
+            f"name={short(held)})) and n_liquid = {spec.n_liquid} liquid spheres (add_liquid); it "
             f"added {'the' if held in names else 'no'} {held} and {n_liquid} spheres"
         )
     info = SceneInfo(spec=spec, objects={k: v.copy() for k, v in objs.items()}, n_liquid=n_liquid)

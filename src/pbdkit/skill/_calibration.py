@@ -23,7 +23,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
-from .._validation import check_array
+from .._validation import check_array, short
 
 __all__ = [
     "CALIBRATION_MAX",
@@ -74,11 +74,11 @@ def check_calibration(
         if k not in given:
             out[k] = np.ones(n_steps)
             continue
-        c = check_array(given[k], f"calibration[{k!r}]", shape=(n_steps,))
+        c = check_array(given[k], f"calibration[{short(k)}]", shape=(n_steps,))
         if not np.all((c >= 1.0) & (c <= CALIBRATION_MAX)):
             raise ValueError(
-                f"calibration[{k!r}] must be in [1, {CALIBRATION_MAX:g}] at every step, got "
-                f"values in [{float(c.min())!r}, {float(c.max())!r}]"
+                f"calibration[{short(k)}] must be in [1, {CALIBRATION_MAX:g}] at every step, got "
+                f"values in [{short(float(c.min()))}, {short(float(c.max()))}]"
             )
         out[k] = c
     return out

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from .._validation import short
+
 __all__ = ["FUSED_POSITION", "controller_names", "controller_use"]
 
 #: The fused controller of the position-only skill (a task with oriented constraints).
@@ -46,5 +48,5 @@ def controller_use(
         return [controller[5:]]
     raise ValueError(
         f"controller must be one of {controller_names(object_names, has_oriented=has_oriented)}, "
-        f"got {controller!r}"
+        f"got {short(controller)}"
     )

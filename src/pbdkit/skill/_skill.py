@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from .._defaults import MAX_COMPONENTS
 from .._io import open_npz, save_npz_atomic
-from .._validation import check_int
+from .._validation import check_int, short
 from ..data._align import align as align_demos
 from ..data._demonstration import Demonstration, check_demonstrations
 from ..data._placement import is_pose
@@ -372,7 +372,11 @@ class Skill:
                 warnings.simplefilter("always", SelectionWarning)
                 gmms[k] = gmm.fit(X, groups=groups)
             for w in caught:  # said again with the space it is about
-                text = f"space {k!r}: {w.message}" if w.category is SelectionWarning else w.message
+                text = (
+                    f"space {short(k)}: {w.message}"
+                    if w.category is SelectionWarning
+                    else w.message
+                )
                 warnings.warn(text, w.category, stacklevel=2)
         calibration = {
             k: step_factors(g.loo_residuals_, steps, len(items), n_steps)
@@ -437,7 +441,7 @@ class Skill:
             gripper (T,) or None.
         """
         if covariance not in ("exact", "paper"):
-            raise ValueError(f"covariance must be 'exact' or 'paper', got {covariance!r}")
+            raise ValueError(f"covariance must be 'exact' or 'paper', got {short(covariance)}")
         cached = self._constraints.get(covariance)
         if cached is not None:
             return cached

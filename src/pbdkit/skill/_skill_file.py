@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from .._io import NpzArchive, check_format
 from .._rotations import check_rotation
+from .._validation import short
 from ..prob import GMM, ModelSelection
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import KinematicModel, PoseKinematicModel, RobotDescription, check_robot
@@ -186,7 +187,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
     if len(set(names)) != len(names) or JOINT in names or "" in names:
         raise ValueError(
             f"{p} is not a valid {FORMAT_NAME} file: object names {names} must be unique, "
-            f"non-empty and not {JOINT!r}"
+            f"non-empty and not {short(JOINT)}"
         )
     d_joint = 1 + n_joints + int(has_gripper)
     dims = {k: int(g.means_.shape[1]) for k, g in gmms.items()}
@@ -261,11 +262,11 @@ def _read_alignment(data: NpzArchive, p: Path) -> Alignment:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: its alignment: {exc}") from exc
     if requested not in ("auto", "yes", "no") or reference not in ("medoid", "mean"):
         raise ValueError(
-            f"{p} is not a valid {FORMAT_NAME} file: its alignment is {requested!r} onto "
-            f"{reference!r}"
+            f"{p} is not a valid {FORMAT_NAME} file: its alignment is {short(requested)} onto "
+            f"{short(reference)}"
         )
     if not 0.0 < band <= 1.0:
-        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: alignment band {band!r}")
+        raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: alignment band {short(band)}")
     return Alignment(requested, applied, band, reference, float(spreads[0]), float(spreads[1]))
 
 
@@ -338,6 +339,6 @@ def _selection_from_arrays(data: Mapping[str, Any], key: str, name: str) -> Mode
         or best not in cand
         or chosen not in cand
     ):
-        raise ValueError(f"the model selection stored for {name!r} is inconsistent")
+        raise ValueError(f"the model selection stored for {short(name)} is inconsistent")
     n_folds = folds.shape[1] if method == "cv" else 0
     return ModelSelection(method, tuple(int(k) for k in cand), scores, folds, best, chosen, n_folds)

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._rotations import log_map, mean_rotation
-from .._validation import check_positive_float
+from .._validation import check_positive_float, short
 from ..data._align import align as align_demos
 from ..data._align import alignment_spreads
 from ..data._demonstration import LIMIT_TOLERANCE, Demonstration, LimitWarning
@@ -67,7 +67,7 @@ MIN_STEP_SECONDS = 1e-9
 def duration_problem(duration: float, n_steps: int) -> str:
     """Why a skill cannot last ``duration`` seconds over ``n_steps`` steps ("" if it can)."""
     if not math.isfinite(duration) or duration <= 0:
-        return f"the duration must be finite and > 0 (s), got {duration!r}"
+        return f"the duration must be finite and > 0 (s), got {short(duration)}"
     step = duration / (n_steps - 1)
     if not step >= MIN_STEP_SECONDS:
         return (
@@ -113,7 +113,7 @@ def variability_floor(reg_covar: float | Mapping[str, float] | None) -> dict[str
             raise ValueError(f"reg_covar: unknown key(s) {unknown}; use {list(VARIABILITY_FLOOR)}")
         out = dict(VARIABILITY_FLOOR)
         for k, v in reg_covar.items():
-            out[k] = check_positive_float(v, f"reg_covar[{k!r}]", allow_zero=True)
+            out[k] = check_positive_float(v, f"reg_covar[{short(k)}]", allow_zero=True)
         return out
     v = check_positive_float(reg_covar, "reg_covar", allow_zero=True)
     return dict.fromkeys(VARIABILITY_FLOOR, v)
@@ -296,7 +296,7 @@ def aligned_demonstrations(
     if align is False:
         return items, Alignment("no", False)
     if align is not True and align != "auto":
-        raise ValueError(f"align must be True, False or 'auto', got {align!r}")
+        raise ValueError(f"align must be True, False or 'auto', got {short(align)}")
     warped = align_demos(items, robot, band=ALIGN_BAND, reference=ALIGN_REFERENCE)
     linear, aligned = alignment_spreads(items, warped, robot)
     if align is True:

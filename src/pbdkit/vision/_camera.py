@@ -24,7 +24,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 from scipy.linalg import rq
 
-from .._validation import check_array, check_int, check_positive_float
+from .._validation import check_array, check_int, check_positive_float, short
 
 __all__ = ["PinholeCamera", "calibrate_camera", "calibrate_intrinsics"]
 
@@ -39,7 +39,7 @@ def _check_size(width: object, height: object) -> tuple[int, int]:
 
 def _check_image_size(image_size: object) -> tuple[int, int]:
     if not isinstance(image_size, (tuple, list)) or len(image_size) != 2:
-        raise ValueError(f"image_size must be (width, height), got {image_size!r}")
+        raise ValueError(f"image_size must be (width, height), got {short(image_size)}")
     return _check_size(image_size[0], image_size[1])
 
 
@@ -154,7 +154,7 @@ class PinholeCamera:
         """
         fovy = check_positive_float(fovy_deg, "fovy_deg")
         if not fovy < 180.0:
-            raise ValueError(f"fovy_deg must be in (0, 180), got {fovy_deg!r}")
+            raise ValueError(f"fovy_deg must be in (0, 180), got {short(fovy_deg)}")
         w, h = _check_size(width, height)
         c = check_array(position, "position", shape=(3,))
         if (R_world_from_cam is None) == (look_at is None):

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_int, check_positive_float
+from .._validation import check_array, check_int, check_positive_float, short
 
 __all__ = [
     "CBCR_FROM_RGB",
@@ -68,7 +68,7 @@ def threshold_from_probability(probability: float) -> float:
     """
     p = check_positive_float(probability, "probability")
     if not p < 1.0:
-        raise ValueError(f"probability must be in (0, 1), got {probability!r}")
+        raise ValueError(f"probability must be in (0, 1), got {short(probability)}")
     return -2.0 * math.log1p(-p)
 
 

@@ -43,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_positive_float
+from .._validation import check_array, check_positive_float, short
 from ._pose import PoseTrack
 from ._stereo import ObjectTrack
 
@@ -123,7 +123,9 @@ class TrackFilter:
     ) -> None:
         self.names = tuple(str(k) for k in names)
         if not self.names or len(set(self.names)) != len(self.names):
-            raise ValueError(f"names must be distinct object names, at least one, got {names!r}")
+            raise ValueError(
+                f"names must be distinct object names, at least one, got {short(names)}"
+            )
         self.max_speed = check_positive_float(max_speed, "max_speed")
         self.tolerance = check_positive_float(tolerance, "tolerance")
         self.min_area_ratio = check_positive_float(min_area_ratio, "min_area_ratio")
@@ -135,7 +137,7 @@ class TrackFilter:
             self.cameras: tuple[Float, Float] | None = None
         else:
             if len(cameras) != 2:
-                raise ValueError(f"cameras must be two centres (a, b), got {cameras!r}")
+                raise ValueError(f"cameras must be two centres (a, b), got {short(cameras)}")
             centres = [check_array(c, "cameras[i]", shape=(3,)) for c in cameras]
             self.cameras = (centres[0], centres[1])
         self.estimates: dict[str, Float] = {}

@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array
+from .._validation import check_array, short
 from ._track import Track, TrackStatus
 
 __all__ = ["PoseModel", "PoseTrack", "ends_heading", "yaw_matrix"]
@@ -105,23 +105,25 @@ class PoseModel:
     def __post_init__(self) -> None:
         ends = tuple(self.ends)
         if len(ends) != 2 or not all(isinstance(e, str) and e for e in ends) or ends[0] == ends[1]:
-            raise ValueError(f"ends must be two different patch names (a, b), got {self.ends!r}")
+            raise ValueError(
+                f"ends must be two different patch names (a, b), got {short(self.ends)}"
+            )
         object.__setattr__(self, "ends", (str(ends[0]), str(ends[1])))
         object.__setattr__(self, "offset", check_array(self.offset, "offset", shape=(3,)))
         yaw = float(self.yaw_offset)
         if not math.isfinite(yaw):
-            raise ValueError(f"yaw_offset must be finite (rad), got {self.yaw_offset!r}")
+            raise ValueError(f"yaw_offset must be finite (rad), got {short(self.yaw_offset)}")
         object.__setattr__(self, "yaw_offset", _wrap(yaw))
         if self.frame not in ("object", "world"):
-            raise ValueError(f"frame must be 'object' or 'world', got {self.frame!r}")
+            raise ValueError(f"frame must be 'object' or 'world', got {short(self.frame)}")
         if self.span is not None:
             span = float(self.span)
             if not (span > 0.0 and math.isfinite(span)):
-                raise ValueError(f"span must be a distance > 0 (m) or None, got {self.span!r}")
+                raise ValueError(f"span must be a distance > 0 (m) or None, got {short(self.span)}")
             object.__setattr__(self, "span", span)
         err = float(self.max_span_error)
         if not (err > 0.0 and math.isfinite(err)):
-            raise ValueError(f"max_span_error must be > 0 (m), got {self.max_span_error!r}")
+            raise ValueError(f"max_span_error must be > 0 (m), got {short(self.max_span_error)}")
         object.__setattr__(self, "max_span_error", err)
 
     @classmethod
@@ -224,10 +226,10 @@ class PoseModel:
     def from_dict(cls, data: dict[str, Any]) -> PoseModel:
         """Inverse of :meth:`as_dict`; validates every field."""
         if not isinstance(data, dict) or "ends" not in data:
-            raise ValueError(f"data must be a dict from PoseModel.as_dict, got {data!r}")
+            raise ValueError(f"data must be a dict from PoseModel.as_dict, got {short(data)}")
         ends = data["ends"]
         if not isinstance(ends, (list, tuple)) or len(ends) != 2:
-            raise ValueError(f"data['ends'] must be two patch names, got {ends!r}")
+            raise ValueError(f"data['ends'] must be two patch names, got {short(ends)}")
         return cls(
             (str(ends[0]), str(ends[1])),
             np.asarray(data.get("offset", [0.0, 0.0, 0.0]), dtype=np.float64),

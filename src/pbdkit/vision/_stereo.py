@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._validation import check_array, check_int, check_positive_float
+from .._validation import check_array, check_int, check_positive_float, short
 from ._blobs import Blob, _find_blob
 from ._camera import PinholeCamera
 from ._color import CBCR_FROM_RGB, CBCR_OFFSET, DEFAULT_THRESHOLD, ColorModel, check_image
@@ -210,11 +210,13 @@ class StereoTracker:
             if not isinstance(cam, PinholeCamera):
                 raise ValueError(f"{name} must be a PinholeCamera, got {type(cam).__name__}")
         if not isinstance(models, Mapping) or len(models) == 0:
-            raise ValueError(f"models must be a non-empty dict name -> ColorModel, got {models!r}")
+            raise ValueError(
+                f"models must be a non-empty dict name -> ColorModel, got {short(models)}"
+            )
         for key, model in models.items():
             if not isinstance(model, ColorModel):
                 raise ValueError(
-                    f"models[{key!r}] must be a ColorModel, got {type(model).__name__}"
+                    f"models[{short(key)}] must be a ColorModel, got {type(model).__name__}"
                 )
         self.cam_a = cam_a
         self.cam_b = cam_b
@@ -233,7 +235,7 @@ class StereoTracker:
                 f"offsets has names {unknown} that are not in models {list(self.models)}"
             )
         self.offsets = {
-            name: check_array(given.get(name, np.zeros(3)), f"offsets[{name!r}]", shape=(3,))
+            name: check_array(given.get(name, np.zeros(3)), f"offsets[{short(name)}]", shape=(3,))
             for name in self.models
         }
         self.poses = _check_poses(poses, self.models)
@@ -299,7 +301,7 @@ class StereoTracker:
             poses = data["poses"]
             if not isinstance(poses, dict):
                 raise ValueError(
-                    f"data['poses'] must be a dict name -> pose model dict, got {poses!r}"
+                    f"data['poses'] must be a dict name -> pose model dict, got {short(poses)}"
                 )
             pose_models = {str(k): PoseModel.from_dict(v) for k, v in poses.items()}
         else:
@@ -351,7 +353,7 @@ class StereoTracker:
 
     def _check(self, image: object, which: str) -> NDArray[np.uint8]:
         if which not in ("a", "b"):
-            raise ValueError(f"which must be 'a' or 'b', got {which!r}")
+            raise ValueError(f"which must be 'a' or 'b', got {short(which)}")
         cam = self.cam_a if which == "a" else self.cam_b
         return check_image(image, f"image_{which}", size=cam.image_size)
 
@@ -461,21 +463,26 @@ def _check_poses(
     used: dict[str, str] = {}
     for name, model in dict(poses or {}).items():
         if not isinstance(model, PoseModel):
-            raise ValueError(f"poses[{name!r}] must be a PoseModel, got {type(model).__name__}")
+            raise ValueError(
+                f"poses[{short(name)}] must be a PoseModel, got {type(model).__name__}"
+            )
         if name in models:
             raise ValueError(
-                f"poses: the object {name!r} has the name of a color model; name a posed object "
+                f"poses: the object {short(name)} has the name of a color model; name a posed "
+                "object "
                 f"otherwise than its patches {list(models)}"
             )
         for end in model.ends:
             if end not in models:
                 raise ValueError(
-                    f"poses[{name!r}]: its end {end!r} is not a color model; expected some of "
+                    f"poses[{short(name)}]: its end {short(end)} is not a color model; expected "
+                    "some of "
                     f"{list(models)}"
                 )
             if end in used:
                 raise ValueError(
-                    f"poses[{name!r}]: the patch {end!r} is already an end of {used[end]!r}"
+                    f"poses[{short(name)}]: the patch {short(end)} is already an end of "
+                    f"{short(used[end])}"
                 )
             used[end] = name
         out[str(name)] = model
