@@ -24,12 +24,18 @@ from pbdkit.skill._skill import Skill
 INF = np.inf
 LIMITS = ("velocity_limit", "acceleration_limit", "jerk_limit")
 
-# Three revolute joints j1..j3 with URDF velocities 1, 2, 3 rad/s, tip frame "tip".
+# Three revolute joints j1..j3 with URDF velocities 1, 2, 3 rad/s, tip frame "tip", and a
+# finger_joint off the chain (a joint_limits file may name it: it is a joint of the URDF).
 URDF = urdf_from_dh(
     [[0.0, 0.0, 0.1, 0.0], [0.2, 0.0, 0.0, 0.0], [0.2, 0.0, 0.0, 0.0]],
     joint_names=["j1", "j2", "j3"],
     velocity=[1.0, 2.0, 3.0],
     effort=1.0,
+).replace(
+    "</robot>",
+    '  <link name="finger"/>\n  <joint name="finger_joint" type="prismatic">\n'
+    '    <parent link="link3"/>\n    <child link="finger"/>\n    <axis xyz="1 0 0"/>\n'
+    '    <limit lower="0" upper="0.04" effort="1.0" velocity="0.1"/>\n  </joint>\n</robot>',
 )
 
 # As MoveIt writes them: scaling factors, effort, a finger off the chain; j3 is not named.

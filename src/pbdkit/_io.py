@@ -115,13 +115,48 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         raise
 
 
-def save_npz_atomic(path: str | os.PathLike[str], arrays: Mapping[str, NDArray[Any]]) -> None:
-    """Save arrays to an ``.npz`` file atomically; object arrays are refused (no pickle)."""
-    for key, value in arrays.items():
-        if np.asarray(value).dtype == object:
-            raise TypeError(f"array {short(key)} has dtype object, which would need pickle")
-    buf = io.BytesIO()
+def save_npz_atomic(
+    path: str | os.PathLike[str],
+    arrays: Mapping[str, NDArray[Any]],
+    *,
+    what: str = "arrays",
+    max_bytes: int | None = None,
+) -> None:
+    """Save arrays to an ``.npz`` file atomically; object arrays are refused (no pickle).
+
+    Parameters
+    ----------
+    path : str or path-like
+    arrays : mapping str -> array-like
+    what : str
+        What the arrays are, for the message (``"demos"``).
+    max_bytes : int, optional
+        The most bytes the arrays may take once loaded: the bound of the file's reader
+        (default :data:`MAX_NPZ_BYTES`, :func:`open_npz`'s). More is refused before anything is
+        written: the file could not be read back.
+
+    Raises
+    ------
+    TypeError
+        An object array.
+    ValueError
+        Arrays of more than ``max_bytes`` in total (the message names ``what``, the size and
+        the bound).
+    """
     payload: dict[str, Any] = {k: np.asarray(v) for k, v in arrays.items()}
+    for key, value in payload.items():
+        if value.dtype == object:
+            raise TypeError(f"array {short(key)} has dtype object, which would need pickle")
+    cap = MAX_NPZ_BYTES if max_bytes is None else int(max_bytes)
+    total = sum(int(v.nbytes) for v in payload.values())
+    bound = "MAX_NPZ_BYTES" if max_bytes is None else f"the bound of its reader for {what}"
+    if total > cap:
+        raise ValueError(
+            f"{what}: the file would hold {_size(total)} of arrays, more than the {_size(cap)} "
+            f"a pbdkit file may hold once loaded ({bound}): it could not be read back; "
+            "nothing written"
+        )
+    buf = io.BytesIO()
     np.savez_compressed(buf, **payload)
     atomic_write_bytes(path, buf.getvalue())
 
@@ -294,7 +329,7 @@ def _npy_header(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> NpyHeader:
 
 
 def open_npz(
-    path: str | os.PathLike[str], *, what: str = "file", max_bytes: int = MAX_NPZ_BYTES
+    path: str | os.PathLike[str], *, what: str = "file", max_bytes: int | None = None
 ) -> NpzArchive:
     """Open an ``.npz`` archive and check every member from its headers, loading no array.
 
@@ -303,8 +338,9 @@ def open_npz(
     path : str or path-like
     what : str
         What the file should be, for the messages ("pbdkit-skill file").
-    max_bytes : int
-        The most bytes all arrays together may take once loaded (:data:`MAX_NPZ_BYTES`).
+    max_bytes : int, optional
+        The most bytes all arrays together may take once loaded (default
+        :data:`MAX_NPZ_BYTES`, the bound :func:`save_npz_atomic` writes within).
 
     Returns
     -------
@@ -344,8 +380,9 @@ def open_npz(
             raise ValueError(
                 f"{p} is not a valid {what} (not a readable .npz archive): {exc}"
             ) from exc
+        cap = MAX_NPZ_BYTES if max_bytes is None else max_bytes
         try:
-            headers, members = _check_members(archive, p, what, max_bytes)
+            headers, members = _check_members(archive, p, what, cap)
         except BaseException:
             archive.close()
             raise
@@ -421,8 +458,55 @@ def _json_default(value: object) -> object:
 
 def write_json(path: str | os.PathLike[str], data: object, *, sort_keys: bool = False) -> None:
     """Write ``data`` as indented JSON, atomically (:func:`atomic_write_bytes`); NumPy arrays
-    and scalars become lists and numbers."""
+    and scalars become lists and numbers.
+
+    Raises
+    ------
+    ValueError
+        A NaN or an infinity anywhere in ``data`` (JSON has neither: ``json.dumps`` would write
+        ``NaN``, which no JSON reader takes), naming where it is; nothing is written. A value
+        that is not known goes in ``data`` as None (``null``).
+    """
     import json
 
-    text = json.dumps(data, indent=2, sort_keys=sort_keys, default=_json_default) + "\n"
-    atomic_write_bytes(path, text.encode())
+    try:
+        text = json.dumps(
+            data, indent=2, sort_keys=sort_keys, default=_json_default, allow_nan=False
+        )
+    except ValueError:
+        found = _non_finite(data, "")
+        if found is None:
+            raise
+        where, value = found
+        raise ValueError(
+            f"{path}: {where or 'the value'} is {short(value)}, which JSON cannot hold (a value "
+            "that is not known is written null); nothing written"
+        ) from None
+    atomic_write_bytes(path, (text + "\n").encode())
+
+
+def _non_finite(value: object, where: str) -> tuple[str, float] | None:
+    """Where the first NaN or infinity in JSON-bound ``value`` is (``runs.fused[3].x``), and
+    it; None if there is none."""
+    if isinstance(value, (float, np.floating)):
+        return None if math.isfinite(value) else (where, float(value))
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "fc":
+            return None
+        bad = ~np.isfinite(value)
+        if not bad.any():
+            return None
+        at = np.unravel_index(int(np.argmax(bad)), value.shape)
+        return where + "".join(f"[{int(i)}]" for i in at), float(np.real(value[at]))
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            name = str(key) if isinstance(key, str) and key.isidentifier() else short(key)
+            found = _non_finite(item, f"{where}.{name}" if where else name)
+            if found is not None:
+                return found
+    elif isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            found = _non_finite(item, f"{where}[{i}]")
+            if found is not None:
+                return found
+    return None

@@ -139,9 +139,22 @@ def quaternion_from_matrix(rot: npt.ArrayLike) -> Float:
     return q.reshape(*shape, 4)
 
 
+#: Quaternions whose largest absolute component is in this range are normalized by their norm
+#: directly; the others (whose norm would overflow or underflow) are divided by that component
+#: first.
+_UNSCALED = (1e-100, 1e100)
+
+
 def matrix_from_quaternion(q: npt.ArrayLike) -> Float:
-    """Rotation matrices (..., 3, 3) of quaternions (qw, qx, qy, qz) (..., 4), normalized first."""
+    """Rotation matrices (..., 3, 3) of quaternions (qw, qx, qy, qz) (..., 4), normalized first
+    (divided by their largest absolute component, then by their norm: a finite quaternion of
+    any magnitude, 1e200 or 1e-300, gives its rotation; a zero one gives NaN)."""
     v = np.asarray(q, dtype=np.float64)
+    # The norm of 1e200 overflows (and of 1e-200 underflows): those are scaled first; the
+    # others are not, so that their rotations stay the same to the bit.
+    scale = np.max(np.abs(v), axis=-1, keepdims=True)
+    if np.any((scale > _UNSCALED[1]) | (scale < _UNSCALED[0])):
+        v = np.where((scale > _UNSCALED[1]) | (scale < _UNSCALED[0]), v / scale, v)
     v = v / np.linalg.norm(v, axis=-1, keepdims=True)
     w, x, y, z = v[..., 0], v[..., 1], v[..., 2], v[..., 3]
     out = np.empty((*v.shape[:-1], 3, 3))
@@ -205,6 +218,19 @@ def pose_matrix(position: npt.ArrayLike, rotation: npt.ArrayLike | None = None) 
     return out
 
 
+def _real_array(value: object, wanted: str) -> Float:
+    """``value`` as a float64 array, or a ValueError "<wanted>, got ...": not numbers, or
+    complex ones (the conversion would drop their imaginary part with a warning only)."""
+    try:
+        dtype = np.asarray(value).dtype
+        arr = np.array(value, dtype=np.float64) if dtype.kind != "c" else None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{wanted}, got {short(value)}") from exc
+    if arr is None:
+        raise ValueError(f"{wanted} of real numbers, got complex values (dtype {dtype})")
+    return arr
+
+
 def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     """Read an object's placement: a position, or a pose with orientation.
 
@@ -225,13 +251,9 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     position : ndarray, shape (3,)
     rotation : ndarray, shape (3, 3), or None for a position
     """
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"{name} must be a position (3,), a 4x4 transform or (x, y, z, qw, qx, qy, qz), "
-            f"got {short(value)}"
-        ) from exc
+    arr = _real_array(
+        value, f"{name} must be a position (3,), a 4x4 transform or (x, y, z, qw, qx, qy, qz)"
+    )
     if arr.shape not in ((3,), (4, 4), (7,)):
         raise ValueError(
             f"{name} must be a position (3,), a 4x4 transform or (x, y, z, qw, qx, qy, qz) "
@@ -242,23 +264,21 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     if arr.shape == (3,):
         return arr, None
     if arr.shape == (7,):
-        norm = float(np.linalg.norm(arr[3:]))
-        if norm < 1e-9:
-            raise ValueError(
-                f"{name}: the quaternion (qw, qx, qy, qz) = {arr[3:].tolist()} has zero norm"
-            )
-        return arr[:3].copy(), matrix_from_quaternion(arr[3:] / norm)
+        return arr[:3].copy(), _quaternion_rotation(arr[3:], name)
     if np.max(np.abs(arr[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-9:
         raise ValueError(
             f"{name}: a 4x4 transform's last row must be [0, 0, 0, 1], got {arr[3].tolist()}"
         )
     rot = arr[:3, :3]
-    dev = float(np.max(np.abs(rot.T @ rot - np.eye(3))))
-    if dev > ORTHONORMAL_TOLERANCE or np.linalg.det(rot) <= 0:
+    # Entries of 1e200 overflow R^T R and det to inf or NaN: refused by the negated tests.
+    with np.errstate(over="ignore", invalid="ignore"):
+        dev = float(np.max(np.abs(rot.T @ rot - np.eye(3))))
+        det = float(np.linalg.det(rot))
+    if not (dev <= ORTHONORMAL_TOLERANCE and det > 0):
         raise ValueError(
             f"{name}: the rotation block of a 4x4 transform must be a rotation matrix "
             f"(orthonormal, determinant +1); it is off by {dev:.3g} with determinant "
-            f"{np.linalg.det(rot):.3g}"
+            f"{det:.3g}"
         )
     if dev <= 1e-12:  # orthonormal to rounding: kept as given (files round-trip exactly)
         return arr[:3, 3].copy(), rot.copy()
@@ -266,14 +286,30 @@ def as_pose(value: object, name: str = "pose") -> tuple[Float, Float | None]:
     return arr[:3, 3].copy(), np.asarray(u @ vt, dtype=np.float64)
 
 
+def _quaternion_rotation(q: Float, name: str) -> Float:
+    """The rotation matrix of a finite quaternion (qw, qx, qy, qz) of :func:`as_pose`, or a
+    ValueError: a norm below 1e-9 is zero. Its norm is taken after dividing by the largest
+    absolute component, so that (1e200, 0, 0, 0) is the identity, not the NaN of an
+    overflowed norm."""
+    scale = float(np.max(np.abs(q)))
+    unit = q / scale if scale > 0 and not _UNSCALED[0] <= scale <= _UNSCALED[1] else q
+    norm = float(np.linalg.norm(unit))
+    size = norm if unit is q else scale * norm  # a Python float: 1e308 * 2 is inf, no warning
+    if not size >= 1e-9:
+        raise ValueError(f"{name}: the quaternion (qw, qx, qy, qz) = {q.tolist()} has zero norm")
+    rot = matrix_from_quaternion(unit / norm)
+    if not np.all(np.isfinite(rot)):  # cannot happen for a finite unit quaternion: a guard
+        raise ValueError(
+            f"{name}: the quaternion (qw, qx, qy, qz) = {q.tolist()} gives no rotation"
+        )
+    return rot
+
+
 def check_rotation(value: object, name: str = "rotation") -> Float:
     """A rotation matrix (3, 3), checked as :func:`as_pose` checks a 4x4's rotation block
     (finite, orthonormal within :data:`ORTHONORMAL_TOLERANCE`, determinant +1) and
     re-orthonormalized."""
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a rotation matrix (3, 3), got {short(value)}") from exc
+    arr = _real_array(value, f"{name} must be a rotation matrix (3, 3)")
     if arr.shape != (3, 3):
         raise ValueError(f"{name} must be a rotation matrix (3, 3), got shape {arr.shape}")
     _, rot = as_pose(pose_matrix(np.zeros(3), arr), name)

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.text import Text
 
-from .._defaults import MAX_COMPONENTS
+from .._defaults import MAX_COMPONENTS, MAX_TRIALS
 from .._io import write_json
 from .._validation import short
 from ._cli_files import bag_extras, bag_timing, load_demos, timing_text
@@ -369,7 +369,7 @@ def reproduce(
 @reports_errors
 def evaluate(
     task: Annotated[str, typer.Option(help=f"{TASK_HELP}.")] = "coaster",
-    trials: Annotated[int, typer.Option(help="Number of new placements.")] = 50,
+    trials: Annotated[int, typer.Option(help=f"Number of new placements, 1 to {MAX_TRIALS}.")] = 50,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     json_path: Annotated[Path | None, typer.Option("--json", help="Write results here.")] = None,
     ground_truth: GroundTruthOption = False,
@@ -401,8 +401,8 @@ def evaluate(
     ] = None,
 ) -> None:
     """Success rate of every controller (fused, joint, task:OBJECT) over new placements."""
-    if trials < 1:
-        raise typer.BadParameter(f"trials must be >= 1, got {trials}", param_hint="--trials")
+    if not 1 <= trials <= MAX_TRIALS:
+        fail(f"--trials must be an integer in [1, {MAX_TRIALS}] (MAX_TRIALS), got {trials}")
     check_seed(seed)
     # The trials' controller runs are the work items (a trial observes once, then runs its
     # controllers at once); without --controller their number is known after the learning.
@@ -505,7 +505,8 @@ def view(
         str | None,
         typer.Option(
             help="With --skill: the URDF to draw the arm from (meshes are looked up beside "
-            "it), or katana; default: the URDF stored in the skill file.",
+            "it), or a shipped robot (katana, panda), with the skill's arm's joints; default: "
+            "the URDF stored in the skill file.",
         ),
     ] = None,
     obj: Annotated[
@@ -526,7 +527,7 @@ def view(
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
     it in physics, or online while you drag (needs the view extra: pip install pbdkit[view])."""
-    from ._view_serve import check_port
+    from ._view_serve import check_port, sigint_deferred
 
     if (task is None) == (skill_path is None):
         fail("give --task or --skill (one of them)")
@@ -534,35 +535,26 @@ def view(
         fail("--robot and --object apply to --skill; a task has its own arm and objects")
     check_seed(seed)
     check_port(port)  # before the teaching and learning; serve checks again as it binds
-    try:
-        import viser  # noqa: F401
-        import yourdfpy  # noqa: F401
-    except ImportError as exc:
-        fail(f"pbdkit view needs the view extra (pip install 'pbdkit[view]'): {exc}")
+    with sigint_deferred():  # a Ctrl+C in these imports ends the command after them
+        try:
+            import viser  # noqa: F401
+            import yourdfpy  # noqa: F401
+        except ImportError as exc:
+            fail(f"pbdkit view needs the view extra (pip install 'pbdkit[view]'): {exc}")
     from ._view import ViewApp
     from ._view_serve import serve
 
     if skill_path is not None:
-        from .. import robots
         from ..skill._skill import Skill
-        from ._view_plan import typical_placements
+        from ._view_plan import check_view_objects, typical_placements
+        from ._view_urdf import arm_urdf
 
         if not skill_path.is_file():
             raise FileNotFoundError(2, "No such file", str(skill_path))
         skill = Skill.load(skill_path)
-        urdf: Path | None = None
-        if robot is not None and robot in robots.available():
-            urdf = robots.katana_urdf_path() if robot == "katana" else None
-        elif robot is not None:
-            urdf = Path(robot)
-            if not urdf.is_file():
-                raise FileNotFoundError(2, "No such file", str(urdf))
+        urdf = arm_urdf(robot, skill.robot)
         objects = typical_placements(skill)
-        given = parse_objects(obj or [])
-        unknown = [k for k in given if k not in skill.object_names]
-        if unknown:
-            fail(f"--object: {unknown} are not objects of the skill ({skill.object_names})")
-        objects.update(given)
+        objects.update(check_view_objects(parse_objects(obj or []), skill))
         title = f"skill {skill_path.name}"
 
         def factory(server: Any) -> ViewApp:

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from .._rotations import exp_map, matrix_from_quaternion, pose_matrix
 from .._validation import short
-from ..data._placement import position_of
+from ..data._placement import check_placements, position_of
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import PoseKinematicModel
 from ..skill._naming import controller_names, controller_use
@@ -71,7 +71,15 @@ if TYPE_CHECKING:
     from ._view_urdf import UrdfArm
     from ._view_world import Frame, SimDrawing
 
-__all__ = ["MIN_PREVIEW_STEPS", "PATH_SEGMENTS", "PREVIEW_BUDGET", "PREVIEW_STEPS", "ViewApp"]
+__all__ = [
+    "MIN_PREVIEW_STEPS",
+    "NOT_A_NUMBER",
+    "PATH_SEGMENTS",
+    "PREVIEW_BUDGET",
+    "PREVIEW_STEPS",
+    "ViewApp",
+    "metrics_text",
+]
 
 Float = NDArray[np.float64]
 
@@ -84,6 +92,19 @@ PREVIEW_BUDGET = 0.030
 MIN_PREVIEW_STEPS = 100
 #: At most this many segments in the drawn path.
 PATH_SEGMENTS = 400
+#: Shown for a value a run has none of (a NaN or an infinity), instead of a number.
+NOT_A_NUMBER = "n/a"
+
+
+def metrics_text(metrics: Mapping[str, Any]) -> str:
+    """A run's numeric metrics as ``"name value, ..."`` (one decimal); a value the run has none
+    of (NaN or infinite: the basin's pour error when nothing was poured) reads
+    :data:`NOT_A_NUMBER`, never ``nan``."""
+    return ", ".join(
+        f"{k} {float(v):.1f}" if math.isfinite(v) else f"{k} {NOT_A_NUMBER}"
+        for k, v in metrics.items()
+        if isinstance(v, (int, float))
+    )
 
 
 def _wxyz_of(value: Float) -> tuple[float, float, float, float]:
@@ -117,9 +138,10 @@ class ViewApp:
     task_skill : TaskSkill, optional
         For ``--task``: the task's skills (controllers, ``fused-position``), the MuJoCo scene
         and the runs in physics.
-    urdf : path, optional
-        The URDF to draw the arm from (meshes are looked up beside it); default: the skill's
-        robot's URDF text.
+    urdf : path or str, optional
+        The URDF to draw the arm from, a file (meshes are looked up beside it) or its XML text;
+        default: the skill's robot's URDF text. Its joints are the skill's arm's by name, or
+        in order (:func:`pbdkit.apps._view_urdf.joint_order`).
     title : str
         Shown at the top of the panel.
     preview_steps : int or None
@@ -136,7 +158,7 @@ class ViewApp:
         server: viser.ViserServer,
         *,
         task_skill: TaskSkill | None = None,
-        urdf: Path | None = None,
+        urdf: Path | str | None = None,
         title: str = "pbdkit view",
         preview_steps: int | None = PREVIEW_STEPS,
     ) -> None:
@@ -158,9 +180,8 @@ class ViewApp:
         )
         self.server = server
         self._lock = threading.RLock()
-        self.objects: dict[str, Float] = {
-            k: np.asarray(v, dtype=np.float64).copy() for k, v in objects.items()
-        }
+        # Positions (3,) and poses (4x4; x, y, z, qw, qx, qy, qz becomes one).
+        self.objects: dict[str, Float] = check_placements(objects, "objects")
         missing = [k for k in skill.object_names if k not in self.objects]
         if missing:
             raise ValueError(f"objects: no placement for {missing} (the skill's objects)")
@@ -194,7 +215,7 @@ class ViewApp:
         self.request_plan()
 
     # ------------------------------------------------------------------ scene
-    def _build_scene(self, urdf: Path | None) -> None:
+    def _build_scene(self, urdf: Path | str | None) -> None:
         scene = self.server.scene
         scene.set_up_direction("+z")
         scene.add_grid("/grid", width=2.0, height=2.0, cell_size=0.1, position=(0.0, 0.0, -0.001))
@@ -358,10 +379,15 @@ class ViewApp:
             pos, yaw = self.ui_fields[name]
             p = np.array(pos.value, dtype=np.float64)
             old = self.objects[name]
-            if old.shape == (4, 4):
-                value = _yaw_pose(p, float(yaw.value)) if self.ts is not None else old.copy()
-                if self.ts is None:
-                    value[:3, 3] = p
+            if not (np.isfinite(p).all() and (yaw is None or math.isfinite(float(yaw.value)))):
+                with self._lock:  # not a place: the fields show where the object is
+                    self._set_fields(name, old)
+                return
+            if old.shape == (4, 4) and self.ts is not None:
+                value = _yaw_pose(p, float(yaw.value))
+            elif old.shape == (4, 4):  # in 3-D: turned about the vertical by the yaw's change
+                turn = exp_map([0.0, 0.0, math.radians(float(yaw.value) - _yaw_deg(old))])
+                value = pose_matrix(p, turn @ old[:3, :3])
             else:
                 value = p
             self.move_object(name, value, arrived=arrived)
@@ -709,9 +735,7 @@ class ViewApp:
             self.last_run = run
             verdict = "**success**" if run.success else "**failure**"
             metrics = run.execution.outcome.metrics
-            shown = ", ".join(
-                f"{k} {float(v):.1f}" for k, v in metrics.items() if isinstance(v, (int, float))
-            )
+            shown = metrics_text(metrics)
             self._set_result(
                 f"{controller} {'online' if online else 'in physics'}: {verdict} ({shown})"
             )

@@ -5,7 +5,8 @@
 - :func:`coarse_skill`: the same skill on a coarser time grid, for previews while dragging;
 - :func:`step_gaussians` and :func:`ellipsoid_pose`: the constraints' Gaussians of the hand at a
   step, as ellipsoids;
-- :func:`typical_placements`: where a skill file's objects start (a skill keeps no placements);
+- :func:`typical_placements`: where a skill file's objects start (a skill keeps no placements),
+  and :func:`check_view_objects`: where ``--object`` puts them;
 - :func:`carry_transform`: how the plan moves the object it grasps;
 - :class:`LatestWins`: one planning thread that serves the newest request only;
 - :func:`constraint_colors`: Fig. 6's colors.
@@ -25,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._rotations import exp_map, quaternion_from_matrix
+from .._validation import short
 from ..data._placement import position_of, rotation_of
 from ..reproduction._constraints import JOINT
 from ..reproduction._setup import ReachWarning
@@ -43,6 +45,7 @@ __all__ = [
     "LatestWins",
     "Plan",
     "carry_transform",
+    "check_view_objects",
     "coarse_skill",
     "constraint_colors",
     "ellipsoid_pose",
@@ -213,20 +216,28 @@ def make_plan(
     preview: bool = False,
 ) -> Plan:
     """Reproduce ``skill`` for ``objects`` with ``use`` and collect what the page draws
-    (``preview``: ``skill`` is a :func:`coarse_skill`, and the plan says so)."""
+    (``preview``: ``skill`` is a :func:`coarse_skill`, and the plan says so).
+
+    Raises
+    ------
+    ValueError
+        The reproduction has a NaN or an infinity in its joints, hand positions, times or
+        influence: nothing of it could be drawn.
+    """
     told = {k: np.asarray(objects[k], dtype=np.float64) for k in skill.object_names}
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
         res = skill.reproduce(told, use=use, on_unreachable="warn")
     seconds = time.perf_counter() - start
-    names = list(res.influence)
-    shares = np.stack([res.influence[k] for k in names], axis=1)
-    driving = [names[i] for i in np.argmax(shares, axis=1)]
     try:
         times = skill.times(res)
     except ValueError:  # no known duration: steps
         times = np.asarray(res.t, dtype=np.float64)
+    _check_finite(res, times)
+    names = list(res.influence)
+    shares = np.stack([res.influence[k] for k in names], axis=1)
+    driving = [names[i] for i in np.argmax(shares, axis=1)]
     return Plan(
         objects=told,
         controller=controller,
@@ -239,6 +250,23 @@ def make_plan(
         skill=skill,
         preview=preview,
     )
+
+
+def _check_finite(res: ReproductionResult, times: Float) -> None:
+    """Refuse a reproduction with a NaN or an infinity in what the page shows: it would reach
+    the browser as a number ("nan" in a field, a path or an arm nowhere)."""
+    shown = {
+        "joints": res.joints,
+        "hand positions": res.positions,
+        "times": times,
+        **{f"influence[{k}]": v for k, v in res.influence.items()},
+    }
+    bad = [k for k, v in shown.items() if not np.isfinite(np.asarray(v, dtype=np.float64)).all()]
+    if bad:
+        raise ValueError(
+            f"the reproduction gave non-finite values (NaN or inf) in {', '.join(bad)}: "
+            "nothing drawn for this placement"
+        )
 
 
 def coarse_skill(skill: Skill, n_steps: int) -> Skill:
@@ -324,6 +352,32 @@ def ellipsoid_pose(cov: Float, n_sd: float = N_SD) -> tuple[Float, Float]:
 def quat_wxyz(rot: Float) -> Float:
     """Unit quaternion (w, x, y, z) of a rotation matrix."""
     return quaternion_from_matrix(rot)
+
+
+def check_view_objects(given: Mapping[str, Any], skill: Skill) -> dict[str, Float]:
+    """Placements given for some of ``skill``'s objects (``pbdkit view --object``), checked as
+    a reproduction checks them (:func:`pbdkit.reproduction._setup.check_objects`): a position,
+    or a pose (x, y, z, qw, qx, qy, qz or 4x4) that an object of an oriented constraint needs.
+
+    Returns
+    -------
+    placements : dict str -> ndarray, shape (3,) or (4, 4)
+
+    Raises
+    ------
+    ValueError
+        An object the skill does not know, or a bad placement; the message names --object.
+    """
+    from ..reproduction._setup import check_objects
+
+    unknown = [k for k in given if k not in skill.object_names]
+    if unknown:
+        raise ValueError(
+            f"--object: {short(unknown)} are not objects of the skill ({skill.object_names})"
+        )
+    return check_objects(
+        given, skill.object_names, "--object", oriented=skill.oriented, partial=True
+    )
 
 
 def typical_placements(skill: Skill) -> dict[str, Float]:

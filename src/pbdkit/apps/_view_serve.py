@@ -1,6 +1,7 @@
 """Serving the live view (``pbdkit view``): a viser server on :data:`HOST`, its port checked
 first, stopped cleanly on SIGINT or SIGTERM (:func:`serve`), or from a background thread for a
-notebook, a test or a benchmark (:func:`served`). The page itself is :class:`ViewApp`
+notebook, a test or a benchmark (:func:`served`); a Ctrl+C during the view's imports is held
+back to their end (:func:`sigint_deferred`). The page itself is :class:`ViewApp`
 (:mod:`pbdkit.apps._view`).
 """
 
@@ -20,7 +21,7 @@ if TYPE_CHECKING:
 
     from ._view import ViewApp
 
-__all__ = ["HOST", "check_port", "serve", "served"]
+__all__ = ["HOST", "check_port", "serve", "served", "sigint_deferred"]
 
 #: The page is served on this interface only.
 HOST = "127.0.0.1"
@@ -61,7 +62,8 @@ def serve(
     """Serve the page until SIGINT or SIGTERM (or ``stop``), then stop cleanly.
 
     ``app_factory`` builds the :class:`ViewApp` on the server. ``ready`` is called with it once
-    the page is served (tests and benchmarks).
+    the page is served (tests and benchmarks). A signal at any moment, from before the server
+    starts on, ends it the same way (with ``stop`` set already, nothing is served).
 
     Raises
     ------
@@ -71,19 +73,29 @@ def serve(
     import viser
 
     check_port(port)
-    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
-        server = viser.ViserServer(host=HOST, port=port, verbose=False)
-    server.gui.configure_theme(show_share_button=False)  # sharing goes through viser's servers
     done = stop if stop is not None else threading.Event()
+    server: viser.ViserServer | None = None
     app: ViewApp | None = None
     previous: dict[signal.Signals, Any] = {}
     try:
-        if server.get_port() != port:
-            raise ValueError(f"port {port} on {HOST} is in use: choose another with --port")
+        # The handlers first: a signal while the server starts (its thread runs before the
+        # constructor returns) must stop it, not leave it serving (issue 36).
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 previous[sig] = signal.signal(sig, lambda *_: done.set())
+        if done.is_set():
+            return
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: we print the URL
+            server = viser.ViserServer(host=HOST, port=port, verbose=False)
+        # Sharing would go through viser's servers.
+        server.gui.configure_theme(show_share_button=False)
+        if server.get_port() != port:
+            raise ValueError(f"port {port} on {HOST} is in use: choose another with --port")
+        if done.is_set():
+            return
         app = app_factory(server)
+        if done.is_set():
+            return
         url = f"http://{HOST}:{port}"
         say(f"serving {url} (Ctrl+C to stop)")
         if open_browser:
@@ -95,12 +107,41 @@ def serve(
         while not done.wait(timeout=0.5):
             pass
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if app is not None:
-            app.close()
-        with contextlib.redirect_stdout(io.StringIO()):
-            server.stop()
+        # The handlers go last: a second signal while the server stops changes nothing.
+        try:
+            if app is not None:
+                app.close()
+            if server is not None:
+                with contextlib.redirect_stdout(io.StringIO()):
+                    server.stop()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """Hold SIGINT back while the block runs, and raise :class:`KeyboardInterrupt` at its end
+    if one came: for the view's imports, where a KeyboardInterrupt can be lost (trimesh, which
+    yourdfpy imports, catches ``BaseException`` around its optional imports: the command went
+    on to serve) or stop an extension module half-way through its initialisation.
+
+    Outside the main thread, or where SIGINT is ignored, the block runs as it is.
+    """
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    ):
+        yield
+        return
+    came = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: came.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if came.is_set():
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager

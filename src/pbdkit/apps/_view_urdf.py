@@ -1,24 +1,156 @@
 """The arm of ``pbdkit view --skill`` drawn from its URDF (:class:`UrdfArm`): yourdfpy's meshes
 through viser's ``ViserUrdf``, and a stick figure through the links (for a URDF without visual
-geometry). Imported only when the view runs (the ``view`` extra).
+geometry); :func:`check_arm_urdf` checks a URDF given for it first. Imported only when the view
+runs (the ``view`` extra).
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
+import logging
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import short
+
 if TYPE_CHECKING:
     import viser
 
 
-__all__ = ["UrdfArm"]
+__all__ = ["UrdfArm", "arm_urdf", "check_arm_urdf", "joint_order"]
 
 Float = NDArray[np.float64]
+
+#: A URDF file larger than this is refused (its meshes are separate files).
+URDF_MAX_BYTES = 64 * 2**20
+
+
+@contextlib.contextmanager
+def _quiet_yourdfpy() -> Iterator[None]:
+    """yourdfpy logs a file it cannot parse as errors on stderr before it raises: the caller
+    reports it in one line."""
+    logger = logging.getLogger("yourdfpy.urdf")
+    disabled = logger.disabled
+    logger.disabled = True
+    try:
+        yield
+    finally:
+        logger.disabled = disabled
+
+
+def _load(urdf: Path | str, *, meshes: bool) -> Any:
+    """``urdf`` (a file, or URDF XML text) loaded with yourdfpy; meshes beside a file."""
+    from functools import partial
+
+    import yourdfpy
+
+    if isinstance(urdf, Path):
+        return yourdfpy.URDF.load(
+            str(urdf),
+            build_scene_graph=meshes,
+            load_meshes=meshes,
+            filename_handler=partial(yourdfpy.filename_handler_magic, dir=urdf.parent),
+        )
+    return yourdfpy.URDF.load(io.StringIO(urdf), build_scene_graph=meshes, load_meshes=meshes)
+
+
+def joint_order(
+    urdf_joints: Sequence[str], joint_names: Sequence[str], name: str, what: str = "the URDF"
+) -> list[int]:
+    """Where each of the arm's joints ``joint_names`` is among a URDF's actuated joints
+    ``urdf_joints``: by name when the URDF has them all, else in order when it has as many.
+
+    Raises
+    ------
+    ValueError
+        Neither: the URDF would draw another arm, or one that does not move.
+    """
+    urdf_joints, joint_names = list(urdf_joints), list(joint_names)
+    if all(j in urdf_joints for j in joint_names):
+        return [urdf_joints.index(j) for j in joint_names]
+    if len(urdf_joints) == len(joint_names):
+        return list(range(len(joint_names)))
+    raise ValueError(
+        f"{name}: {what} has {len(urdf_joints)} moving joints {short(urdf_joints)}, the "
+        f"skill's arm {len(joint_names)} {short(joint_names)}: give a URDF of the skill's arm"
+    )
+
+
+def check_arm_urdf(urdf: Path | str, joint_names: Sequence[str], name: str = "--robot") -> None:
+    """Check that ``urdf`` (a file, or URDF XML text) is a URDF that can draw an arm of the
+    joints ``joint_names`` (:func:`joint_order`), before the page is built.
+
+    Raises
+    ------
+    ValueError
+        It is not a URDF (larger than :data:`URDF_MAX_BYTES`, not UTF-8 XML, no ``<robot>``
+        root, or yourdfpy cannot read it), or not of this arm.
+    """
+    what = short(str(urdf)) if isinstance(urdf, Path) else "the URDF text"
+    if isinstance(urdf, Path) and urdf.stat().st_size > URDF_MAX_BYTES:
+        raise ValueError(
+            f"{name}: {what} is not a URDF ({urdf.stat().st_size} bytes, more than "
+            f"{URDF_MAX_BYTES}: meshes are separate files)"
+        )
+    try:
+        text = urdf.read_text(encoding="utf-8") if isinstance(urdf, Path) else urdf
+        root = ET.fromstring(text)
+    except (UnicodeDecodeError, ET.ParseError) as exc:
+        raise ValueError(f"{name}: {what} is not a URDF (not XML: {short(str(exc))})") from None
+    if root.tag != "robot":
+        raise ValueError(
+            f"{name}: {what} is not a URDF (its root element is {short(root.tag)}, not 'robot')"
+        )
+    try:
+        with _quiet_yourdfpy():
+            loaded = _load(urdf, meshes=False)
+    except Exception as exc:  # yourdfpy raises KeyError, TypeError ... on a bad element
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise ValueError(f"{name}: {what} is not a URDF ({short(reason)})") from None
+    if not loaded.robot.links:
+        raise ValueError(f"{name}: {what} is not a URDF (no links)")
+    joint_order(loaded.actuated_joint_names, joint_names, name, what)
+
+
+def arm_urdf(robot: str | None, arm: Any) -> Path | str | None:
+    """``pbdkit view --robot``: the URDF to draw the skill's arm ``arm`` (a Robot) from: a file,
+    or a shipped robot's (its file, or its URDF text); None (``robot`` None): the skill's own.
+
+    Raises
+    ------
+    ValueError
+        A shipped robot of another number of joints than ``arm``; no such file; a file that
+        is not a URDF, or not of this arm (:func:`check_arm_urdf`). The message names --robot.
+    """
+    from .. import robots
+
+    if robot is None:
+        return None
+    urdf: Path | str
+    if robot in robots.available():
+        named = robots.load(robot)
+        if named.n_joints != arm.n_joints:
+            raise ValueError(
+                f"--robot: {robot} has {named.n_joints} joints, the skill's arm "
+                f"{arm.n_joints} {short(arm.joint_names)}: name the skill's arm, or leave "
+                "--robot out to draw the URDF the skill file keeps"
+            )
+        urdf = robots.katana_urdf_path() if robot == "katana" else named.urdf
+    else:
+        urdf = Path(robot)
+        if not urdf.is_file():
+            raise ValueError(
+                f"--robot must be a URDF file or one of {', '.join(robots.available())}, "
+                f"got {short(robot)} ({'a directory' if urdf.is_dir() else 'no such file'})"
+            )
+    check_arm_urdf(urdf, arm.joint_names, "--robot")
+    return urdf
 
 
 class UrdfArm:
@@ -26,27 +158,14 @@ class UrdfArm:
     through its links' origins (a URDF without visual geometry, such as one made from a DH
     table, still shows)."""
 
-    def __init__(self, server: viser.ViserServer, robot: Any, urdf: Path | None) -> None:
-        from functools import partial
-
-        import yourdfpy
+    def __init__(self, server: viser.ViserServer, robot: Any, urdf: Path | str | None) -> None:
         from viser.extras import ViserUrdf
 
-        if urdf is not None:
-            loaded = yourdfpy.URDF.load(
-                str(urdf),
-                build_scene_graph=True,
-                load_meshes=True,
-                filename_handler=partial(yourdfpy.filename_handler_magic, dir=urdf.parent),
-            )
-        else:
-            loaded = yourdfpy.URDF.load(
-                io.StringIO(robot.urdf), build_scene_graph=True, load_meshes=True
-            )
+        loaded = _load(robot.urdf if urdf is None else urdf, meshes=True)
         self.urdf = loaded
         self.viser_urdf = ViserUrdf(server, loaded, root_node_name="/arm")
         names = list(self.viser_urdf.get_actuated_joint_names())
-        self._index = [names.index(j) if j in names else -1 for j in robot.joint_names]
+        self._index = joint_order(names, robot.joint_names, "urdf")
         self._cfg = np.zeros(len(names))
         self._links = [j.child for j in loaded.robot.joints]
         self._parents = [j.parent for j in loaded.robot.joints]
@@ -56,8 +175,7 @@ class UrdfArm:
 
     def show(self, q: Float) -> None:
         for i, k in enumerate(self._index):
-            if k >= 0:
-                self._cfg[k] = q[i]
+            self._cfg[k] = q[i]
         self.viser_urdf.update_cfg(self._cfg)
         pts = []
         for parent, child in zip(self._parents, self._links, strict=True):

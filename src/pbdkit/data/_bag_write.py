@@ -277,7 +277,7 @@ def _check_motion(t: Float, q: Float, names: Sequence[str], limits: MotionLimits
         top = np.abs(v).max(axis=0)
         unbounded = np.full(q.shape[1], np.inf)
         limits = with_defaults(
-            MotionLimits(np.where(top > 0, top, np.inf), unbounded, unbounded), warn=False
+            MotionLimits._derived(np.where(top > 0, top, np.inf), unbounded, unbounded), warn=False
         )
     elif limits.n_joints != q.shape[1]:
         raise ValueError(

@@ -300,6 +300,13 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
         Destination; replaced atomically (readers see the old file or the new one).
 
     Its keys: :doc:`/reproduction`, "Demonstration files".
+
+    Raises
+    ------
+    ValueError
+        Invalid demonstrations, or more than :func:`load_demonstrations` reads
+        (:data:`pbdkit._io.MAX_NPZ_BYTES` of arrays, 1 GiB: e.g. 200 demonstrations of 10**5
+        samples of a 7-joint arm with a gripper): nothing is written.
     """
     items = check_demonstrations(demos, min_demos=1)
     names = list(items[0].object_names)
@@ -328,7 +335,8 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
             )
         if d.gripper is not None:
             arrays[f"demo_{i}_gripper"] = d.gripper
-    save_npz_atomic(path, arrays)
+    # Refused before anything is written if load_demonstrations could not read it back.
+    save_npz_atomic(path, arrays, what="demos")
 
 
 def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:

@@ -40,11 +40,14 @@ exceeded by a ratio r (velocity), r_a (acceleration), r_j (jerk), the segments a
 stretched by max(r, sqrt(r_a), cbrt(r_j)) to the power 1.05 (plus 0.005 per round: neighbouring
 stretches interact, and the iteration should end in a few rounds: 2-3 on the teacher's skills,
 22 on benchmarks/bench_skill.py's), tapered with a Gaussian window so that the durations vary
-smoothly (a sudden change of the duration of the steps is itself an acceleration). A step over
-a limit is stretched by at least 1e-6 of its duration (an excess of a few ulps would otherwise
-ask for a stretch that rounding loses). This repeats until every divided difference, padded
-with rest, is within the limits. A step is never
-given less than dt: the skill keeps the demonstrations' pace wherever the arm can follow it.
+smoothly (a sudden change of the duration of the steps is itself an acceleration): 10 steps
+either side, or on a grid finer than 5 ms, 10 blocks of 10 ms of the path as timed so far (the
+way back to the demonstrations' pace takes a time, not a number of steps), weighting the
+logarithm of the stretch (a step slowed 100 times does not slow its neighbours 50 times). A
+step over a limit is stretched by at least 1e-6 of its duration (an excess of a few ulps would
+otherwise ask for a stretch that rounding loses). This repeats until every divided difference,
+padded with rest, is within the limits. A step is never given less than dt: the skill keeps the
+demonstrations' pace wherever the arm can follow it.
 """
 
 from __future__ import annotations
@@ -58,11 +61,13 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._limit_values import LIMIT_RANGES, UNITS, check_limit_range, names_of, positive_bounds
 from .._validation import check_array, short
 
 __all__ = [
     "DEFAULT_ACCELERATION_TIME",
     "DEFAULT_JERK_TIME",
+    "LIMIT_RANGES",
     "LIMIT_SAFETY",
     "DefaultLimitsWarning",
     "MotionLimits",
@@ -91,6 +96,17 @@ _STRETCH_OVERSHOOT = 1.05
 _OVERSHOOT_GROWTH = 0.005
 _TAPER_HALF_WIDTH = 10
 _TAPER_SIGMA = 4.0
+# retime: on a grid finer than this (s, the median step), the taper spans blocks of this
+# duration of the path as timed so far, not steps (:func:`_tapered_in_time`). The speed a
+# slowed neighbourhood must come back to takes a time to reach within the limits, not a number
+# of steps: a taper of 10 steps of 0.3 ms (a skill of 60000 steps) ended 3 ms after its peak,
+# the ramp back to the pace was over the limits right after it, and the stretch crept along
+# the path by a taper a round, never done in 200 rounds (issue 36: a RuntimeError, or the
+# path slowed 160 times as a whole).
+_TAPER_BLOCK_SECONDS = 0.01
+# retime: grids (median step, s) finer than this are tapered in time; coarser ones over steps
+# (the zoo's 6 ms and the teacher's 17 ms keep their timings to the bit).
+_FINE_GRID_SECONDS = 0.005
 _MAX_ROUNDS = 200
 # retime: a step over a limit is stretched by at least this fraction of its duration. An
 # excess of a few ulps (a re-plan that continues a motion planned on the limit: 1 + 1e-12)
@@ -128,6 +144,9 @@ class MotionLimits:
         rad/s^2.
     jerk : ndarray, shape (n,)
         rad/s^3.
+
+    Each finite limit must be within its kind's :data:`LIMIT_RANGES` (ValueError naming the
+    kind and the joint otherwise).
     """
 
     velocity: Float
@@ -135,6 +154,21 @@ class MotionLimits:
     jerk: Float
 
     def __post_init__(self) -> None:
+        self._check(in_range=True)
+
+    @classmethod
+    def _derived(cls, velocity: Float, acceleration: Float, jerk: Float) -> MotionLimits:
+        """Limits computed by pbdkit from limits already checked (a safety margin, the defaults
+        of :func:`with_defaults`) or from a trajectory's own speeds: > 0, not held to
+        :data:`LIMIT_RANGES` (a margin of 0.995 takes a limit on the range's edge past it)."""
+        out = object.__new__(cls)
+        for name, value in (("velocity", velocity), ("acceleration", acceleration), ("jerk", jerk)):
+            object.__setattr__(out, name, value)
+        out._check(in_range=False)
+        return out
+
+    def _check(self, *, in_range: bool) -> None:
+        """Validate and freeze the three arrays (in place: the dataclass is frozen)."""
         n = None
         for name in ("velocity", "acceleration", "jerk"):
             # A copy: the caller's array (e.g. a robot's attribute) stays its own and writable.
@@ -149,6 +183,8 @@ class MotionLimits:
             if bad.size:
                 i = int(bad[0])
                 raise ValueError(f"{name}[{i}] must be > 0 (inf: no limit), got {short(arr[i])}")
+            if in_range:
+                check_limit_range(arr, name, name)
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
@@ -168,7 +204,9 @@ class MotionLimits:
 
     def scaled(self, factor: float) -> MotionLimits:
         """The same limits times ``factor`` (e.g. :data:`LIMIT_SAFETY`)."""
-        return MotionLimits(self.velocity * factor, self.acceleration * factor, self.jerk * factor)
+        return MotionLimits._derived(
+            self.velocity * factor, self.acceleration * factor, self.jerk * factor
+        )
 
     def as_dict(self) -> dict[str, list[float | None]]:
         """JSON-ready: per kind, one value per joint (None: no limit)."""
@@ -213,7 +251,7 @@ class MotionLimits:
         limits : MotionLimits
         """
         specs = {"velocity": velocity, "acceleration": acceleration, "jerk": jerk}
-        units = {"velocity": "rad/s", "acceleration": "rad/s^2", "jerk": "rad/s^3"}
+        units = UNITS
         declared = {
             "velocity": robot.velocity_limit,
             "acceleration": robot.acceleration_limit,
@@ -232,8 +270,10 @@ class MotionLimits:
                     )
                 arr = check_array(declared[kind], f"robot.{name}", shape=(n,), finite=False)
                 out[kind] = np.where(np.isfinite(arr) & (arr > 0), arr, np.inf)
+                check_limit_range(out[kind], kind, f"robot.{name}", names_of(robot))
             else:
                 out[kind] = positive_bounds(spec, n, name, units[kind])
+                check_limit_range(out[kind], kind, name)
         return cls(out["velocity"], out["acceleration"], out["jerk"])
 
 
@@ -279,7 +319,7 @@ def with_defaults(
             DefaultLimitsWarning,
             stacklevel=3,
         )
-    return MotionLimits(v, a_new, j_new)
+    return MotionLimits._derived(v, a_new, j_new)
 
 
 def defaults_where_declared(
@@ -312,31 +352,11 @@ def defaults_where_declared(
     if not (robot_spec(acceleration) or robot_spec(jerk)):
         return limits
     filled = with_defaults(limits, names)
-    return MotionLimits(
+    return MotionLimits._derived(
         limits.velocity,
         filled.acceleration if robot_spec(acceleration) else limits.acceleration,
         filled.jerk if robot_spec(jerk) else limits.jerk,
     )
-
-
-def positive_bounds(value: npt.ArrayLike, n: int, name: str, unit: str) -> Float:
-    """A number or (n,) values, each > 0 or inf (unbounded) -> ndarray (n,)."""
-    scalar = np.ndim(value) == 0
-    arr = check_array(value, name, ndim=(0, 1), finite=False)
-    if scalar:
-        arr = np.full(n, arr.item())
-    elif arr.shape[0] != n:
-        raise ValueError(
-            f"{name} must be a number or have shape ({n},) (one value per joint), "
-            f"got shape ({arr.shape[0]},)"
-        )
-    bad = np.flatnonzero(~(arr > 0))
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{name}[{i}] must be > 0 ({unit}; inf leaves that joint unbounded), got {arr[i]:.6g}"
-        )
-    return arr
 
 
 # ----------------------------------------------------------------------------- checks
@@ -578,7 +598,7 @@ def retime(
     )
     offsets = np.arange(-_TAPER_HALF_WIDTH, _TAPER_HALF_WIDTH + 1)
     taper = np.exp(-0.5 * (offsets / _TAPER_SIGMA) ** 2)
-    edge = np.zeros(_TAPER_HALF_WIDTH)
+    fine = float(np.median(h)) < _FINE_GRID_SECONDS
     vlim, alim, jlim = limits.velocity, limits.acceleration, limits.jerk
     for round_ in range(_MAX_ROUNDS):
         t = np.concatenate([[0.0], np.cumsum(h)])
@@ -603,11 +623,7 @@ def retime(
         # stretches of neighbours interact, and a slow convergence would cost many rounds.
         overshoot = _STRETCH_OVERSHOOT + _OVERSHOOT_GROWTH * round_
         excess = np.where(need > 1.0, np.maximum(need**overshoot - 1.0, _MIN_STRETCH), 0.0)
-        # Taper: every step gets the largest stretch asked by a step within the window,
-        # weighted by its distance (the window symmetric: no flip needed).
-        padded_excess = np.concatenate([edge, excess, edge])
-        windows = np.lib.stride_tricks.sliding_window_view(padded_excess, offsets.shape[0])
-        h = h * (1.0 + (windows * taper).max(axis=1))
+        h = h * (1.0 + (_tapered_in_time(excess, taper, h) if fine else _tapered(excess, taper)))
     # Not converged (never seen since the minimum stretch; the loop is bounded anyway): the
     # durations reached, all stretched alike until every divided difference is within.
     largest = float(f.max())
@@ -625,6 +641,41 @@ def retime(
         stacklevel=2,
     )
     return slowed
+
+
+def _tapered(excess: Float, taper: Float) -> Float:
+    """retime's taper over steps: every step gets the largest stretch asked by a step within
+    the window, weighted by its distance (the window symmetric: no flip needed)."""
+    edge = np.zeros((taper.shape[0] - 1) // 2)
+    windows = np.lib.stride_tricks.sliding_window_view(
+        np.concatenate([edge, excess, edge]), taper.shape[0]
+    )
+    return np.asarray((windows * taper).max(axis=1), dtype=np.float64)
+
+
+def _tapered_in_time(excess: Float, taper: Float, h: Float) -> Float:
+    """retime's taper on a fine grid: over blocks of :data:`_TAPER_BLOCK_SECONDS` of the
+    durations ``h`` reached (a step in the block of its middle; each block asks for the largest
+    stretch of its steps), weighted as :func:`_tapered`'s but on the logarithm of the stretch
+    (a stretch by f asks a neighbour for f^w, not 1 + (f - 1) w: a step slowed 100 times does
+    not slow its neighbours 50 times), interpolated at each step's middle; every step gets at
+    least its own. Only the blocks that hold a step are kept: memory and time O(K) however
+    long the path has become."""
+    half = (taper.shape[0] - 1) // 2
+    middle = np.cumsum(h) - 0.5 * h
+    block = np.floor(middle / _TAPER_BLOCK_SECONDS).astype(np.int64)
+    first = np.flatnonzero(np.r_[True, np.diff(block) > 0])
+    held = block[first]
+    asked = np.maximum.reduceat(np.log1p(excess), first)
+    spread = asked.copy()
+    # The blocks within `half` of a block are among the `half` held ones on either side.
+    for m in range(1, min(half, held.shape[0] - 1) + 1):
+        gap = held[m:] - held[:-m]
+        weight = np.where(gap <= half, taper[half + np.minimum(gap, half)], 0.0)
+        np.maximum(spread[m:], weight * asked[:-m], out=spread[m:])
+        np.maximum(spread[:-m], weight * asked[m:], out=spread[:-m])
+    middles = _TAPER_BLOCK_SECONDS * (held + 0.5)
+    return np.maximum(np.expm1(np.interp(middle, middles, spread)), excess)
 
 
 class RetimeWarning(RuntimeWarning):

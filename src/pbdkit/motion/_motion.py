@@ -147,7 +147,7 @@ class Motion:
         p, v, a = (np.array(x) for x in state["start"])
         self._start = (p, v, a)
         lim = state["limits"]
-        self._limits = None if lim is None else MotionLimits(lim[0], lim[1], lim[2])
+        self._limits = None if lim is None else MotionLimits._derived(lim[0], lim[1], lim[2])
         self._starts = state["starts"].tolist()
         self._durations = state["durations"].tolist()
         self._recipes = (state["rows"], state["min_durations"], state["interfaces"])

@@ -17,7 +17,9 @@ pickle, written atomically. Keys: ``format`` = ``"pbdkit-frame-model"``, ``versi
 ``n_frames`` (P >= 1), ``n_dims`` (D >= 1), and for every frame p in 0 .. P-1
 ``gmm_{p}_weights`` (K,), ``gmm_{p}_means`` (K, 1 + D) and ``gmm_{p}_covariances``
 (K, 1 + D, 1 + D). :meth:`FrameModel.load` judges the archive from its headers before it loads
-an array: any other key, or arrays of more than :data:`MAX_FILE_BYTES` in all, are refused.
+an array: any other key, or arrays of more than :data:`MAX_FILE_BYTES` in all, are refused;
+then values that are not finite, means beyond :data:`MAX_MAGNITUDE` and covariances beyond its
+square (what :meth:`FrameModel.learn` gives), naming the key.
 """
 
 from __future__ import annotations
@@ -62,6 +64,14 @@ MAX_FILE_BYTES = 2**24
 #: value) that :meth:`FrameModel.learn` and :meth:`FrameModel.reproduce` accept: beyond it,
 #: A^-1 (x - b) loses more than 12 of float64's 16 digits, and A is taken as singular.
 MAX_CONDITION = 1e12
+#: The range of a frame's scale, the singular values of its A, that :meth:`FrameModel.learn` and
+#: :meth:`FrameModel.reproduce` accept: A = 1e-200 I (condition number 1) made A^-1 (x - b)
+#: overflow EM's statistics, and A S A^T underflow to 0 (NaN predictions).
+FRAME_SCALE_RANGE = (1e-9, 1e9)
+#: Largest magnitude of a time, a coordinate, a frame's origin b and a coordinate seen from a
+#: frame, A^-1 (x - b), that :meth:`FrameModel.learn` takes (and of a loaded model's means; its
+#: covariances up to the square): EM squares and sums them, which overflowed from 1e150 on.
+MAX_MAGNITUDE = 1e15
 
 
 def to_local(a: npt.ArrayLike, b: npt.ArrayLike, x: npt.ArrayLike) -> Float:
@@ -165,14 +175,48 @@ def _check_frames(
             ) from None
         a[p] = check_array(a_p, f"{name}[{p}] A", shape=(n_dims, n_dims))
         b[p] = check_array(b_p, f"{name}[{p}] b", shape=(n_dims,))
-        cond = float(np.linalg.cond(a[p]))
+        with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308
+            scale = np.linalg.svd(a[p], compute_uv=False)
+        cond = float(scale[0] / scale[-1]) if scale[-1] > 0 else float("inf")
         if not cond <= MAX_CONDITION:
             raise ValueError(
                 f"{name}[{p}] A must be invertible (a rotation, scaling, reflection or a "
                 f"product of them), got a singular matrix (condition number {cond:.3g}, "
                 f"more than MAX_CONDITION = {MAX_CONDITION:g}): {a[p].tolist()}"
             )
+        low, high = FRAME_SCALE_RANGE
+        if not (low <= scale[-1] and scale[0] <= high):
+            raise ValueError(
+                f"{name}[{p}] A must scale by {low:g} to {high:g} (its singular values, "
+                f"FRAME_SCALE_RANGE), got singular values from {scale[-1]:.3g} to {scale[0]:.3g}"
+            )
+        _check_magnitude(b[p], f"{name}[{p}] b")
     return a, b
+
+
+def _check_magnitude(x: Float, name: str, what: str = "") -> None:
+    """Refuse values above :data:`MAX_MAGNITUDE` in magnitude, naming ``name``."""
+    top = float(np.max(np.abs(x))) if x.size else 0.0
+    if top > MAX_MAGNITUDE:
+        raise ValueError(
+            f"{name}{what} must be at most MAX_MAGNITUDE = {MAX_MAGNITUDE:g} in magnitude, "
+            f"got {top:.3g}"
+        )
+
+
+def _check_random_state(value: object) -> int | np.random.RandomState | None:
+    """``random_state`` as scikit-learn takes it: None, an integer in [0, 2**32 - 1] or a
+    numpy RandomState."""
+    if value is None or isinstance(value, np.random.RandomState):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        seed = int(value)
+        if 0 <= seed < 2**32:
+            return seed
+    raise ValueError(
+        "random_state must be None, an integer in [0, 2**32 - 1] or a numpy RandomState, "
+        f"got {short(value)}"
+    )
 
 
 class FrameModel:
@@ -238,7 +282,7 @@ class FrameModel:
         n_components: int | Literal["auto", "bic"] = "auto",
         max_components: int = MAX_COMPONENTS,
         reg_covar: float | npt.ArrayLike | None = None,
-        random_state: int | None = 0,
+        random_state: int | np.random.RandomState | None = 0,
         fit_samples: int | None = 100,
     ) -> FrameModel:
         """Learn from demonstrations and the frames each was recorded with.
@@ -252,11 +296,14 @@ class FrameModel:
         trajectories : sequence of array-like, shape (T_i, 1 + D)
             At least 2 demonstrations, time in column 0 (any unit, the same for all: for
             demonstrations of different durations a phase, such as t / duration, aligns their
-            moments), then the D coordinates x. T_i >= 2 may differ.
+            moments), then the D coordinates x. T_i >= 2 may differ. Times and coordinates
+            (and the coordinates seen from each frame) at most :data:`MAX_MAGNITUDE` (1e15) in
+            magnitude.
         frames : sequence of sequence of (A, b)
             Per demonstration, its P frames, the same P for all: A array-like (D, D),
             invertible (a rotation, scaling, reflection or a product of them; a condition
-            number up to :data:`MAX_CONDITION`), b array-like (D,).
+            number up to :data:`MAX_CONDITION`, singular values in
+            :data:`FRAME_SCALE_RANGE`), b array-like (D,).
         n_components : int, "auto" or "bic"
             K of every frame's GMM, or how to choose it per frame (:class:`pbdkit.GMM`).
         max_components : int
@@ -265,8 +312,8 @@ class FrameModel:
             Added to the diagonal of every covariance, in each frame's units squared (time's,
             then the coordinates seen from the frame). None: :class:`pbdkit.GMM`'s
             scale-aware default.
-        random_state : int or None
-            Passed to the GMMs.
+        random_state : int, numpy RandomState or None
+            Passed to the GMMs (an integer in [0, 2**32 - 1], as scikit-learn's).
         fit_samples : int or None
             Number of evenly spaced samples per demonstration given to EM (all if None or
             larger than T_i), as in :meth:`pbdkit.Skill.learn`: consecutive samples of a smooth
@@ -289,6 +336,10 @@ class FrameModel:
             what="demonstration",
             why=" (what varies between them is what the model learns)",
         )
+        for i, x in enumerate(xs):
+            _check_magnitude(x[:, 0], f"trajectories[{i}][:, 0]", " (time)")
+            _check_magnitude(x[:, 1:], f"trajectories[{i}][:, 1:]", " (coordinates)")
+        random_state = _check_random_state(random_state)
         d = xs[0].shape[1] - 1
         given: object = frames
         per_demo = None if isinstance(given, (str, bytes, np.ndarray)) else given
@@ -317,12 +368,12 @@ class FrameModel:
         t = np.concatenate([x[r, 0] for x, r in zip(xs, rows, strict=True)])
         gmms = []
         for p in range(n_frames):
-            local = np.concatenate(
-                [
-                    to_local(a[p], b[p], x[r, 1:])
-                    for (a, b), x, r in zip(checked, xs, rows, strict=True)
-                ]
-            )
+            parts = []
+            for i, ((a, b), x, r) in enumerate(zip(checked, xs, rows, strict=True)):
+                parts.append(to_local(a[p], b[p], x[r, 1:]))
+                seen = f" (trajectories[{i}] seen from the frame, A^-1 (x - b))"
+                _check_magnitude(parts[-1], f"frames[{i}][{p}]", seen)
+            local = np.concatenate(parts)
             gmm = GMM(
                 n_components=n_components,
                 max_components=max_components,
@@ -350,10 +401,12 @@ class FrameModel:
         Parameters
         ----------
         frames : sequence of (A, b)
-            The P new frames, in the order of learning: A array-like (D, D), invertible;
-            b array-like (D,).
+            The P new frames, in the order of learning: A array-like (D, D), invertible, its
+            singular values in :data:`FRAME_SCALE_RANGE`; b array-like (D,), at most
+            :data:`MAX_MAGNITUDE` in magnitude.
         t : array-like, shape (T,)
-            Times, in the unit of the demonstrations' column 0.
+            Times, in the unit of the demonstrations' column 0, at most :data:`MAX_MAGNITUDE`
+            in magnitude.
         covariance : {"exact", "paper"}
             GMR covariance (:meth:`pbdkit.GMM.regress`).
 
@@ -366,6 +419,7 @@ class FrameModel:
             frames, "frames", self.n_dims, self.n_frames, ", one per frame learned"
         )
         tv = check_array(t, "t", ndim=1, min_rows=1)
+        _check_magnitude(tv, "t")
         local = [g.regress(tv[:, None], in_dims=[0], covariance=covariance) for g in self.gmms]
         means = np.stack([m for m, _ in local], axis=1)
         covs = np.stack([c for _, c in local], axis=1)
@@ -390,7 +444,7 @@ class FrameModel:
             arrays[f"gmm_{p}_weights"] = g.weights_
             arrays[f"gmm_{p}_means"] = g.means_
             arrays[f"gmm_{p}_covariances"] = g.covariances_
-        save_npz_atomic(path, arrays)
+        save_npz_atomic(path, arrays, what="FrameModel", max_bytes=MAX_FILE_BYTES)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> FrameModel:
@@ -433,12 +487,7 @@ class FrameModel:
             extra = [k for k in data if k.startswith("gmm_") and int(k.split("_")[1]) >= n_frames]
             if extra:
                 raise ValueError(f"key {short(extra[0])} for a frame beyond n_frames = {n_frames}")
-            gmms = [
-                GMM.from_params(
-                    data[f"gmm_{i}_weights"], data[f"gmm_{i}_means"], data[f"gmm_{i}_covariances"]
-                )
-                for i in range(n_frames)
-            ]
+            gmms = [_stored_gmm(data, i) for i in range(n_frames)]
         except KeyError as exc:
             raise ValueError(f"{bad}: missing key {exc}") from exc
         except (TypeError, ValueError) as exc:
@@ -454,6 +503,25 @@ class FrameModel:
 
 _BASE_KEYS = frozenset({"format", "version", "n_frames", "n_dims"})
 _GMM_KEY = re.compile(r"gmm_(0|[1-9][0-9]{0,5})_(?:weights|means|covariances)")
+
+
+def _stored_gmm(data: NpzArchive, i: int) -> GMM:
+    """Frame ``i``'s GMM of a file, its arrays checked by key: real, finite, and means and
+    covariances within what :meth:`FrameModel.learn` gives (:data:`MAX_MAGNITUDE`, squared for
+    the covariances): means of 1e308 made every prediction NaN."""
+    arrays = {}
+    bounds = {"weights": np.inf, "means": MAX_MAGNITUDE, "covariances": MAX_MAGNITUDE**2}
+    for kind, bound in bounds.items():
+        key = f"gmm_{i}_{kind}"
+        arr = check_array(data[key], key)
+        top = float(np.max(np.abs(arr))) if arr.size else 0.0
+        if top > bound:
+            raise ValueError(
+                f"{key} must be at most {bound:g} in magnitude (MAX_MAGNITUDE"
+                f"{'' if kind == 'means' else ' squared'}, as learn gives), got {top:.3g}"
+            )
+        arrays[kind] = arr
+    return GMM.from_params(arrays["weights"], arrays["means"], arrays["covariances"])
 
 
 def _stored_int(value: NDArray[Any]) -> int | None:

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import re
 from collections.abc import Mapping
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._io import NpzArchive, check_format, open_npz, save_npz_atomic
+from .._validation import short
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "ReproductionResult"]
 
@@ -133,8 +135,16 @@ class ReproductionResult:
         ----------
         path : str or path-like
             The file (replaced if it exists; a new one gets the mode the umask gives).
+
+        Raises
+        ------
+        ValueError
+            A NaN or inf in an array (naming the field and where), or a ``nominal_dt`` that is
+            neither a positive number nor NaN (not known: the key is left out, as in a file
+            from before it was stored): nothing is written.
         """
-        save_npz_atomic(path, _arrays(self))
+        _check_finite(self)
+        save_npz_atomic(path, _arrays(self), what="ReproductionResult")
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> ReproductionResult:
@@ -209,6 +219,34 @@ def _is_result_key(key: str) -> bool:
     return key in _KEYS or _NAMED_KEY.fullmatch(key) is not None
 
 
+def _check_finite(res: ReproductionResult) -> None:
+    """Every float array of a result to be saved finite, and ``nominal_dt`` a duration or NaN
+    (not known: no timing, or a file from before it was stored); a ValueError naming the field
+    otherwise."""
+    for field in dataclasses.fields(res):
+        value = getattr(res, field.name)
+        items = value.items() if isinstance(value, dict) else [(None, value)]
+        for key, arr in items:
+            if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "fc":
+                continue
+            bad = ~np.isfinite(arr)
+            if not bad.any():
+                continue
+            where = np.unravel_index(int(np.argmax(bad)), arr.shape)
+            label = field.name if key is None else f"{field.name}[{short(key)}]"
+            index = "".join(f"[{int(i)}]" for i in where)
+            raise ValueError(
+                f"{label}{index} is {short(arr[where].item())}: a reproduction's arrays must "
+                "be finite; nothing written"
+            )
+    dt = res.nominal_dt
+    if not (math.isnan(dt) or (math.isfinite(dt) and dt > 0)):
+        raise ValueError(
+            "nominal_dt must be a positive number of seconds (or NaN: not known, left out of "
+            f"the file), got {short(dt)}; nothing written"
+        )
+
+
 def _arrays(res: ReproductionResult) -> dict[str, Any]:
     """The arrays of a result's file, by key; the keys of version 1 as `pbdkit reproduce`
     wrote them first, then those added since."""
@@ -239,7 +277,8 @@ def _arrays(res: ReproductionResult) -> dict[str, Any]:
     arrays["limited"] = res.limited
     prefix = _PREFIXES["influence_joint_space"]
     arrays.update({f"{prefix}{k}": v for k, v in res.influence_joint_space.items()})
-    arrays["nominal_dt"] = np.array(res.nominal_dt, dtype=np.float64)
+    if math.isfinite(res.nominal_dt):  # NaN (no timing): left out, as before it was stored
+        arrays["nominal_dt"] = np.array(res.nominal_dt, dtype=np.float64)
     return arrays
 
 

@@ -15,7 +15,9 @@ acceleration and jerk limits (and optionally position limits) from a YAML file::
 :func:`read_joint_limits` parses such a file, its text or an already-parsed mapping of the same
 structure into one :class:`JointLimits` per named joint; :func:`joint_limits_mapping` writes
 arrays back into that structure (how a :class:`pbdkit.Robot` is pickled and a skill file's limits
-are passed back). The YAML is read with ``yaml.safe_load`` only: loading it cannot run code.
+are passed back); :func:`limits_on_chain` matches the names to a robot's joints. The YAML is read
+with PyYAML's safe loader only (libyaml's where present): loading it cannot run code. A file or
+text over :data:`MAX_YAML_BYTES` is refused unread.
 
 Rules (those of MoveIt and ros2_control unless said otherwise):
 
@@ -26,6 +28,9 @@ Rules (those of MoveIt and ros2_control unless said otherwise):
   its ``has_X_limits`` is refused: MoveIt and ros2_control would silently ignore it;
 - ``has_position_limits: true`` with finite ``min_position <= max_position`` replaces the URDF's
   position limits; ``false`` keeps them (a :class:`pbdkit.Robot` needs finite position limits);
+- a joint name the URDF does not have is refused (a typo, or a file for another arm, would
+  otherwise leave the arm unlimited); a joint of the URDF off the arm's chain (a finger) is
+  ignored;
 - other keys (``has_effort_limits``/``max_effort``, ``has_deceleration_limits``/
   ``max_deceleration``, soft limits, a top-level ``default_velocity_scaling_factor``, ...) are
   accepted and not used.
@@ -47,6 +52,7 @@ import numpy.typing as npt
 import yaml
 from numpy.typing import NDArray
 
+from .._limit_values import LIMIT_RANGES
 from .._validation import short
 
 __all__ = [
@@ -54,6 +60,7 @@ __all__ = [
     "JointLimitsSource",
     "check_limit_array",
     "joint_limits_mapping",
+    "limits_on_chain",
     "read_joint_limits",
 ]
 
@@ -63,8 +70,16 @@ JointLimitsSource = str | os.PathLike[str] | Mapping[str, Any]
 #: Derivative limits a joint may declare, with their units (revolute joints; m for prismatic).
 KINDS = {"velocity": "rad/s", "acceleration": "rad/s^2", "jerk": "rad/s^3"}
 
+#: The largest joint_limits file (bytes) or YAML text (characters) read: such a file is a few KB,
+#: and loading one MB costs about 0.7 s and 50 MB with libyaml (its constructor is Python), 3-6 s
+#: and 70 MB with the pure-Python loader.
+MAX_YAML_BYTES = 1024 * 1024
+
 # A string holding "joint_limits:" (or a newline) is YAML text, anything else a file path.
 _LOOKS_LIKE_YAML = re.compile(r"\n|joint_limits['\"]?\s*:")
+
+# libyaml's safe loader where PyYAML was built with it (no python/* tags either way).
+_SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 @dataclass(frozen=True)
@@ -105,9 +120,11 @@ def read_joint_limits(source: JointLimitsSource) -> dict[str, JointLimits]:
     Raises
     ------
     ValueError
-        A missing or unreadable file, text that is not YAML, no ``joint_limits`` mapping, a
-        ``has_*`` flag that is not a boolean, a flag set without its value, or a value that is
-        not a number > 0. The message names the source, the joint and the key.
+        A missing or unreadable file, a file or text over :data:`MAX_YAML_BYTES`, text that is
+        not YAML (or that the loader chokes on: nested too deeply, a 13th month), no
+        ``joint_limits`` mapping, a ``has_*`` flag that is not a boolean, a flag set without its
+        value, or a value that is not a number > 0 within the float range. The message names
+        the source, the joint and the key.
     """
     data, label = _load(source)
     table = data.get("joint_limits") if isinstance(data, Mapping) else None
@@ -115,7 +132,7 @@ def read_joint_limits(source: JointLimitsSource) -> dict[str, JointLimits]:
         if not isinstance(data, Mapping):
             where = f"the document is a {type(data).__name__}"
         elif "joint_limits" not in data:
-            where = f"the 'joint_limits' key is missing (keys: {list(data)})"
+            where = f"the 'joint_limits' key is missing (keys: {short(list(data))})"
         else:
             where = f"'joint_limits' holds a {type(table).__name__}"
         raise ValueError(
@@ -124,7 +141,7 @@ def read_joint_limits(source: JointLimitsSource) -> dict[str, JointLimits]:
         )
     out: dict[str, JointLimits] = {}
     for name, entry in table.items():
-        where = f"{label}: joint '{name}'"
+        where = f"{label}: joint {short(str(name))}"
         if not isinstance(entry, Mapping):
             raise ValueError(
                 f"{where} must map keys such as max_velocity to values, got "
@@ -133,6 +150,49 @@ def read_joint_limits(source: JointLimitsSource) -> dict[str, JointLimits]:
         derivatives = {kind: _derivative(entry, kind, where) for kind in KINDS}
         out[str(name)] = JointLimits(**derivatives, position=_position(entry, where))
     return out
+
+
+def limits_on_chain(
+    declared: Mapping[str, JointLimits],
+    chain: Sequence[str],
+    urdf_joints: Sequence[str],
+    source: JointLimitsSource,
+) -> dict[str, JointLimits]:
+    """The declared limits of the chain's joints; a name the URDF does not have is refused.
+
+    Parameters
+    ----------
+    declared : mapping of str to JointLimits
+        What :func:`read_joint_limits` returned for ``source``.
+    chain : sequence of str
+        The robot's joint names (the joints that move its tip).
+    urdf_joints : sequence of str
+        Every joint name of the URDF: a declared joint among them but off the chain (a finger)
+        is ignored, as MoveIt's files name the joints of every group.
+    source : str, path-like or mapping
+        The joint_limits source, to name it in the message.
+
+    Returns
+    -------
+    on_chain : dict of str to JointLimits
+        The entries of ``declared`` named in ``chain``.
+
+    Raises
+    ------
+    ValueError
+        A declared name that is no joint of the URDF (a typo, or a file for another arm would
+        leave the joint without its limits): the message names it and the robot's joints.
+    """
+    known = set(urdf_joints)
+    unknown = [name for name in declared if name not in known]
+    if unknown:
+        joints = "joint" if len(unknown) == 1 else "joints"
+        raise ValueError(
+            f"{_label(source)} names {len(unknown)} {joints} the URDF does not have: "
+            f"{short(unknown)}; the robot's {len(chain)} joints are {short(list(chain))} (a "
+            "typo, or a file for another arm?)"
+        )
+    return {name: declared[name] for name in chain if name in declared}
 
 
 def joint_limits_mapping(
@@ -159,7 +219,7 @@ def joint_limits_mapping(
     for kind, values in (("velocity", velocity), ("acceleration", acceleration), ("jerk", jerk)):
         if values is None:
             continue
-        arr = np.asarray(values, dtype=np.float64).reshape(-1)
+        arr = _float_array(values, kind)
         if arr.shape != (len(table),):
             raise ValueError(
                 f"{kind} must have shape ({len(table)},) (one value per joint), got {arr.shape}"
@@ -169,6 +229,16 @@ def joint_limits_mapping(
             if math.isfinite(value):
                 entry[f"max_{kind}"] = value
     return {"joint_limits": table}
+
+
+def _float_array(values: npt.ArrayLike, kind: str) -> NDArray[np.float64]:
+    """``values`` as a flat float64 array; ValueError naming ``kind`` if they are not numbers."""
+    try:
+        return np.asarray(values, dtype=np.float64).reshape(-1)
+    except (OverflowError, TypeError, ValueError) as exc:  # 10**400, a string, ragged lists
+        raise ValueError(
+            f"{kind} must be numbers within the float range, one per joint, got {short(values)}"
+        ) from exc
 
 
 def check_limit_array(value: npt.ArrayLike, name: str, n_joints: int) -> NDArray[np.float64]:
@@ -205,37 +275,72 @@ def check_limit_array(value: npt.ArrayLike, name: str, n_joints: int) -> NDArray
     return out
 
 
+def _label(source: JointLimitsSource) -> str:
+    """How error messages name the source."""
+    if isinstance(source, Mapping):
+        return "joint_limits (mapping)"
+    if isinstance(source, str) and _LOOKS_LIKE_YAML.search(source):
+        return "joint_limits (YAML text)"
+    if isinstance(source, str | os.PathLike):
+        return f"joint_limits file '{Path(source)}'"
+    raise ValueError(
+        "joint_limits must be a path to a joint_limits.yaml file, its YAML text or a mapping, "
+        f"got {type(source).__name__}"
+    )
+
+
 def _load(source: JointLimitsSource) -> tuple[Any, str]:
     """The parsed YAML (or the mapping as given) and how error messages name the source."""
+    label = _label(source)
     if isinstance(source, Mapping):
-        return source, "joint_limits (mapping)"
+        return source, label
     if isinstance(source, str) and _LOOKS_LIKE_YAML.search(source):
-        text, label = source, "joint_limits (YAML text)"
-    elif isinstance(source, str | os.PathLike):
-        path = Path(source)
-        label = f"joint_limits file '{path}'"
-        if not path.is_file():
-            what = "is a directory" if path.is_dir() else "does not exist"
+        text = source
+        if len(text) > MAX_YAML_BYTES:
             raise ValueError(
-                f"{label} {what}; pass an existing joint_limits.yaml path, the YAML text or a "
-                "mapping"
+                f"{label} has {len(text)} characters, over the cap of {MAX_YAML_BYTES} "
+                "(MAX_YAML_BYTES; a joint_limits.yaml is a few KB)"
             )
-        try:
-            text = path.read_text(encoding="utf-8")
-        except UnicodeDecodeError as exc:
-            raise ValueError(
-                f"{label} is not UTF-8 text (byte {exc.start}: {exc.reason}); expected YAML"
-            ) from exc
     else:
+        text = _read_text(Path(source), label)
+    try:
+        return yaml.load(text, Loader=_SAFE_LOADER), label
+    except Exception as exc:
+        # The loader raises more than YAMLError on hostile text: RecursionError (PyYAML's
+        # composer, YAML nested 5000 deep), ValueError (a 13th month, 5000 digits), ...
+        detail = " ".join(str(exc).split())
+        if isinstance(exc, RecursionError):
+            detail = f"nested too deeply: {detail}"
+        elif not isinstance(exc, yaml.YAMLError):
+            detail = f"{type(exc).__name__}: {detail}"
+        if len(detail) > 300:  # an alias or tag name of any length
+            detail = f"{detail[:200]}...{detail[-80:]}"
+        raise ValueError(f"{label} is not valid YAML ({detail})") from exc
+
+
+def _read_text(path: Path, label: str) -> str:
+    """A joint_limits file's text: an existing file of at most MAX_YAML_BYTES, UTF-8."""
+    if not path.is_file():
+        what = "is a directory" if path.is_dir() else "does not exist"
         raise ValueError(
-            "joint_limits must be a path to a joint_limits.yaml file, its YAML text or a mapping, "
-            f"got {type(source).__name__}"
+            f"{label} {what}; pass an existing joint_limits.yaml path, the YAML text or a mapping"
+        )
+    size, data = path.stat().st_size, b""
+    if size <= MAX_YAML_BYTES:
+        with path.open("rb") as file:
+            data = file.read(MAX_YAML_BYTES + 1)  # it may have grown since
+        size = max(size, len(data))
+    if size > MAX_YAML_BYTES:
+        raise ValueError(
+            f"{label} has {size} bytes, over the cap of {MAX_YAML_BYTES} (MAX_YAML_BYTES; a "
+            "joint_limits.yaml is a few KB)"
         )
     try:
-        return yaml.safe_load(text), label
-    except yaml.YAMLError as exc:
-        detail = " ".join(str(exc).split())
-        raise ValueError(f"{label} is not valid YAML ({detail})") from exc
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"{label} is not UTF-8 text (byte {exc.start}: {exc.reason}); expected YAML"
+        ) from exc
 
 
 def _flag(entry: Mapping[str, Any], key: str, where: str) -> bool | None:
@@ -254,7 +359,13 @@ def _number(entry: Mapping[str, Any], key: str, where: str, flag: str) -> float:
     value = entry[key]
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{where}: {key} must be a number, got {short(value)}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError as exc:  # an int (or Fraction) such as 10**400
+        raise ValueError(
+            f"{where}: {key} must be a number within the float range (.inf for no limit), got "
+            f"{short(value)}"
+        ) from exc
 
 
 def _derivative(entry: Mapping[str, Any], kind: str, where: str) -> float | None:
@@ -274,6 +385,12 @@ def _derivative(entry: Mapping[str, Any], kind: str, where: str) -> float | None
         raise ValueError(
             f"{where}: {key} must be a number > 0 ({KINDS[kind]}; .inf for no limit), got "
             f"{short(value)}"
+        )
+    low, high = LIMIT_RANGES[kind]
+    if math.isfinite(value) and not low <= value <= high:  # refused here, naming the file
+        raise ValueError(
+            f"{where}: {key} must be in [{low:g}, {high:g}] {KINDS[kind]} (LIMIT_RANGES, around "
+            f"every real arm's; .inf for no limit), got {short(value)}"
         )
     return value
 

@@ -44,7 +44,13 @@ from numpy.typing import NDArray
 from .._validation import check_array, shape_str, short
 from ._chain import _chain_constants, _chain_fk_jacobian
 from ._ik import ik
-from ._joint_limits import JointLimits, JointLimitsSource, joint_limits_mapping, read_joint_limits
+from ._joint_limits import (
+    JointLimits,
+    JointLimitsSource,
+    joint_limits_mapping,
+    limits_on_chain,
+    read_joint_limits,
+)
 from ._urdf import (
     _choose_tip,
     _normalize_joints,
@@ -172,7 +178,10 @@ class Robot:
         velocity = np.array(model.velocityLimit, dtype=np.float64)
         velocity[~(velocity > 0)] = np.inf  # URDF writes velocity="0" for "not limited"
         acceleration, jerk = np.full(len(names), np.inf), np.full(len(names), np.inf)
-        on_chain = {name: declared[name] for name in names if name in declared}  # not fingers
+        on_chain: dict[str, JointLimits] = {}
+        if joint_limits is not None:
+            urdf_joints = [str(joint.get("name")) for joint in root.iter("joint")]
+            on_chain = limits_on_chain(declared, names, urdf_joints, joint_limits)
         for i, name in enumerate(names):
             lim = on_chain.get(name, JointLimits())
             for arr, value in (
@@ -258,15 +267,17 @@ class Robot:
             Limits in the ``joint_limits.yaml`` format of MoveIt and ros2_control: a path to
             such a file, its YAML text (a string with a newline or ``joint_limits:``), or the
             parsed mapping ``{"joint_limits": {joint: {"has_acceleration_limits": True,
-            "max_acceleration": 15.0, ...}}}``. Read with ``yaml.safe_load`` only.
+            "max_acceleration": 15.0, ...}}}``. Read with PyYAML's safe loader only, at most
+            1 MiB (``pbdkit.robots._joint_limits.MAX_YAML_BYTES``).
             ``has_X_limits: true`` with ``max_X`` (> 0, ``.inf`` for none) sets the velocity,
             acceleration or jerk limit; ``has_X_limits: false`` removes it (inf) even if
             ``max_X`` is given. A velocity limit here wins over the URDF's (as in MoveIt);
             ``has_position_limits: true`` with ``min_position``/``max_position`` replaces the
             URDF's position limits (and is written into :attr:`urdf`). Joints of the chain the
             YAML does not name keep the URDF's limits and get no acceleration or jerk limit
-            (inf); joints it names that are not on the chain (fingers, ...) are ignored, and so
-            are other keys (effort, deceleration, scaling factors). Default: no YAML.
+            (inf); joints of the URDF it names that are not on the chain (fingers, ...) are
+            ignored, and so are other keys (effort, deceleration, scaling factors); a name the
+            URDF does not have is an error. Default: no YAML.
 
         Returns
         -------
@@ -277,9 +288,10 @@ class Robot:
         ValueError
             If the file does not exist, the text is not a URDF, the tip frame does not exist,
             the tree branches and no tip is given, or a joint type is not supported; if the
-            joint_limits file is missing or not YAML, has no ``joint_limits`` mapping, a
-            ``has_*`` flag is not a boolean, a flag is true without its value, or a value is
-            not a number > 0 (the message names the source, the joint and the key).
+            joint_limits file is missing, over 1 MiB or not YAML, has no ``joint_limits``
+            mapping, names a joint the URDF does not have, a ``has_*`` flag is not a boolean, a
+            flag is true without its value, or a value is not a number > 0 (the message names
+            the source, the joint and the key).
         """
         return cls(_read_urdf_text(path_or_xml), tip, joint_limits)
 

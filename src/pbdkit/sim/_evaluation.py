@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from .._defaults import MAX_TRIALS
+from .._validation import check_int
 from ._metrics import tracking_summary, yaw_errors, yaw_summary
 from ._parallel import session
 from ._perturb import check_perturb
@@ -227,7 +229,7 @@ def evaluate(
     task : str or TaskSpec
         A registered task name (e.g. "coaster", "basin") or its spec.
     trials : int
-        Number of new placements (>= 1).
+        Number of new placements, 1 to :data:`pbdkit._defaults.MAX_TRIALS` (100000).
     seed : int
         Seeds the demonstrations and the placements.
     n_demos : int
@@ -262,8 +264,7 @@ def evaluate(
         ``result.as_dict()`` is JSON-ready (``pbdkit evaluate --json``).
     """
     spec = get_task(task)
-    if trials < 1:
-        raise ValueError(f"trials must be >= 1, got {trials}")
+    trials = check_int(trials, "trials", minimum=1, maximum=MAX_TRIALS)
     conditions = TrialConditions(
         online=online, perturb=perturb, ground_truth=ground_truth, seed=seed
     )

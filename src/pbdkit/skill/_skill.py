@@ -47,12 +47,19 @@ from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import RunOptions, reach_from_samples, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
 from ._calibration import check_calibration, step_factors
-from ._skill_file import FORMAT_NAME, MAX_FILE_BYTES, read_skill, skill_arrays
+from ._skill_file import (
+    FORMAT_NAME,
+    MAX_DURATION,
+    MAX_FILE_BYTES,
+    MAX_FILE_COMPONENTS,
+    read_skill,
+    skill_arrays,
+    skill_duration_problem,
+)
 from ._spaces import (
     MAX_STEPS,
     Alignment,
     aligned_demonstrations,
-    duration_problem,
     mean_relative_rotation,
     space_data,
     space_floors,
@@ -121,6 +128,11 @@ class Skill:
             robot, PoseKinematicModel if self.rotation_base else KinematicModel
         )
         self.duration = float(duration)
+        if not (np.isnan(self.duration) or 0.0 < self.duration <= MAX_DURATION):
+            raise ValueError(
+                "duration must be NaN (unknown) or in (0, MAX_DURATION = "
+                f"{MAX_DURATION:g}] s, got {short(duration)}"
+            )
         self.n_steps = int(n_steps)
         self.object_names = list(object_names)
         self.gmms = {k: gmms[k] for k in [JOINT, *self.object_names]}
@@ -246,7 +258,8 @@ class Skill:
             they do elsewhere; ``"bic"``: the effective-sample-size BIC of earlier versions
             (kept for comparison).
         max_components : int
-            Largest K tried.
+            Largest K tried. K (given or chosen) is at most
+            :data:`~pbdkit.skill._skill_file.MAX_FILE_COMPONENTS` (1000), as :meth:`load` reads.
         reg_covar : float, dict or None
             The variability floor added to the diagonal of every GMM covariance: no constraint
             is tighter than it. None: :data:`~pbdkit.skill._spaces.VARIABILITY_FLOOR` (joint
@@ -312,9 +325,13 @@ class Skill:
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
         n_steps = check_int(n_steps, "n_steps", minimum=2, maximum=MAX_STEPS)
+        # What Skill.load refuses is not learned (MAX_FILE_COMPONENTS).
+        if not isinstance(n_components, str):
+            check_int(n_components, "n_components", minimum=1, maximum=MAX_FILE_COMPONENTS)
+        check_int(max_components, "max_components", minimum=1, maximum=MAX_FILE_COMPONENTS)
         with np.errstate(over="ignore"):  # durations near 1e308: inf, refused next
             duration = float(np.mean([d.duration for d in items]))
-        problem = duration_problem(duration, n_steps)
+        problem = skill_duration_problem(duration, n_steps)
         if problem:
             raise ValueError(f"demos: {problem} (are the time stamps t in seconds?)")
         warn_outside_limits(items, robot)
@@ -727,7 +744,7 @@ class Skill:
             aligned=self.aligned_,
             calibration=self.calibration_,
         )
-        save_npz_atomic(path, arrays)
+        save_npz_atomic(path, arrays, what="skill", max_bytes=MAX_FILE_BYTES)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], robot: KinematicModel | None = None) -> Skill:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._defaults import MAX_COMPONENTS
 from .._io import NpzArchive, check_format
 from .._rotations import check_rotation
 from .._validation import short
@@ -28,11 +29,14 @@ from ._spaces import MAX_STEPS, Alignment, duration_problem
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "MAX_DURATION",
     "MAX_FILE_BYTES",
+    "MAX_FILE_COMPONENTS",
     "READABLE_VERSIONS",
     "StoredSkill",
     "read_skill",
     "skill_arrays",
+    "skill_duration_problem",
 ]
 
 Float = NDArray[np.float64]
@@ -44,6 +48,28 @@ FORMAT_NAME = "pbdkit-skill"
 FORMAT_VERSION = 2
 #: The versions :meth:`pbdkit.Skill.load` reads (1: positions only; 2: oriented constraints too).
 READABLE_VERSIONS = (1, 2)
+#: The longest duration (s) of a skill (:meth:`pbdkit.Skill.learn`, :meth:`pbdkit.Skill.load`,
+#: :class:`pbdkit.Skill`): 317 years, where demonstrations last seconds to minutes, and still
+#: beyond a bag's int32 seconds (2**31 s, which ``pbdkit reproduce --bag`` checks). A file's
+#: duration of 1e300 s made reproductions' velocities NaN (from about 1e200 s on).
+MAX_DURATION = 1e10
+#: The largest K of a GMM that :meth:`pbdkit.Skill.load` (and :meth:`pbdkit.Skill.learn`) accept,
+#: far above the K learning chooses (1 .. :data:`pbdkit._defaults.MAX_COMPONENTS` = 30 by
+#: default): a reproduction's memory grows as K times n_steps (a 46 MB file of K = 100,000 made
+#: ``reproduce`` allocate 3.6 GB).
+MAX_FILE_COMPONENTS = 1000
+
+
+def skill_duration_problem(duration: float, n_steps: int) -> str:
+    """Why a skill cannot last ``duration`` seconds over ``n_steps`` (>= 2) steps ("" if it
+    can): :func:`~pbdkit.skill._spaces.duration_problem` (finite, > 0, a step of at least
+    ``MIN_STEP_SECONDS``), and at most :data:`MAX_DURATION`."""
+    if math.isfinite(duration) and duration > MAX_DURATION:
+        return (
+            f"the duration must be at most MAX_DURATION = {MAX_DURATION:g} s, "
+            f"got {short(duration)} s"
+        )
+    return duration_problem(duration, n_steps)
 
 
 def skill_arrays(
@@ -149,6 +175,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
     except KeyError as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
     data.check_keys(functools.partial(_is_skill_key, n_objects=len(names)))
+    _check_headers(data, p)
     try:
         n_steps = _stored_int(data["n_steps"])
         if n_steps is None or not 2 <= n_steps <= MAX_STEPS:
@@ -200,7 +227,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
             "and the relative orientation for an oriented object)"
         )
     # NaN: unknown (a skill learned before durations were stored); else as learn checks it.
-    problem = "" if math.isnan(duration) else duration_problem(duration, n_steps)
+    problem = "" if math.isnan(duration) else skill_duration_problem(duration, n_steps)
     if problem:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {problem}")
     if not (np.isfinite(reach) and reach > 0):
@@ -246,6 +273,22 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         aligned=_read_alignment(data, p),
         calibration=calibration,
     )
+
+
+def _check_headers(data: NpzArchive, p: Path) -> None:
+    """Refuse from the archive's headers, before an array is loaded, complex arrays (their
+    conversion to real numbers would drop the imaginary part with a warning only) and GMMs of
+    more than :data:`MAX_FILE_COMPONENTS` components."""
+    bad = f"{p} is not a valid {FORMAT_NAME} file"
+    for key, header in data.headers.items():
+        if header.dtype.kind == "c":
+            raise ValueError(f"{bad}: {key} must hold real numbers, got dtype {header.dtype}")
+        if key.startswith("gmm_") and header.shape and header.shape[0] > MAX_FILE_COMPONENTS:
+            raise ValueError(
+                f"{bad}: {key} holds {header.shape[0]} components; a GMM may have at most "
+                f"MAX_FILE_COMPONENTS = {MAX_FILE_COMPONENTS} (learning chooses K up to "
+                f"max_components, {MAX_COMPONENTS} by default)"
+            )
 
 
 def _read_alignment(data: NpzArchive, p: Path) -> Alignment:
