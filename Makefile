@@ -28,6 +28,12 @@ $(STAMP): pyproject.toml | $(BIN)/python system-deps
 	$(BIN)/python -m pip install --quiet -e ".[sim,view,test,docs]"
 	touch $(STAMP)
 
+# The tests also speak ROS 2 (the ros extra: PyPI's ROS 2 wheels); `make demo` does not need it.
+ROS_STAMP := $(VENV)/.installed-ros
+$(ROS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[sim,view,test,docs,ros]"
+	touch $(ROS_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/pbdkit demo --out $(OUT)
 
@@ -35,7 +41,7 @@ demo: $(STAMP)
 # incremental build would not repeat the warnings of pages it does not reread), offline.
 SPHINX := $(BIN)/python -m sphinx -E -W --keep-going -q -b html docs docs/_build/html
 
-lint: $(STAMP)
+lint: $(ROS_STAMP)
 	$(BIN)/ruff check src tests benchmarks examples docs
 	$(BIN)/ruff format --check src tests benchmarks examples docs
 	$(BIN)/mypy

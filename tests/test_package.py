@@ -93,6 +93,7 @@ def test_the_public_surface_is_what_the_packages_curate() -> None:
         "pbdkit.prob.gaussian",
         "pbdkit.reproduction",
         "pbdkit.robots",
+        "pbdkit.ros",
         "pbdkit.sim",
         "pbdkit.skill",
         "pbdkit.vision",

@@ -54,6 +54,7 @@ PUBLIC_PACKAGES = (
     "pbdkit.datasets",
     "pbdkit.sim",
     "pbdkit.vision",
+    "pbdkit.ros",
     "pbdkit.apps",
 )
 

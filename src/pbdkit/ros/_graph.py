@@ -1,0 +1,76 @@
+"""The live side: a node's joint-state listener (:class:`JointStateListener`), with rclpy from
+the ``ros`` extra, and the settings that keep a graph private (:func:`private_graph_env`)."""
+
+from __future__ import annotations
+
+import os
+import time
+import zlib
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._joints import JointOrder
+
+__all__ = ["JointStateListener", "private_graph_env", "ros_available"]
+
+Float = NDArray[np.float64]
+
+#: The ROS 2 quality of service of the joint trajectory controller's topics: reliable, depth 10.
+QOS_DEPTH = 10
+
+
+def ros_available() -> bool:
+    """Whether rclpy and the message packages import (the ``ros`` extra)."""
+    try:
+        import rclpy  # noqa: F401
+        import sensor_msgs.msg  # noqa: F401
+        import trajectory_msgs.msg  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def private_graph_env(name: str, env: dict[str, str] | None = None) -> dict[str, str]:
+    """The environment of a process on a private graph: discovery on localhost only, and a
+    ROS_DOMAIN_ID in 1-101 drawn from ``name`` (reproducible; two tests with different names
+    rarely share one)."""
+    out = dict(os.environ if env is None else env)
+    out["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    out["ROS_DOMAIN_ID"] = str(1 + zlib.crc32(name.encode()) % 101)
+    return out
+
+
+class JointStateListener:
+    """The arm's latest measured posture from ``sensor_msgs/JointState`` on ``topic``, matched by
+    name (:class:`JointOrder`), with when it came (``time.monotonic()``, the node's clock for
+    staleness: a driver's header stamps may be another machine's).
+
+    A message that does not give the arm's joints is kept as :attr:`error` (the first one) and
+    otherwise ignored: the caller decides whether to stop.
+    """
+
+    def __init__(self, node: Any, topic: str, order: JointOrder) -> None:
+        from sensor_msgs.msg import JointState
+
+        self.order, self.topic = order, topic
+        self.q: Float | None = None
+        self.received: float | None = None
+        self.count = 0
+        self.error: str | None = None
+        self._sub = node.create_subscription(JointState, topic, self._on_message, QOS_DEPTH)
+
+    def _on_message(self, msg: Any) -> None:
+        try:
+            q = self.order.positions(list(msg.name), list(msg.position), self.topic)
+        except ValueError as err:
+            if self.error is None:
+                self.error = str(err)
+            return
+        self.q, self.received = q, time.monotonic()
+        self.count += 1
+
+    def age(self) -> float:
+        """Seconds since the last good message (inf before any)."""
+        return np.inf if self.received is None else time.monotonic() - self.received

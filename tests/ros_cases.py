@@ -1,0 +1,78 @@
+"""Cases run on a private ROS 2 graph by ``tests/rosgraph.py`` (issue 37), one per command
+line: ``python tests/ros_cases.py CASE``. Each prints OK and exits 0, or fails with an
+assertion."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+PANDA = [f"panda_joint{i}" for i in range(1, 8)]
+FR3 = [f"fr3_joint{i}" for i in range(1, 8)]
+POSTURE = np.array([0.1, -0.7, 0.05, -2.3, 0.02, 1.6, 0.8])
+
+
+def publish_joint_states(seconds: str) -> None:
+    """A driver's joint states: franka_ros2's FR3 names, shuffled, a finger joint among them,
+    at 100 Hz; then one message without fr3_joint4."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    rclpy.init()
+    node = rclpy.create_node("fake_driver")
+    pub = node.create_publisher(JointState, "/joint_states", 10)
+    order = [6, 2, 0, 5, 3, 1, 4]
+    names = [FR3[i] for i in order] + ["fr3_finger_joint1"]
+    positions = [float(POSTURE[i]) for i in order] + [0.04]
+    end = time.monotonic() + float(seconds)
+    while time.monotonic() < end:
+        pub.publish(JointState(name=names, position=positions))
+        time.sleep(0.01)
+    pub.publish(
+        JointState(name=[n for n in names if n != "fr3_joint4"], position=[*positions[:-2], 0.04])
+    )
+    time.sleep(0.2)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def joint_states() -> None:
+    """The listener, in this process, matches the driver's (another process's) joint states
+    to the Panda model's joints through the joint map."""
+    import rclpy
+
+    from pbdkit.ros import JointOrder, parse_joint_map
+    from pbdkit.ros._graph import JointStateListener
+
+    driver = subprocess.Popen([sys.executable, __file__, "publish_joint_states", "3"])
+    rclpy.init()
+    node = rclpy.create_node("listener")
+    order = JointOrder(
+        PANDA, parse_joint_map([f"{p}={f}" for p, f in zip(PANDA, FR3, strict=True)])
+    )
+    listener = JointStateListener(node, "/joint_states", order)
+    start = time.monotonic()
+    while listener.q is None and time.monotonic() - start < 10.0:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    assert listener.q is not None, "no joint states in 10 s"
+    first = time.monotonic() - start
+    np.testing.assert_array_equal(listener.q, POSTURE)
+    assert listener.age() < 0.5
+    while driver.poll() is None:  # until the message without fr3_joint4
+        rclpy.spin_once(node, timeout_sec=0.05)
+    for _ in range(10):
+        rclpy.spin_once(node, timeout_sec=0.05)
+    assert driver.returncode == 0
+    assert listener.error is not None and "fr3_joint4" in listener.error, listener.error
+    np.testing.assert_array_equal(listener.q, POSTURE)  # the last good posture is kept
+    node.destroy_node()
+    rclpy.shutdown()
+    print(f"OK: first joint states after {first:.2f} s, {listener.count} messages")
+
+
+if __name__ == "__main__":
+    case, *rest = sys.argv[1:]
+    {"publish_joint_states": publish_joint_states, "joint_states": joint_states}[case](*rest)

@@ -1,0 +1,84 @@
+"""pbdkit on a live ROS 2 graph (issue 37): joint states matched by name (any order, extra
+joints ignored, a missing joint named, names mapped with --joint-map), and the same over a
+real graph of two processes in a private network namespace (``tests/rosgraph.py``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosgraph import run_on_private_graph
+
+from pbdkit.ros import JointOrder, parse_joint_map
+from pbdkit.ros._graph import private_graph_env
+
+KATANA = ["pan", "lift1", "lift2", "lift3", "wrist_roll"]
+
+
+def test_joint_states_in_any_order_with_extra_joints() -> None:
+    order = JointOrder(KATANA)
+    names = ["finger", "lift3", "pan", "wrist_roll", "lift1", "lift2"]
+    q = order.positions(names, [9.0, 4.0, 1.0, 5.0, 2.0, 3.0])
+    np.testing.assert_array_equal(q, [1.0, 2.0, 3.0, 4.0, 5.0])
+    assert order.indices(names) is order.indices(list(names))  # cached per names
+
+
+def test_a_missing_or_repeated_joint_is_a_clear_error() -> None:
+    order = JointOrder(KATANA)
+    with pytest.raises(
+        ValueError, match=r"joint\(s\) \['lift2'\] are not in the joint states.*--joint-map"
+    ):
+        order.positions(["pan", "lift1", "lift3", "wrist_roll"], [0.0] * 4)
+    with pytest.raises(ValueError, match="names a joint twice"):
+        order.positions([*KATANA, "pan"], [0.0] * 6)
+    with pytest.raises(ValueError, match="6 names and 5 positions"):
+        order.positions([*KATANA, "x"], [0.0] * 5)
+    with pytest.raises(ValueError, match="not finite"):
+        order.positions(KATANA, [0.0, np.nan, 0.0, 0.0, 0.0])
+
+
+def test_joint_map_maps_fr3_names_to_the_panda_models() -> None:
+    panda = [f"panda_joint{i}" for i in range(1, 8)]
+    mapping = parse_joint_map([f"panda_joint{i}=fr3_joint{i}" for i in range(1, 8)])
+    order = JointOrder(panda, mapping)
+    names = [f"fr3_joint{i}" for i in (7, 6, 5, 4, 3, 2, 1)] + ["fr3_finger_joint1"]
+    q = order.positions(names, [7, 6, 5, 4, 3, 2, 1, 0.04])
+    np.testing.assert_array_equal(q, [1, 2, 3, 4, 5, 6, 7])
+    with pytest.raises(ValueError, match="panda_joint3"):  # the model's name is not on the graph
+        order.positions(panda, np.zeros(7))
+
+
+@pytest.mark.parametrize(
+    ("items", "match"),
+    [
+        (["panda_joint1"], "is not FROM=TO"),
+        (["=fr3_joint1"], "is not FROM=TO"),
+        (["a=b=c"], "is not FROM=TO"),
+        (["a=x", "a=y"], "'a' is mapped twice"),
+        (["a=x", "b=x"], "'x' is the graph's name of two joints"),
+    ],
+)
+def test_a_malformed_joint_map_is_refused(items: list[str], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        parse_joint_map(items)
+
+
+def test_a_joint_map_of_joints_the_arm_does_not_have_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"\['elbow'\] are not joints of the skill's arm"):
+        JointOrder(KATANA, {"elbow": "x"})
+    with pytest.raises(ValueError, match="two joints share a name on the graph"):
+        JointOrder(KATANA, {"pan": "lift1"})
+
+
+def test_a_private_graph_has_localhost_discovery_and_a_domain_from_the_name() -> None:
+    a, b = private_graph_env("test_a", {}), private_graph_env("test_b", {})
+    assert a["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert 1 <= int(a["ROS_DOMAIN_ID"]) <= 101
+    assert a == private_graph_env("test_a", {}) and a["ROS_DOMAIN_ID"] != b["ROS_DOMAIN_ID"]
+
+
+def test_joint_states_over_a_real_graph_fr3_names_mapped() -> None:
+    # Two processes on a private graph: a driver publishing franka_ros2's FR3 names (shuffled,
+    # a finger among them), and the listener matching them to the Panda model's joints.
+    done = run_on_private_graph("test_joint_states_over_a_real_graph", "joint_states")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout
