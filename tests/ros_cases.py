@@ -73,6 +73,78 @@ def joint_states() -> None:
     print(f"OK: first joint states after {first:.2f} s, {listener.count} messages")
 
 
+def sim_arm(seconds: str) -> None:
+    """The kinematic arm behind a JTC, for ``seconds``; prints what it received."""
+    import rclpy
+
+    from pbdkit.ros._sim_arm import SimArm
+
+    rclpy.init()
+    node = rclpy.create_node("sim_arm")
+    arm = SimArm(node, PANDA, np.zeros(7), interpolate_from_desired_state=True)
+    end = time.monotonic() + float(seconds)
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.01)
+    print(f"received {arm.received} rejected {len(arm.rejected)} {arm.rejected}")
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def trajectory_to_sim_arm() -> None:
+    """A JointTrajectory sent over the graph to the sim arm (another process): its joint states
+    follow it to the last point; an empty one is rejected."""
+    import rclpy
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from pbdkit.ros import JointOrder
+    from pbdkit.ros._graph import JointStateListener
+
+    arm = subprocess.Popen(
+        [sys.executable, __file__, "sim_arm", "4"], stdout=subprocess.PIPE, text=True
+    )
+    rclpy.init()
+    node = rclpy.create_node("sender")
+    listener = JointStateListener(node, "/joint_states", JointOrder(PANDA))
+    pub = node.create_publisher(JointTrajectory, "/arm_controller/joint_trajectory", 10)
+    start = time.monotonic()
+    while (
+        listener.q is None or pub.get_subscription_count() == 0
+    ) and time.monotonic() - start < 10:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    assert listener.q is not None and pub.get_subscription_count() == 1
+    np.testing.assert_array_equal(listener.q, np.zeros(7))
+    msg = JointTrajectory(joint_names=PANDA[::-1])  # in another order
+    for t, scale in ((0.5, 0.5), (1.0, 1.0)):
+        msg.points.append(
+            JointTrajectoryPoint(
+                positions=(scale * POSTURE[::-1]).tolist(),
+                velocities=[0.0] * 7,
+                time_from_start=Duration(sec=int(t), nanosec=round((t % 1) * 1e9)),
+            )
+        )
+    pub.publish(msg)
+    pub.publish(JointTrajectory(joint_names=PANDA))  # empty: rejected, the first goes on
+    sent = time.monotonic()
+    while time.monotonic() - sent < 1.6:
+        rclpy.spin_once(node, timeout_sec=0.02)
+    np.testing.assert_allclose(listener.q, POSTURE, atol=1e-12)
+    out, _ = arm.communicate(timeout=10)
+    assert arm.returncode == 0 and out.startswith("received 1 rejected 1"), out
+    assert "empty" in out, out
+    node.destroy_node()
+    rclpy.shutdown()
+    print("OK: the sim arm followed the trajectory; the empty one was rejected")
+
+
+CASES = {
+    "publish_joint_states": publish_joint_states,
+    "joint_states": joint_states,
+    "sim_arm": sim_arm,
+    "trajectory_to_sim_arm": trajectory_to_sim_arm,
+}
+
+
 if __name__ == "__main__":
     case, *rest = sys.argv[1:]
-    {"publish_joint_states": publish_joint_states, "joint_states": joint_states}[case](*rest)
+    CASES[case](*rest)

@@ -82,3 +82,11 @@ def test_joint_states_over_a_real_graph_fr3_names_mapped() -> None:
     done = run_on_private_graph("test_joint_states_over_a_real_graph", "joint_states")
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK"), done.stdout
+
+
+def test_a_trajectory_over_a_real_graph_is_followed_by_the_sim_arm() -> None:
+    # The robot side of `pbdkit ros run`'s tests: a JTC on /arm_controller/joint_trajectory in
+    # another process; joints named in another order; an empty trajectory rejected.
+    done = run_on_private_graph("test_a_trajectory_over_a_real_graph", "trajectory_to_sim_arm")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout

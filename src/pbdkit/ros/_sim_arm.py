@@ -1,0 +1,104 @@
+"""An arm on a ROS 2 graph without physics (:class:`SimArm`): a joint_trajectory_controller
+(:class:`~pbdkit.ros._jtc.TrajectoryFollower`) on ``/NAME/joint_trajectory`` whose commands the
+arm follows exactly, its joint states published on ``/joint_states``. The kinematic core of
+``pbdkit ros sim`` (issue 37; the MuJoCo world and the objects come on top of it) and the robot
+side of the tests of ``pbdkit ros run``."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._graph import QOS_DEPTH
+from ._jtc import RejectedTrajectory, TrajectoryFollower
+
+__all__ = ["SimArm"]
+
+Float = NDArray[np.float64]
+
+
+class SimArm:
+    """A position-controlled arm behind a JTC, on ``node``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    joint_names : sequence of str
+        As it publishes and its controller takes them.
+    q0 : array_like, shape (n,)
+    controller : str
+        The controller's name: it listens on ``/{controller}/joint_trajectory``.
+    rate_hz : float
+        Joint states published, and the controller updated, this often.
+    interpolate_from_desired_state : bool
+        The JTC's option (False: a message's first segment starts from the measured state).
+    """
+
+    def __init__(
+        self,
+        node: Any,
+        joint_names: Sequence[str],
+        q0: Any,
+        *,
+        controller: str = "arm_controller",
+        rate_hz: float = 250.0,
+        interpolate_from_desired_state: bool = False,
+    ) -> None:
+        from sensor_msgs.msg import JointState
+        from trajectory_msgs.msg import JointTrajectory
+
+        self.node = node
+        self.names = [str(n) for n in joint_names]
+        self.follower = TrajectoryFollower(
+            self.names, q0, interpolate_from_desired_state=interpolate_from_desired_state
+        )
+        self.t0 = time.monotonic()
+        self.q, self.v, _ = self.follower.desired(0.0)
+        self.received = 0
+        self.rejected: list[str] = []
+        self._msg = JointState
+        self._pub = node.create_publisher(JointState, "/joint_states", QOS_DEPTH)
+        self._sub = node.create_subscription(
+            JointTrajectory, f"/{controller}/joint_trajectory", self._on_trajectory, QOS_DEPTH
+        )
+        self._timer = node.create_timer(1.0 / rate_hz, self._tick)
+
+    def now(self) -> float:
+        """Seconds on the arm's monotonic clock."""
+        return time.monotonic() - self.t0
+
+    def _on_trajectory(self, msg: Any) -> None:
+        points = list(msg.points)
+        times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points]
+
+        def rows(field: str) -> Any:
+            got = [list(getattr(p, field)) for p in points]
+            return got if points and all(len(g) == len(self.names) for g in got) else None
+
+        try:
+            self.follower.receive(
+                self.now(),
+                list(msg.joint_names),
+                times,
+                rows("positions"),
+                rows("velocities"),
+                rows("accelerations"),
+                measured=(self.q, self.v),
+            )
+        except (RejectedTrajectory, ValueError) as err:
+            self.rejected.append(str(err))
+            return
+        self.received += 1
+
+    def _tick(self) -> None:
+        self.q, self.v, _ = self.follower.desired(self.now())
+        msg = self._msg()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.name = self.names
+        msg.position = self.q.tolist()
+        msg.velocity = self.v.tolist()
+        self._pub.publish(msg)
