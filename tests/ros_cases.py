@@ -4,6 +4,7 @@ assertion."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -143,6 +144,75 @@ CASES = {
     "sim_arm": sim_arm,
     "trajectory_to_sim_arm": trajectory_to_sim_arm,
 }
+
+
+def katana_arm(seconds: str, q0: str) -> None:
+    """The sim arm with the Katana's joints from ``q0`` (comma-separated), for ``seconds``;
+    prints the worst v/a/j of its commands over the Katana's limits."""
+    import rclpy
+
+    from pbdkit.motion._limits import MotionLimits, motion_peaks
+    from pbdkit.robots import katana
+    from pbdkit.ros._sim_arm import SimArm
+
+    robot = katana()
+    rclpy.init()
+    node = rclpy.create_node("katana_arm")
+    start = np.array([float(x) for x in q0.split(",")])
+    arm = SimArm(node, robot.joint_names, start, interpolate_from_desired_state=True)
+    stop: list[int] = []
+    signal.signal(signal.SIGUSR1, lambda *_: stop.append(1))  # the test's "enough"
+    end = time.monotonic() + float(seconds)
+    while time.monotonic() < end and not stop:
+        rclpy.spin_once(node, timeout_sec=0.01)
+    s = np.vstack([np.repeat(start[None], 3, axis=0), np.array(arm.commanded)])
+    limits = MotionLimits.from_robot(robot, robot.n_joints)
+    peaks = motion_peaks(1e-3 * np.arange(len(s)), s, limits, pad_rest=0)
+    print(f"worst {peaks.worst:.4f} received {arm.received} rejected {arm.rejected} {peaks}")
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def run_on_katana_arm() -> None:
+    """`pbdkit ros run`'s core on the sim arm (another process): the synthetic glass skill runs
+    to its end; the arm ends where the reproduction does, its commands within the limits."""
+    import warnings
+
+    import rclpy
+
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    from synthetic_teacher import synthetic_demos, unseen_glass
+
+    from pbdkit import Skill
+    from pbdkit.robots import katana
+    from pbdkit.ros._run import RunSettings, run_skill
+
+    warnings.simplefilter("ignore")
+    robot = katana()
+    demos = synthetic_demos(robot, np.random.default_rng(0))
+    skill = Skill.learn(demos, robot, n_steps=200, random_state=0)
+    glass, _ = unseen_glass(demos)
+    q0 = demos[1].joints[0]
+    arm = subprocess.Popen(
+        [sys.executable, __file__, "katana_arm", "25", ",".join(map(str, q0))],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    rclpy.init()
+    node = rclpy.create_node("pbdkit_run")
+    code = run_skill(node, skill, {"glass": glass}, RunSettings(timeout=10.0), log=lambda m: None)
+    assert code == 0, code
+    end = skill.reproduce({"glass": glass}, q0=q0).joints[-1]
+    node.destroy_node()
+    rclpy.shutdown()
+    arm.send_signal(signal.SIGUSR1)
+    out, _ = arm.communicate(timeout=10)
+    worst = float(out.split()[1])
+    assert worst <= 1.0, out
+    print(f"OK: ran to its end; commands' worst v/a/j {worst:.3f}; end {end.round(3).tolist()}")
+
+
+CASES.update({"katana_arm": katana_arm, "run_on_katana_arm": run_on_katana_arm})
 
 
 if __name__ == "__main__":

@@ -90,3 +90,12 @@ def test_a_trajectory_over_a_real_graph_is_followed_by_the_sim_arm() -> None:
     done = run_on_private_graph("test_a_trajectory_over_a_real_graph", "trajectory_to_sim_arm")
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK"), done.stdout
+
+
+def test_a_skill_runs_to_its_end_on_the_sim_arm_within_the_limits() -> None:
+    # `pbdkit ros run`'s core (pbdkit.ros._run.run_skill) and the sim arm in two processes:
+    # the synthetic glass skill runs to its end (exit code 0, the arm at rest where the
+    # reproduction ends), every command the arm's controller executed within v/a/j.
+    done = run_on_private_graph("test_a_skill_runs_to_its_end", "run_on_katana_arm", timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout

@@ -56,6 +56,7 @@ class JointStateListener:
 
         self.order, self.topic = order, topic
         self.q: Float | None = None
+        self.v: Float = np.zeros(len(order.graph_names))  # zeros where a message gives none
         self.received: float | None = None
         self.count = 0
         self.error: str | None = None
@@ -68,6 +69,8 @@ class JointStateListener:
             if self.error is None:
                 self.error = str(err)
             return
+        if len(msg.velocity) == len(msg.name):
+            self.v = np.asarray(msg.velocity, dtype=np.float64)[self.order.indices(list(msg.name))]
         self.q, self.received = q, time.monotonic()
         self.count += 1
 

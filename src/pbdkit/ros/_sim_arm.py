@@ -60,6 +60,9 @@ class SimArm:
         self.q, self.v, _ = self.follower.desired(0.0)
         self.received = 0
         self.rejected: list[str] = []
+        #: The desired positions on a 1 kHz grid of the arm's clock, up to the last tick (what
+        #: the controller commanded: for checking them against the limits).
+        self.commanded: list[Float] = []
         self._msg = JointState
         self._pub = node.create_publisher(JointState, "/joint_states", QOS_DEPTH)
         self._sub = node.create_subscription(
@@ -95,7 +98,10 @@ class SimArm:
         self.received += 1
 
     def _tick(self) -> None:
-        self.q, self.v, _ = self.follower.desired(self.now())
+        now = self.now()
+        while len(self.commanded) * 1e-3 <= now:
+            self.commanded.append(self.follower.desired(len(self.commanded) * 1e-3)[0])
+        self.q, self.v, _ = self.follower.desired(now)
         msg = self._msg()
         msg.header.stamp = self.node.get_clock().now().to_msg()
         msg.name = self.names

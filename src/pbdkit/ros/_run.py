@@ -1,0 +1,270 @@
+"""A skill run on a live arm through its joint_trajectory_controller (:func:`run_skill`, the
+core of ``pbdkit ros run``, issue 37): joint states in by name, JointTrajectory messages out,
+each a continuation of the motion in force (:func:`~pbdkit.ros._jtc.trajectory_points`).
+
+The controller (:meth:`pbdkit.Skill.controller`, inline plans) steps at its own ``dt`` on the
+node's monotonic clock, fed its own commands: the joint states, which lag the commands by the
+graph and the JTC's interpolation, serve to start from the measured posture, to watch
+staleness and the following error, and to see the end. Every new plan is sent as a message
+whose points run from two controller periods plus 20 ms ahead to the end, at rest.
+
+Exit codes: :data:`EXIT_CODES`. Every failure after the first message first sends a braking
+trajectory (from the commanded state, within the limits) and then says why, in one line.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..motion._limits import MotionLimits, with_defaults
+from ..motion._motion import brake
+from ._graph import QOS_DEPTH, JointStateListener
+from ._joints import JointOrder
+from ._jtc import trajectory_points
+
+__all__ = ["EXIT_CODES", "RunFailed", "RunSettings", "run_skill"]
+
+Float = NDArray[np.float64]
+
+#: ``pbdkit ros run``'s exit codes.
+EXIT_CODES = {
+    "done": 0,  # the skill ran to its end and the arm is at rest
+    "usage": 2,  # usage or refused
+    "stale": 3,  # joint states older than --stale
+    "no_controller": 4,  # no subscriber, or no motion within --timeout
+    "following": 5,  # a following error over --max-following-error
+    "signal": 130,  # SIGINT or SIGTERM, after bringing the arm to rest
+}
+#: The JTC's quintics between exact states of a jerk-limited motion overshoot its jerk (1.40x at
+#: 20 ms between points on a smooth path, tests/test_ros_jtc.py; up to about 1.6x on a skill's
+#: lead-in, measured through the sim arm): the jerk limit is planned this much lower, so that
+#: what the controller executes stays within the arm's (the sim arm's commands: 0.67 of the
+#: limits at 2.0, 1.05-1.09 at 1.45).
+JTC_JERK_MARGIN = 2.0
+#: Seconds between the points of a message (the JTC's quintics between them follow the motion
+#: closer, and overshoot its jerk less, the closer they are: 1.29x at 10 ms, 1.40x at 20 ms).
+POINT_SPACING = 0.01
+
+
+class RunFailed(Exception):
+    """A run that ends early: its exit code (:data:`EXIT_CODES`) and one line."""
+
+    def __init__(self, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.code = EXIT_CODES[reason]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """``pbdkit ros run``'s options (their defaults are the command's)."""
+
+    controller: str = "arm_controller"
+    joint_states: str = "/joint_states"
+    joint_map: Mapping[str, str] = field(default_factory=dict)
+    speed: float = 1.0
+    stale: float = 0.2
+    max_following_error: float = 0.05
+    timeout: float = 5.0
+    controller_period: float = 0.004  # the JTC's update period it plans ahead of (250 Hz)
+    dry_run: bool = False
+    assume_limits: bool = False  # an arm without acceleration or jerk limits: the defaults
+
+    def __post_init__(self) -> None:
+        if not 0.1 <= self.speed <= 1.0:
+            raise ValueError(f"--speed must be in [0.1, 1], got {self.speed}")
+        for name in ("stale", "max_following_error", "timeout", "controller_period"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {value}")
+
+
+def scaled_limits(limits: MotionLimits, speed: float) -> MotionLimits:
+    """The arm's limits at ``speed`` (time scaled: velocity by s, acceleration by s^2, jerk by
+    s^3), the jerk lowered by :data:`JTC_JERK_MARGIN`."""
+    return MotionLimits._derived(
+        limits.velocity * speed,
+        limits.acceleration * speed**2,
+        limits.jerk * speed**3 / JTC_JERK_MARGIN,
+    )
+
+
+def run_skill(
+    node: Any,
+    skill: Any,
+    objects: Mapping[str, Any],
+    settings: RunSettings,
+    *,
+    log: Callable[[str], None] = print,
+    stop: Callable[[], bool] = lambda: False,
+) -> int:
+    """Run ``skill`` for ``objects`` on the arm behind ``settings.controller``; returns the exit
+    code (0: ran to its end, at rest). ``stop()`` true (a signal) brakes and returns 130.
+    Raises RunFailed for the other endings, after braking where a message was sent."""
+    import rclpy
+    from trajectory_msgs.msg import JointTrajectory
+
+    order = JointOrder(skill.robot.joint_names, settings.joint_map)
+    listener = JointStateListener(node, settings.joint_states, order)
+    topic = f"/{settings.controller}/joint_trajectory"
+    pub = node.create_publisher(JointTrajectory, topic, QOS_DEPTH)
+    runner = _Runner(node, pub, order, settings, log)
+
+    def spin(seconds: float) -> None:
+        rclpy.spin_once(node, timeout_sec=seconds)
+
+    waited = time.monotonic()
+    while listener.q is None:
+        if listener.error is not None:
+            raise RunFailed("usage", listener.error)
+        if time.monotonic() - waited > settings.timeout:
+            raise RunFailed(
+                "stale", f"no joint states on {settings.joint_states} in {settings.timeout:g} s"
+            )
+        spin(0.05)
+    while pub.get_subscription_count() == 0 and not settings.dry_run:
+        if time.monotonic() - waited > settings.timeout:
+            raise RunFailed(
+                "no_controller",
+                f"nothing subscribes to {topic} ({settings.controller} not loaded?) within "
+                f"{settings.timeout:g} s",
+            )
+        spin(0.05)
+    q0 = listener.q.copy()
+    declared = MotionLimits.from_robot(skill.robot, skill.robot.n_joints)
+    if not (np.all(np.isfinite(declared.acceleration)) and np.all(np.isfinite(declared.jerk))):
+        if not settings.assume_limits:
+            raise RunFailed(
+                "usage",
+                "the skill's arm declares no acceleration or jerk limit for some joint: give them "
+                "(a joint_limits.yaml when learning) or --assume-limits (a = v / 0.25 s, "
+                "j = a / 0.1 s)",
+            )
+        declared = with_defaults(declared, skill.robot.joint_names)
+    limits = scaled_limits(declared, settings.speed)
+    ctrl = skill.controller(
+        dict(objects),
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+        jerk_limit=limits.jerk,
+    )
+    st = ctrl._timed
+    start = time.monotonic()
+    cmd = ctrl.step(q0)
+    first = st.motion.at(0.0)[0]
+    if float(np.abs(first - q0).max()) > 1e-9:  # a guard: the controller starts where measured
+        raise RunFailed(
+            "usage", f"the plan starts at {first.tolist()}, not at the arm's {q0.tolist()}"
+        )
+    runner.plan = st.plan
+    runner.send(st.motion, 0.0)
+    log(f"running {skill.n_steps} steps at speed {settings.speed:g}; objects {dict(objects)}")
+    if settings.dry_run:
+        log(f"dry run: the plan lasts {st.motion.end:.2f} s; nothing sent")
+        return EXIT_CODES["done"]
+    moved_by, moved = start + settings.timeout, False
+    q_cmd = cmd.q
+    while True:
+        now = time.monotonic() - start
+        if stop():
+            runner.brake(st.motion, now, ctrl.limits)
+            return EXIT_CODES["signal"]
+        if listener.age() > settings.stale:
+            runner.brake(st.motion, now, ctrl.limits)
+            raise RunFailed(
+                "stale",
+                f"joint states on {settings.joint_states} are {listener.age():.2f} s old "
+                f"(--stale {settings.stale:g} s)",
+            )
+        q = listener.q
+        assert q is not None
+        moved = moved or float(np.abs(q - q0).max()) >= 1e-4
+        if not moved and time.monotonic() > moved_by and not st.motion.at_rest_after(0.0):
+            runner.brake(st.motion, now, ctrl.limits)
+            raise RunFailed(
+                "no_controller",
+                f"the arm did not move within {settings.timeout:g} s of the first "
+                f"message on {topic} (the controller inactive?)",
+            )
+        err = runner.following_error(st.motion, now, q)
+        if err > settings.max_following_error:
+            runner.brake(st.motion, now, ctrl.limits)
+            raise RunFailed(
+                "following",
+                f"following error {err:.3f} rad (--max-following-error "
+                f"{settings.max_following_error:g})",
+            )
+        if ctrl.done:
+            end = st.motion.at(st.motion.end)[0]
+            if float(np.abs(q - end).max()) < 1e-3 and float(np.abs(listener.v).max()) < 1e-3:
+                log(f"done: at rest after {now:.2f} s")
+                return EXIT_CODES["done"]
+        elif now >= ctrl._timed.cycle * ctrl.dt:
+            cmd = ctrl.step(q_cmd)  # fed its own commands: the states lag them
+            q_cmd = cmd.q
+            if st.plan is not runner.plan and st.plan is not None:
+                runner.plan = st.plan
+                runner.send(st.motion, now)
+                log(f"re-planned at phase {st.phase:.1f}")
+        spin(0.002)
+
+
+class _Runner:
+    """What :func:`run_skill` sends: messages of a motion's points, and a brake."""
+
+    def __init__(
+        self,
+        node: Any,
+        pub: Any,
+        order: JointOrder,
+        settings: RunSettings,
+        log: Callable[[str], None],
+    ) -> None:
+        self.node, self.pub, self.order, self.settings, self.log = node, pub, order, settings, log
+        self.plan: Any = None
+        self.sent = 0
+
+    def send(self, motion: Any, now: float) -> None:
+        """The points of ``motion`` from ``now`` (s on the run's clock) as one message."""
+        from builtin_interfaces.msg import Duration
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        tfs, p, v, a = trajectory_points(
+            motion, now, self.settings.controller_period, POINT_SPACING
+        )
+        if self.settings.dry_run:
+            return
+        msg = JointTrajectory(joint_names=list(self.order.graph_names))
+        for k in range(tfs.shape[0]):
+            sec = math.floor(tfs[k])
+            msg.points.append(
+                JointTrajectoryPoint(
+                    positions=p[k].tolist(),
+                    velocities=v[k].tolist(),
+                    accelerations=a[k].tolist(),
+                    time_from_start=Duration(sec=sec, nanosec=round((tfs[k] - sec) * 1e9) % 10**9),
+                )
+            )
+        self.pub.publish(msg)
+        self.sent += 1
+
+    def brake(self, motion: Any, now: float, limits: MotionLimits | None) -> None:
+        """A braking trajectory from the commanded state at the message's first point."""
+        if limits is None or self.sent == 0:
+            return
+        t = now + 2.0 * self.settings.controller_period + 0.02
+        self.send(brake(t, motion.at(t), limits.scaled(0.995)), now)
+        self.log("braking")
+
+    @staticmethod
+    def following_error(motion: Any, now: float, q: Float) -> float:
+        """How far the measured posture is from the commanded motion, over the last 0.15 s of
+        commands (the states lag them by the graph and the controller's interpolation)."""
+        times = np.linspace(max(0.0, now - 0.15), now, 16)
+        return float(min(np.abs(q - motion.at(float(t))[0]).max() for t in times))
