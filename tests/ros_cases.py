@@ -215,6 +215,44 @@ def run_on_katana_arm() -> None:
 CASES.update({"katana_arm": katana_arm, "run_on_katana_arm": run_on_katana_arm})
 
 
+def cli_no_arm(skill_file: str) -> None:
+    """`pbdkit ros run` with no arm on the graph: exit 3 (no joint states) within the time-out."""
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "pbdkit", "ros", "run", skill_file, "--controller", "arm_controller",
+         "--object", "glass=0.45,0.2,0.2", "--timeout", "1.5"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    took = time.monotonic() - start
+    assert done.returncode == 3, (done.returncode, done.stdout, done.stderr)
+    assert "no joint states on /joint_states in 1.5 s" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and took < 10, took
+    print(f"OK: exit 3 after {took:.1f} s")
+
+
+def cli_no_controller(skill_file: str) -> None:
+    """`pbdkit ros run` with an arm publishing joint states but no such controller: exit 4."""
+    q0 = "1.5,1.8,-1.2,-1.6,0.1"
+    arm = subprocess.Popen(
+        [sys.executable, __file__, "katana_arm", "20", q0], stdout=subprocess.PIPE, text=True
+    )
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "pbdkit", "ros", "run", skill_file, "--controller", "nobody",
+         "--object", "glass=0.45,0.2,0.2", "--timeout", "1.5"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    took = time.monotonic() - start
+    arm.send_signal(signal.SIGUSR1)
+    arm.communicate(timeout=10)
+    assert done.returncode == 4, (done.returncode, done.stdout, done.stderr)
+    assert "nothing subscribes to /nobody/joint_trajectory" in done.stderr, done.stderr
+    print(f"OK: exit 4 after {took:.1f} s")
+
+
+CASES.update({"cli_no_arm": cli_no_arm, "cli_no_controller": cli_no_controller})
+
+
 if __name__ == "__main__":
     case, *rest = sys.argv[1:]
     CASES[case](*rest)

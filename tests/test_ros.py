@@ -4,10 +4,13 @@ real graph of two processes in a private network namespace (``tests/rosgraph.py`
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from rosgraph import run_on_private_graph
 
+from pbdkit import Skill
 from pbdkit.ros import JointOrder, parse_joint_map
 from pbdkit.ros._graph import private_graph_env
 
@@ -99,3 +102,14 @@ def test_a_skill_runs_to_its_end_on_the_sim_arm_within_the_limits() -> None:
     done = run_on_private_graph("test_a_skill_runs_to_its_end", "run_on_katana_arm", timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK"), done.stdout
+
+
+@pytest.mark.parametrize(("case", "code"), [("cli_no_arm", 3), ("cli_no_controller", 4)])
+def test_pbdkit_ros_run_exits_with_its_code_when_the_graph_lacks_a_side(
+    skill: Skill, tmp_path: Path, case: str, code: int
+) -> None:
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    done = run_on_private_graph(f"test_pbdkit_ros_run_{case}", case, str(path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith(f"OK: exit {code}"), done.stdout

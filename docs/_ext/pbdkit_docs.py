@@ -343,10 +343,13 @@ import json, sys
 import typer.main
 from typer.testing import CliRunner
 from pbdkit.apps._cli import app
-names = list(getattr(typer.main.get_command(app), "commands", {}))
+root = typer.main.get_command(app)
+calls = [[]]
+for name, command in getattr(root, "commands", {}).items():  # a group's commands too (ros)
+    calls += [[name], *([name, sub] for sub in getattr(command, "commands", {}))]
 env = {"COLUMNS": "96", "NO_COLOR": "1", "TERM": "dumb"}
 out = {}
-for args in [[], *([name] for name in names)]:
+for args in calls:
     result = CliRunner().invoke(app, [*args, "--help"], prog_name="pbdkit", env=env)
     if result.exit_code != 0:
         sys.exit(f"pbdkit {' '.join(args)} --help failed: {result.output}")

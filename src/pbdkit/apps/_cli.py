@@ -66,6 +66,15 @@ app = typer.Typer(
 )
 
 
+def _add_ros() -> None:
+    from ._cli_ros import ros_app
+
+    app.add_typer(ros_app, name="ros")
+
+
+_add_ros()
+
+
 @app.callback()
 def _root() -> None:
     """Teach a robot arm a skill from a few demonstrations (Calinon & Billard, IROS 2008)."""
