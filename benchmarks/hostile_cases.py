@@ -581,46 +581,14 @@ def cases() -> list[Case]:
         )
 
     # 10. the view's --robot
-    add(
-        Case(
-            "10",
-            "view --robot: not a URDF",
-            "serve",
-            ["view", "--no-browser", "--skill", sk, "--robot", "{FIX}/not_a_urdf.urdf"],
-            match="robot",
-            seconds=30,
-        )
-    )
-    add(
-        Case(
-            "10",
-            "view --robot: an empty URDF",
-            "serve",
-            ["view", "--no-browser", "--skill", sk, "--robot", "{FIX}/empty.urdf"],
-            match="robot",
-            seconds=30,
-        )
-    )
-    add(
-        Case(
-            "10",
-            "view --robot panda with a Katana skill",
-            "serve",
-            ["view", "--no-browser", "--skill", sk, "--robot", "panda"],
-            match="robot",
-            seconds=30,
-        )
-    )
-    add(
-        Case(
-            "10",
-            "view --robot: a missing file",
-            "serve",
-            ["view", "--no-browser", "--skill", sk, "--robot", "{FIX}/nothing.urdf"],
-            match="robot",
-            seconds=30,
-        )
-    )
+    for why, given in [
+        ("not a URDF", "{FIX}/not_a_urdf.urdf"),
+        ("an empty URDF", "{FIX}/empty.urdf"),
+        ("panda with a Katana skill", "panda"),
+        ("a missing file", "{FIX}/nothing.urdf"),
+    ]:
+        view = ["view", "--no-browser", "--skill", sk, "--robot", given]
+        add(Case("10", f"view --robot: {why}", "serve", view, match="robot", seconds=30))
 
     # 11. a skill file's duration
     for expr in (
@@ -651,80 +619,21 @@ def cases() -> list[Case]:
     )
 
     # 12. FrameModel
-    add(
-        Case(
-            "12",
-            "FrameModel: A = 1e-200 I",
-            "py",
-            _frames("frames[1][0] = (1e-200 * np.eye(2), frames[1][0][1])"),
-            match="frame",
-        )
+    tiny = (
+        "trajs = [np.column_stack([x[:, 0], x[:, 1:] * 1e-300]) for x in trajs]\n"
+        "        frames = [[(np.eye(2), b * 1e-300) for _, b in f] for f in frames]"
     )
-    add(
-        Case(
-            "12",
-            "FrameModel: A = 1e200 I",
-            "py",
-            _frames("frames[1][0] = (1e200 * np.eye(2), frames[1][0][1])"),
-            match="frame",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: times of 1e300",
-            "py",
-            _frames("trajs[0][:, 0] = trajs[0][:, 0] * 1e300"),
-            match="traject",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: points of 1e300",
-            "py",
-            _frames("trajs[0][:, 1:] = trajs[0][:, 1:] * 1e300"),
-            match="traject",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: points of 1e-300",
-            "py",
-            _frames(
-                "trajs = [np.column_stack([x[:, 0], x[:, 1:] * 1e-300]) for x in trajs]\n"
-                "        frames = [[(np.eye(2), b * 1e-300) for _, b in f] for f in frames]"
-            ),
-            "accept-or-refuse",
-            match="traject",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: random_state='x'",
-            "py",
-            _frames("kw['random_state'] = 'x'"),
-            match="random_state",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: random_state=-1",
-            "py",
-            _frames("kw['random_state'] = -1"),
-            match="random_state",
-        )
-    )
-    add(
-        Case(
-            "12",
-            "FrameModel: a tampered file, means 1e308",
-            "py",
-            _frames("")
-            + textwrap.dedent("""
+    for why, change, expect, match in [
+        ("A = 1e-200 I", "frames[1][0] = (1e-200 * np.eye(2), frames[1][0][1])", "refuse", "frame"),
+        ("A = 1e200 I", "frames[1][0] = (1e200 * np.eye(2), frames[1][0][1])", "refuse", "frame"),
+        ("times of 1e300", "trajs[0][:, 0] = trajs[0][:, 0] * 1e300", "refuse", "traject"),
+        ("points of 1e300", "trajs[0][:, 1:] = trajs[0][:, 1:] * 1e300", "refuse", "traject"),
+        ("points of 1e-300", tiny, "accept-or-refuse", "traject"),
+        ("random_state='x'", "kw['random_state'] = 'x'", "refuse", "random_state"),
+        ("random_state=-1", "kw['random_state'] = -1", "refuse", "random_state"),
+    ]:
+        add(Case("12", f"FrameModel: {why}", "py", _frames(change), expect, match=match))
+    tampered = textwrap.dedent("""
         m.save(FIX + "/fm.npz")
         z = dict(np.load(FIX + "/fm.npz"))
         for k in z:
@@ -734,10 +643,9 @@ def cases() -> list[Case]:
         m2 = pbdkit.FrameModel.load(FIX + "/fm2.npz")
         mean, cov = m2.reproduce(frames[0], t)
         assert np.all(np.isfinite(mean)), "non-finite result"
-    """),
-            match="means",
-        )
-    )
+    """)
+    add(Case("12", "FrameModel: a tampered file, means 1e308", "py", _frames("") + tampered,
+             match="means"))  # fmt: skip
 
     # 13, 14: deep and big YAML
     for f in ("deep", "deep_map"):

@@ -215,15 +215,20 @@ def run_on_katana_arm() -> None:
 CASES.update({"katana_arm": katana_arm, "run_on_katana_arm": run_on_katana_arm})
 
 
-def cli_no_arm(skill_file: str) -> None:
-    """`pbdkit ros run` with no arm on the graph: exit 3 (no joint states) within the time-out."""
+def _ros_run(skill_file: str, controller: str) -> tuple[subprocess.CompletedProcess[str], float]:
+    """`pbdkit ros run` of the glass skill with a 1.5 s time-out: its outcome and seconds."""
     start = time.monotonic()
     done = subprocess.run(
-        [sys.executable, "-m", "pbdkit", "ros", "run", skill_file, "--controller", "arm_controller",
+        [sys.executable, "-m", "pbdkit", "ros", "run", skill_file, "--controller", controller,
          "--object", "glass=0.45,0.2,0.2", "--timeout", "1.5"],
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
-    took = time.monotonic() - start
+    return done, time.monotonic() - start
+
+
+def cli_no_arm(skill_file: str) -> None:
+    """`pbdkit ros run` with no arm on the graph: exit 3 (no joint states) within the time-out."""
+    done, took = _ros_run(skill_file, "arm_controller")
     assert done.returncode == 3, (done.returncode, done.stdout, done.stderr)
     assert "no joint states on /joint_states in 1.5 s" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr and took < 10, took
@@ -236,13 +241,7 @@ def cli_no_controller(skill_file: str) -> None:
     arm = subprocess.Popen(
         [sys.executable, __file__, "katana_arm", "20", q0], stdout=subprocess.PIPE, text=True
     )
-    start = time.monotonic()
-    done = subprocess.run(
-        [sys.executable, "-m", "pbdkit", "ros", "run", skill_file, "--controller", "nobody",
-         "--object", "glass=0.45,0.2,0.2", "--timeout", "1.5"],
-        capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
-    took = time.monotonic() - start
+    done, took = _ros_run(skill_file, "nobody")
     arm.send_signal(signal.SIGUSR1)
     arm.communicate(timeout=10)
     assert done.returncode == 4, (done.returncode, done.stdout, done.stderr)

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import short
+from ..motion._motion import _Quintic, _quintic_coefficients
 
 __all__ = ["RejectedTrajectory", "TrajectoryFollower", "trajectory_points"]
 
@@ -151,18 +152,10 @@ class TrajectoryFollower:
                 v0 + 2.0 * c2 * u + 3.0 * c3 * u**2,
                 2.0 * c2 + 6.0 * c3 * u,
             )
-        a0, a1 = tr.a[k], tr.a[k + 1]
-        d = p1 - (p0 + v0 * h + 0.5 * a0 * h * h)
-        e = v1 - (v0 + a0 * h)
-        f = a1 - a0
-        c3 = (10.0 * d - 4.0 * e * h + 0.5 * f * h * h) / h**3
-        c4 = (-15.0 * d + 7.0 * e * h - f * h * h) / h**4
-        c5 = (6.0 * d - 3.0 * e * h + 0.5 * f * h * h) / h**5
-        return (
-            p0 + v0 * u + 0.5 * a0 * u**2 + c3 * u**3 + c4 * u**4 + c5 * u**5,
-            v0 + a0 * u + 3.0 * c3 * u**2 + 4.0 * c4 * u**3 + 5.0 * c5 * u**4,
-            a0 + 6.0 * c3 * u + 12.0 * c4 * u**2 + 20.0 * c5 * u**3,
-        )
+        # quintic: the same polynomial as a motion's quintic segment
+        c = _quintic_coefficients((p0, v0, tr.a[k]), (p1, v1, tr.a[k + 1]), h)
+        p, v, a = _Quintic(None, None, h, c).at_time(u)
+        return p, v, a
 
 
 def trajectory_points(
