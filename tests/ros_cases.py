@@ -162,6 +162,7 @@ def katana_arm(seconds: str, q0: str) -> None:
     arm = SimArm(node, robot.joint_names, start, interpolate_from_desired_state=True)
     stop: list[int] = []
     signal.signal(signal.SIGUSR1, lambda *_: stop.append(1))  # the test's "enough"
+    print("ready", flush=True)  # the launcher starts its side only now (_start_katana_arm)
     end = time.monotonic() + float(seconds)
     while time.monotonic() < end and not stop:
         rclpy.spin_once(node, timeout_sec=0.01)
@@ -171,6 +172,18 @@ def katana_arm(seconds: str, q0: str) -> None:
     print(f"worst {peaks.worst:.4f} received {arm.received} rejected {arm.rejected} {peaks}")
     node.destroy_node()
     rclpy.shutdown()
+
+
+def _start_katana_arm(seconds: int, q0: str) -> subprocess.Popen[str]:
+    """The sim arm in another process, returned once it publishes (a loaded machine takes
+    seconds to import; a side started meanwhile would time out waiting for it)."""
+    arm = subprocess.Popen(
+        [sys.executable, __file__, "katana_arm", str(seconds), q0],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert arm.stdout is not None and arm.stdout.readline().strip() == "ready"
+    return arm
 
 
 def run_on_katana_arm() -> None:
@@ -193,11 +206,7 @@ def run_on_katana_arm() -> None:
     skill = Skill.learn(demos, robot, n_steps=200, random_state=0)
     glass, _ = unseen_glass(demos)
     q0 = demos[1].joints[0]
-    arm = subprocess.Popen(
-        [sys.executable, __file__, "katana_arm", "25", ",".join(map(str, q0))],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    arm = _start_katana_arm(25, ",".join(map(str, q0)))
     rclpy.init()
     node = rclpy.create_node("pbdkit_run")
     code = run_skill(node, skill, {"glass": glass}, RunSettings(timeout=10.0), log=lambda m: None)
@@ -238,9 +247,7 @@ def cli_no_arm(skill_file: str) -> None:
 def cli_no_controller(skill_file: str) -> None:
     """`pbdkit ros run` with an arm publishing joint states but no such controller: exit 4."""
     q0 = "1.5,1.8,-1.2,-1.6,0.1"
-    arm = subprocess.Popen(
-        [sys.executable, __file__, "katana_arm", "20", q0], stdout=subprocess.PIPE, text=True
-    )
+    arm = _start_katana_arm(20, q0)
     done, took = _ros_run(skill_file, "nobody")
     arm.send_signal(signal.SIGUSR1)
     arm.communicate(timeout=10)
