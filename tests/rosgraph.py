@@ -24,12 +24,13 @@ def needs_ros() -> None:
 
 
 def run_on_private_graph(
-    name: str, *args: str, timeout: float = 60.0
+    name: str, *args: str, timeout: float = 60.0, script: Path = CASES
 ) -> subprocess.CompletedProcess[str]:
-    """``python tests/ros_cases.py ARGS`` on a private graph; its output captured."""
+    """``python SCRIPT ARGS`` (default ``tests/ros_cases.py``) on a private graph; its output
+    captured."""
     needs_ros()
     env = private_graph_env(name)
-    cmd = [sys.executable, str(CASES), *args]
+    cmd = [sys.executable, str(script), *args]
     if os.geteuid() == 0 and shutil.which("unshare") and shutil.which("ip"):
         inner = " ".join(["ip link set lo up &&", "exec", *map(_quote, cmd)])
         cmd = ["unshare", "-n", "sh", "-c", inner]

@@ -113,3 +113,30 @@ def test_pbdkit_ros_run_exits_with_its_code_when_the_graph_lacks_a_side(
     done = run_on_private_graph(f"test_pbdkit_ros_run_{case}", case, str(path))
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith(f"OK: exit {code}"), done.stdout
+
+
+@pytest.mark.parametrize(
+    "case", ["cli_topics_renamed_gripper", "cli_sigint", "cli_arm_dies", "cli_following_error"]
+)
+def test_pbdkit_ros_run_on_the_sim_arm(skill: Skill, tmp_path: Path, case: str) -> None:
+    # `pbdkit ros run` (the CLI) and the sim arm in two processes on a private graph
+    # (tests/ros_cases.py says what each case checks): the glass from a topic that moves, the
+    # joints renamed and shuffled, the gripper; SIGINT (rest, then 130); the arm dies (3 within
+    # 1 s after the staleness bound); an arm that lags (5).
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    done = run_on_private_graph(f"test_ros_run_{case}", case, str(path), timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout
+
+
+def test_record_learn_and_run_the_coaster_over_a_real_graph(tmp_path: Path) -> None:
+    # The whole chain on a private graph (tests/ros_cases.py, coaster_round_trip): `pbdkit ros
+    # sim --teach` replays five takes (10x real time), `pbdkit ros record --auto` records them,
+    # `pbdkit learn` learns the skill, and `pbdkit ros run` runs it against `pbdkit ros sim
+    # --perturb move` on a sixth placement: the coaster slides 5 cm while the glass is
+    # carried, the run re-plans, and the sim judges the glass placed.
+    done = run_on_private_graph("test_record_learn_and_run", "coaster_round_trip",
+                                str(tmp_path), timeout=240)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK: success"), done.stdout

@@ -535,7 +535,7 @@ def view(
 ) -> None:
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
-    it in physics, or online while you drag (needs the view extra: pip install pbdkit[view])."""
+    it in physics, or online while you drag (needs the view extra: pip install 'pbdkit\\[view]')."""
     from ._view_serve import check_port, sigint_deferred
 
     if (task is None) == (skill_path is None):

@@ -4,20 +4,23 @@ needs the ``ros`` extra (``pip install 'pbdkit[ros]'``)."""
 
 from __future__ import annotations
 
-import signal
+import math
 import sys
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from ._cli_options import parse_objects
+from .._validation import short
+from ._cli_options import PerturbHelp, parse_objects
 from ._cli_output import fail, reports_errors
+from ._cli_ros_node import run_node
+from ._cli_ros_sim import sim_command
 
 ros_app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
-    help="A skill on a live ROS 2 graph: run it on an arm (pip install 'pbdkit[ros]').",
+    help="A skill on a live ROS 2 graph: run it on an arm (pip install 'pbdkit\\[ros]').",
 )
 
 
@@ -31,9 +34,24 @@ def run(
     obj: Annotated[
         list[str] | None,
         typer.Option(
-            "--object", help="NAME=x,y,z or NAME=x,y,z,qw,qx,qy,qz in the robot's base frame."
+            "--object",
+            help="NAME=SOURCE: a PoseStamped or PointStamped topic (/NAME), or x,y,z or "
+            "x,y,z,qw,qx,qy,qz; in the robot's base frame (tf:FRAME is refused: no tf2_msgs).",
         ),
     ] = None,
+    grasped: Annotated[
+        str | None,
+        typer.Option(help="The object the gripper takes: its topic is ignored once it closes."),
+    ] = None,
+    gripper_controller: Annotated[
+        str | None, typer.Option(help="The gripper's joint_trajectory_controller.")
+    ] = None,
+    gripper_joint: Annotated[
+        str | None, typer.Option(help="NAME:OPEN:CLOSED, the gripper joint and its positions.")
+    ] = None,
+    gripper_seconds: Annotated[
+        float, typer.Option(help="Seconds each gripper command takes.")
+    ] = 0.3,
     joint_states: Annotated[str, typer.Option(help="sensor_msgs/JointState topic.")] = (
         "/joint_states"
     ),
@@ -63,6 +81,7 @@ def run(
     if not ros_available():
         fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
     from ..ros._joints import parse_joint_map
+    from ..ros._objects import check_sources
     from ..ros._run import RunFailed, RunSettings, run_skill
     from ..skill._skill import Skill
 
@@ -76,39 +95,176 @@ def run(
         timeout=timeout,
         dry_run=dry_run,
         assume_limits=assume_limits,
+        gripper_controller=gripper_controller,
+        gripper_joint=None if gripper_joint is None else parse_gripper_joint(gripper_joint),
+        gripper_seconds=gripper_seconds,
+        grasped=grasped,
     )
     if not skill_path.is_file():
         raise FileNotFoundError(2, "No such file", str(skill_path))
     skill = Skill.load(skill_path)
-    objects = parse_objects(obj or [])
+    objects = parse_objects(obj or [], sources=True)
+    check_sources(objects)
     missing = [k for k in skill.object_names if k not in objects]
     if missing:
-        fail(f"--object: give {missing} (fixed coordinates; object topics are not read yet)")
-    code = _run_node(lambda node, stop: run_skill(node, skill, objects, settings, stop=stop))
+        fail(f"--object: give {missing} (a topic or coordinates)")
+    if grasped is not None and grasped not in objects:
+        fail(f"--grasped {short(grasped)} is none of the objects {sorted(objects)}")
+    code = run_node(
+        lambda node, stop: run_skill(node, skill, objects, settings, stop=stop, log=_say)
+    )
     if isinstance(code, RunFailed):
         typer.echo(f"error: {code}", err=True)
         raise typer.Exit(code.code)
     raise typer.Exit(code)
 
 
-def _run_node(body: Any) -> Any:
-    """``body(node, stop)`` on a node of its own; SIGINT and SIGTERM set ``stop`` (the body
-    brakes and returns 130). Returns the body's exit code, or the RunFailed it raised."""
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
+ros_app.command("sim", cls=PerturbHelp)(reports_errors(sim_command))
 
-    from ..ros._run import RunFailed
 
-    stopped: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stopped.append(1))
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node: Any = rclpy.create_node("pbdkit_ros_run")
+@ros_app.command()
+@reports_errors
+def record(
+    out: Annotated[
+        Path, typer.Option(help="Demonstrations file (.npz): each take is appended to it.")
+    ],
+    robot: Annotated[str, typer.Option(help="katana, panda, or a URDF file.")] = "katana",
+    tip: Annotated[str | None, typer.Option(help="Tip frame (URDF robots).")] = None,
+    obj: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--object",
+            help="NAME=SOURCE, as for pbdkit ros run; its pose at each take's start is kept.",
+        ),
+    ] = None,
+    joint_states: Annotated[str, typer.Option(help="sensor_msgs/JointState topic.")] = (
+        "/joint_states"
+    ),
+    joint_map: Annotated[
+        list[str] | None,
+        typer.Option(help="ROBOT_JOINT=GRAPH_JOINT, for joints named otherwise on the graph."),
+    ] = None,
+    gripper_joint: Annotated[
+        str | None,
+        typer.Option(help="NAME:OPEN:CLOSED: the gripper's joint state, recorded 0..1."),
+    ] = None,
+    takes: Annotated[
+        int | None, typer.Option(help="Stop after this many takes (default: at Ctrl-C).")
+    ] = None,
+    auto: Annotated[
+        bool, typer.Option(help="Start a take on motion, stop it after --rest s at rest.")
+    ] = False,
+    rest: Annotated[float, typer.Option(help="--auto: seconds at rest that end a take.")] = 1.0,
+    timeout: Annotated[
+        float, typer.Option(help="Seconds to wait for joint states and the objects.")
+    ] = 5.0,
+) -> None:
+    """Record demonstrations on a live arm (kinesthetic teaching: putting the arm in its
+    hand-guiding mode is yours). A take starts and stops on Enter, or with --takes N --auto on
+    motion; each is appended to --out, which pbdkit learn reads."""
+    from ..ros._graph import ros_available
+
+    if not ros_available():
+        fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
+    from ..data._demonstration import load_demonstrations, save_demonstrations
+    from ..ros._joints import parse_joint_map
+    from ..ros._objects import ObjectSources, check_sources
+    from ..ros._record import RecordSettings, record_takes
+
+    settings = RecordSettings(
+        joint_states=joint_states,
+        joint_map=parse_joint_map(joint_map or []),
+        takes=takes,
+        auto=auto,
+        rest=rest,
+        gripper_joint=None if gripper_joint is None else parse_gripper_joint(gripper_joint),
+        timeout=timeout,
+    )
+    objects = parse_objects(obj or [], sources=True)
+    check_sources(objects)
+    names = _robot_joint_names(robot, tip)
+    demos = load_demonstrations(out) if out.exists() else []
+    if demos and (demos[0].n_joints != len(names) or set(demos[0].object_names) != set(objects)):
+        fail(
+            f"{out} holds demonstrations of {demos[0].n_joints} joints with objects "
+            f"{list(demos[0].object_names)}; record into another file"
+        )
+
+    def save(demo: Any) -> None:
+        demos.append(demo)
+        save_demonstrations(demos, out)
+
+    pressed = _enter_presses() if not auto else (lambda: False)
+
+    def body(node: Any, stop: Any) -> int:
+        sources = ObjectSources(node, objects, log=_say)
+        n = record_takes(
+            node, names, sources, settings, save=save, toggled=pressed, log=_say, stop=stop
+        )
+        _say(f"{n} take(s) recorded; {out} holds {len(demos)} demonstration(s)")
+        return 0
+
+    code = run_node(body, "pbdkit_ros_record")
+    if isinstance(code, Exception):
+        typer.echo(f"error: {code}", err=True)
+        raise typer.Exit(3)
+    raise typer.Exit(code)
+
+
+def _robot_joint_names(robot: str, tip: str | None) -> list[str]:
+    from .. import robots
+    from ..robots._robot import Robot
+
+    if robot in robots.available():
+        return list(robots.load(robot).joint_names)
+    if Path(robot).is_file():
+        return list(Robot.from_urdf(Path(robot), tip=tip).joint_names)
+    raise typer.BadParameter(
+        f"robot must be one of {robots.available()} or a URDF file, got {short(robot)}",
+        param_hint="--robot",
+    )
+
+
+def _enter_presses() -> Any:
+    """A function telling whether Enter was pressed since its last call (stdin read on a
+    thread of its own)."""
+    import threading
+
+    presses: list[int] = []
+
+    def read() -> None:
+        for _ in sys.stdin:
+            presses.append(1)
+
+    threading.Thread(target=read, daemon=True).start()
+
+    def pressed() -> bool:
+        if presses:
+            presses.clear()
+            return True
+        return False
+
+    return pressed
+
+
+def _say(line: str) -> None:
+    """One console line of a run, flushed (a log read live, or through a pipe)."""
+    print(line, flush=True)
+
+
+def parse_gripper_joint(text: str) -> tuple[str, float, float]:
+    """``--gripper-joint NAME:OPEN:CLOSED``."""
+    name, _, rest = text.partition(":")
     try:
-        return body(node, lambda: bool(stopped))
-    except RunFailed as err:
-        return err
-    finally:
-        node.destroy_node()
-        rclpy.shutdown()
-        sys.stdout.flush()
+        open_, closed = (float(v) for v in rest.split(":"))
+    except ValueError:
+        raise typer.BadParameter(
+            f"expected NAME:OPEN:CLOSED (e.g. gripper:0.0:1.0), got {short(text)}",
+            param_hint="--gripper-joint",
+        ) from None
+    if not name or not (math.isfinite(open_) and math.isfinite(closed)) or open_ == closed:
+        raise typer.BadParameter(
+            f"expected NAME:OPEN:CLOSED with two different finite positions, got {short(text)}",
+            param_hint="--gripper-joint",
+        )
+    return name, open_, closed

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import time
 import zlib
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -47,22 +48,29 @@ class JointStateListener:
     name (:class:`JointOrder`), with when it came (``time.monotonic()``, the node's clock for
     staleness: a driver's header stamps may be another machine's).
 
-    A message that does not give the arm's joints is kept as :attr:`error` (the first one) and
-    otherwise ignored: the caller decides whether to stop.
+    A message with none of the arm's joints (another part's, on the same topic) is ignored; one
+    that gives some of them but not all is kept as :attr:`error` (the first one) and otherwise
+    ignored: the caller decides whether to stop.
     """
 
     def __init__(self, node: Any, topic: str, order: JointOrder) -> None:
         from sensor_msgs.msg import JointState
 
         self.order, self.topic = order, topic
+        self._names = frozenset(order.graph_names)
         self.q: Float | None = None
         self.v: Float = np.zeros(len(order.graph_names))  # zeros where a message gives none
         self.received: float | None = None
         self.count = 0
         self.error: str | None = None
+        #: Called with each good message's time (its header stamp, s; where that is 0, when it
+        #: came on the node's monotonic clock) and positions (the arm's order), if set.
+        self.on_state: Callable[[float, Float], None] | None = None
         self._sub = node.create_subscription(JointState, topic, self._on_message, QOS_DEPTH)
 
     def _on_message(self, msg: Any) -> None:
+        if self._names.isdisjoint(msg.name):
+            return  # another part's states (a gripper's, say) on the same topic
         try:
             q = self.order.positions(list(msg.name), list(msg.position), self.topic)
         except ValueError as err:
@@ -73,6 +81,9 @@ class JointStateListener:
             self.v = np.asarray(msg.velocity, dtype=np.float64)[self.order.indices(list(msg.name))]
         self.q, self.received = q, time.monotonic()
         self.count += 1
+        if self.on_state is not None:
+            stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            self.on_state(stamp if stamp > 0 else self.received, q)
 
     def age(self) -> float:
         """Seconds since the last good message (inf before any)."""

@@ -27,7 +27,8 @@ from ..motion._limits import MotionLimits, with_defaults
 from ..motion._motion import brake
 from ._graph import QOS_DEPTH, JointStateListener
 from ._joints import JointOrder
-from ._jtc import trajectory_points
+from ._jtc import splice_lead, trajectory_points
+from ._objects import ObjectSources
 
 __all__ = ["EXIT_CODES", "RunFailed", "RunSettings", "run_skill"]
 
@@ -75,11 +76,18 @@ class RunSettings:
     controller_period: float = 0.004  # the JTC's update period it plans ahead of (250 Hz)
     dry_run: bool = False
     assume_limits: bool = False  # an arm without acceleration or jerk limits: the defaults
+    gripper_controller: str | None = None
+    gripper_joint: tuple[str, float, float] | None = None  # NAME, OPEN, CLOSED positions
+    gripper_seconds: float = 0.3  # each gripper message's one point, this far ahead
+    grasped: str | None = None  # its source is ignored once the gripper closes
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.speed <= 1.0:
             raise ValueError(f"--speed must be in [0.1, 1], got {self.speed}")
-        for name in ("stale", "max_following_error", "timeout", "controller_period"):
+        if (self.gripper_controller is None) != (self.gripper_joint is None):
+            raise ValueError("--gripper-controller and --gripper-joint go together")
+        for name in ("stale", "max_following_error", "timeout", "controller_period",
+                     "gripper_seconds"):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"--{name.replace('_', '-')} must be > 0, got {value}")
@@ -104,21 +112,66 @@ def run_skill(
     log: Callable[[str], None] = print,
     stop: Callable[[], bool] = lambda: False,
 ) -> int:
-    """Run ``skill`` for ``objects`` on the arm behind ``settings.controller``; returns the exit
-    code (0: ran to its end, at rest). ``stop()`` true (a signal) brakes and returns 130.
-    Raises RunFailed for the other endings, after braking where a message was sent."""
+    """Run ``skill`` on the arm behind ``settings.controller``, its objects from ``objects``
+    (name -> a topic, or fixed coordinates: :class:`~pbdkit.ros._objects.ObjectSources`);
+    returns the exit code (0: ran to its end, at rest). ``stop()`` true (a signal) brakes and
+    returns 130. Raises RunFailed for the other endings, after braking where a message was
+    sent."""
     import rclpy
     from trajectory_msgs.msg import JointTrajectory
 
+    try:
+        sources = ObjectSources(node, objects, skill.oriented, log=log)
+    except ValueError as err:
+        raise RunFailed("usage", str(err)) from None
     order = JointOrder(skill.robot.joint_names, settings.joint_map)
     listener = JointStateListener(node, settings.joint_states, order)
     topic = f"/{settings.controller}/joint_trajectory"
     pub = node.create_publisher(JointTrajectory, topic, QOS_DEPTH)
+    gripper = _Gripper.create(node, settings)
     runner = _Runner(node, pub, order, settings, log)
 
     def spin(seconds: float) -> None:
         rclpy.spin_once(node, timeout_sec=seconds)
 
+    _wait_for_graph(listener, [(pub, topic), *gripper.publishers()], settings, spin)
+    try:
+        sources.subscribe(settings.timeout, spin)
+    except TimeoutError as err:
+        raise RunFailed("stale", f"objects: {err}") from None
+    except ValueError as err:
+        raise RunFailed("usage", str(err)) from None
+    limits = scaled_limits(_arm_limits(skill, settings), settings.speed)
+    ctrl = skill.controller(  # its planner's process takes a second to start
+        dict(sources.values),
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+        jerk_limit=limits.jerk,
+        planner="inline" if settings.dry_run else "process",
+    )
+    try:
+        count = listener.count  # the posture to start from: a state that came after that
+        while listener.count == count:
+            if listener.age() > settings.timeout:
+                raise RunFailed(
+                    "stale", f"joint states on {settings.joint_states} stopped before the run"
+                )
+            spin(0.01)
+        assert listener.q is not None
+        q0 = listener.q.copy()
+        return _loop(ctrl, q0, listener, sources, runner, gripper, settings, log, stop, spin)
+    finally:
+        ctrl.close()
+
+
+def _wait_for_graph(
+    listener: JointStateListener,
+    publishers: list[tuple[Any, str]],
+    settings: RunSettings,
+    spin: Callable[[float], None],
+) -> None:
+    """Wait for joint states (exit 3 after the time-out) and a subscriber on each of
+    ``publishers`` (exit 4)."""
     waited = time.monotonic()
     while listener.q is None:
         if listener.error is not None:
@@ -128,32 +181,46 @@ def run_skill(
                 "stale", f"no joint states on {settings.joint_states} in {settings.timeout:g} s"
             )
         spin(0.05)
-    while pub.get_subscription_count() == 0 and not settings.dry_run:
-        if time.monotonic() - waited > settings.timeout:
-            raise RunFailed(
-                "no_controller",
-                f"nothing subscribes to {topic} ({settings.controller} not loaded?) within "
-                f"{settings.timeout:g} s",
-            )
-        spin(0.05)
-    q0 = listener.q.copy()
+    for pub, topic in publishers:
+        while pub.get_subscription_count() == 0 and not settings.dry_run:
+            if time.monotonic() - waited > settings.timeout:
+                raise RunFailed(
+                    "no_controller",
+                    f"nothing subscribes to {topic} ({topic.split('/')[1]} not loaded?) "
+                    f"within {settings.timeout:g} s",
+                )
+            spin(0.05)
+
+
+def _arm_limits(skill: Any, settings: RunSettings) -> MotionLimits:
+    """The skill's arm's limits; refused (exit 2) without acceleration or jerk limits unless
+    ``--assume-limits``."""
     declared = MotionLimits.from_robot(skill.robot, skill.robot.n_joints)
-    if not (np.all(np.isfinite(declared.acceleration)) and np.all(np.isfinite(declared.jerk))):
-        if not settings.assume_limits:
-            raise RunFailed(
-                "usage",
-                "the skill's arm declares no acceleration or jerk limit for some joint: give them "
-                "(a joint_limits.yaml when learning) or --assume-limits (a = v / 0.25 s, "
-                "j = a / 0.1 s)",
-            )
-        declared = with_defaults(declared, skill.robot.joint_names)
-    limits = scaled_limits(declared, settings.speed)
-    ctrl = skill.controller(
-        dict(objects),
-        velocity_limit=limits.velocity,
-        acceleration_limit=limits.acceleration,
-        jerk_limit=limits.jerk,
-    )
+    if np.all(np.isfinite(declared.acceleration)) and np.all(np.isfinite(declared.jerk)):
+        return declared
+    if not settings.assume_limits:
+        raise RunFailed(
+            "usage",
+            "the skill's arm declares no acceleration or jerk limit for some joint: give them "
+            "(a joint_limits.yaml when learning) or --assume-limits (a = v / 0.25 s, "
+            "j = a / 0.1 s)",
+        )
+    return with_defaults(declared, skill.robot.joint_names)
+
+
+def _loop(
+    ctrl: Any,
+    q0: Float,
+    listener: JointStateListener,
+    sources: ObjectSources,
+    runner: _Runner,
+    gripper: _Gripper,
+    settings: RunSettings,
+    log: Callable[[str], None],
+    stop: Callable[[], bool],
+    spin: Callable[[float], None],
+) -> int:
+    """The run from the first plan to its end (see :func:`run_skill`)."""
     st = ctrl._timed
     start = time.monotonic()
     cmd = ctrl.step(q0)
@@ -162,14 +229,17 @@ def run_skill(
         raise RunFailed(
             "usage", f"the plan starts at {first.tolist()}, not at the arm's {q0.tolist()}"
         )
-    runner.plan = st.plan
+    runner.jerk = ctrl.limits.jerk
     runner.send(st.motion, 0.0)
-    log(f"running {skill.n_steps} steps at speed {settings.speed:g}; objects {dict(objects)}")
+    gripper.send(cmd.gripper)
+    log(f"objects: {sources.describe()}")
+    log(f"running {ctrl.n_steps} steps at speed {settings.speed:g}")
     if settings.dry_run:
-        log(f"dry run: the plan lasts {st.motion.end:.2f} s; nothing sent")
+        log("dry run: nothing sent")
         return EXIT_CODES["done"]
     moved_by, moved = start + settings.timeout, False
     q_cmd = cmd.q
+    said = -1.0
     while True:
         now = time.monotonic() - start
         if stop():
@@ -190,7 +260,7 @@ def run_skill(
             raise RunFailed(
                 "no_controller",
                 f"the arm did not move within {settings.timeout:g} s of the first "
-                f"message on {topic} (the controller inactive?)",
+                f"message on /{settings.controller}/joint_trajectory (the controller inactive?)",
             )
         err = runner.following_error(st.motion, now, q)
         if err > settings.max_following_error:
@@ -200,19 +270,73 @@ def run_skill(
                 f"following error {err:.3f} rad (--max-following-error "
                 f"{settings.max_following_error:g})",
             )
+        sources.check_silent()
         if ctrl.done:
             end = st.motion.at(st.motion.end)[0]
             if float(np.abs(q - end).max()) < 1e-3 and float(np.abs(listener.v).max()) < 1e-3:
-                log(f"done: at rest after {now:.2f} s")
+                log(f"done: at rest after {now:.2f} s, {ctrl.replans} re-plan(s)")
                 return EXIT_CODES["done"]
-        elif now >= ctrl._timed.cycle * ctrl.dt:
-            cmd = ctrl.step(q_cmd)  # fed its own commands: the states lag them
+        elif now >= st.cycle * ctrl.dt:
+            cmd = ctrl.step(q_cmd, sources.take_new() or None)  # fed its own commands
             q_cmd = cmd.q
-            if st.plan is not runner.plan and st.plan is not None:
-                runner.plan = st.plan
-                runner.send(st.motion, now)
-                log(f"re-planned at phase {st.phase:.1f}")
+            if gripper.send(cmd.gripper) and cmd.gripper and settings.grasped is not None:
+                sources.ignore(settings.grasped)
+            if runner.changed(st.motion):
+                runner.send(st.motion, time.monotonic() - start)
+                if ctrl.replans:
+                    log(f"re-planned at step {cmd.index}: {sources.describe()}")
+                else:
+                    log(f"planned: at rest after {st.motion.end:.2f} s")
+            if now - said >= 1.0:
+                said = now
+                log(
+                    f"t {now:5.1f} s  step {cmd.index}/{ctrl.n_steps}  gripper "
+                    f"{'closed' if cmd.gripper else 'open'}"
+                )
         spin(0.002)
+
+
+class _Gripper:
+    """The gripper's commands: a JointTrajectory of its one joint to ``--gripper-controller``
+    whenever the skill's command changes (nothing without one)."""
+
+    def __init__(self, node: Any, settings: RunSettings) -> None:
+        self.settings = settings
+        self.closed: bool | None = None
+        self.pub: Any = None
+        self.topic = ""
+        if settings.gripper_controller is not None:
+            from trajectory_msgs.msg import JointTrajectory
+
+            self.topic = f"/{settings.gripper_controller}/joint_trajectory"
+            self.pub = node.create_publisher(JointTrajectory, self.topic, QOS_DEPTH)
+
+    @classmethod
+    def create(cls, node: Any, settings: RunSettings) -> _Gripper:
+        return cls(node, settings)
+
+    def publishers(self) -> list[tuple[Any, str]]:
+        return [] if self.pub is None else [(self.pub, self.topic)]
+
+    def send(self, closed: bool) -> bool:
+        """Send ``closed`` if it changed (or is the first); True if it changed."""
+        if closed == self.closed:
+            return False
+        self.closed = closed
+        if self.pub is None or self.settings.dry_run:
+            return True
+        from builtin_interfaces.msg import Duration
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        name, open_, shut = self.settings.gripper_joint or ("", 0.0, 1.0)
+        sec = self.settings.gripper_seconds
+        point = JointTrajectoryPoint(
+            positions=[shut if closed else open_],
+            velocities=[0.0],
+            time_from_start=Duration(sec=math.floor(sec), nanosec=round(sec % 1.0 * 1e9) % 10**9),
+        )
+        self.pub.publish(JointTrajectory(joint_names=[name], points=[point]))
+        return True
 
 
 class _Runner:
@@ -227,17 +351,31 @@ class _Runner:
         log: Callable[[str], None],
     ) -> None:
         self.node, self.pub, self.order, self.settings, self.log = node, pub, order, settings, log
-        self.plan: Any = None
+        self.motion: Any = None  # the motion last sent
+        self.jerk: Any = np.inf  # the planned jerk limit (the splices' lead: splice_lead)
         self.sent = 0
 
-    def send(self, motion: Any, now: float) -> None:
-        """The points of ``motion`` from ``now`` (s on the run's clock) as one message."""
+    def changed(self, motion: Any) -> bool:
+        """Whether ``motion`` (the controller's now) is not the one last sent: a new plan's
+        hand-over, or a brake. The hand-over's own end (the new plan alone) is the same
+        motion from then on, and is not sent again."""
+        last = self.motion
+        if motion is last or (last is not None and motion is getattr(last, "new", None)):
+            self.motion = motion
+            return False
+        return True
+
+    def send(self, motion: Any, now: float, lead: float | None = None) -> None:
+        """The points of ``motion`` from ``now`` (s on the run's clock) as one message, the
+        first ``lead`` s ahead (default: :func:`~pbdkit.ros._jtc.splice_lead`)."""
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-        tfs, p, v, a = trajectory_points(
-            motion, now, self.settings.controller_period, POINT_SPACING
-        )
+        self.motion = motion
+        period = self.settings.controller_period
+        if lead is None:
+            lead = splice_lead(motion.at(now)[1], self.jerk, period)
+        tfs, p, v, a = trajectory_points(motion, now, period, POINT_SPACING, lead)
         if self.settings.dry_run:
             return
         msg = JointTrajectory(joint_names=list(self.order.graph_names))
@@ -258,8 +396,8 @@ class _Runner:
         """A braking trajectory from the commanded state at the message's first point."""
         if limits is None or self.sent == 0:
             return
-        t = now + 2.0 * self.settings.controller_period + 0.02
-        self.send(brake(t, motion.at(t), limits.scaled(0.995)), now)
+        lead = splice_lead(motion.at(now)[1], limits.jerk, self.settings.controller_period)
+        self.send(brake(now + lead, motion.at(now + lead), limits.scaled(0.995)), now, lead)
         self.log("braking")
 
     @staticmethod

@@ -36,6 +36,11 @@ class SimArm:
         Joint states published, and the controller updated, this often.
     interpolate_from_desired_state : bool
         The JTC's option (False: a message's first segment starts from the measured state).
+    extra_joints : dict str -> float
+        Joints it publishes besides the arm's (a finger, say), fixed, after the arm's.
+    lag : float
+        An arm that lags its controller (for tests of the following error): its joints follow
+        the commands as a first-order lag of this time constant (s; 0: exactly).
     """
 
     def __init__(
@@ -47,6 +52,8 @@ class SimArm:
         controller: str = "arm_controller",
         rate_hz: float = 250.0,
         interpolate_from_desired_state: bool = False,
+        extra_joints: dict[str, float] | None = None,
+        lag: float = 0.0,
     ) -> None:
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
@@ -56,6 +63,9 @@ class SimArm:
         self.follower = TrajectoryFollower(
             self.names, q0, interpolate_from_desired_state=interpolate_from_desired_state
         )
+        self.extra = dict(extra_joints or {})
+        self.lag = float(lag)
+        self._ticked = 0.0
         self.t0 = time.monotonic()
         self.q, self.v, _ = self.follower.desired(0.0)
         self.received = 0
@@ -74,7 +84,15 @@ class SimArm:
         """Seconds on the arm's monotonic clock."""
         return time.monotonic() - self.t0
 
+    def _record_until(self, now: float) -> None:
+        """The commands on the 1 kHz grid up to ``now``, from the trajectory in force (before
+        a new one replaces it: the grid between two ticks is the old one's)."""
+        while len(self.commanded) * 1e-3 <= now:
+            self.commanded.append(self.follower.desired(len(self.commanded) * 1e-3)[0])
+
     def _on_trajectory(self, msg: Any) -> None:
+        now = self.now()  # one instant: the grid up to it is the old trajectory's
+        self._record_until(now)
         points = list(msg.points)
         times = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points]
 
@@ -84,7 +102,7 @@ class SimArm:
 
         try:
             self.follower.receive(
-                self.now(),
+                now,
                 list(msg.joint_names),
                 times,
                 rows("positions"),
@@ -99,12 +117,16 @@ class SimArm:
 
     def _tick(self) -> None:
         now = self.now()
-        while len(self.commanded) * 1e-3 <= now:
-            self.commanded.append(self.follower.desired(len(self.commanded) * 1e-3)[0])
-        self.q, self.v, _ = self.follower.desired(now)
+        self._record_until(now)
+        q, v, _ = self.follower.desired(now)
+        if self.lag > 0.0:
+            gain = min(1.0, (now - self._ticked) / self.lag)
+            v = (q - self.q) * gain / max(now - self._ticked, 1e-6)
+            q = self.q + (q - self.q) * gain
+        self.q, self.v, self._ticked = q, v, now
         msg = self._msg()
         msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.name = self.names
-        msg.position = self.q.tolist()
-        msg.velocity = self.v.tolist()
+        msg.name = [*self.names, *self.extra]
+        msg.position = [*self.q.tolist(), *self.extra.values()]
+        msg.velocity = [*self.v.tolist(), *(0.0 for _ in self.extra)]
         self._pub.publish(msg)
