@@ -36,51 +36,22 @@ def _pbdkit(*args: str) -> list[str]:
 def one(skill: Path, placement: int, work: Path) -> dict:
     """One placement: the sim and the run in two processes on a private graph."""
     report = work / f"report_{placement}.json"
-    script = f"""
-import subprocess, sys
-sim = subprocess.Popen({
-        _pbdkit(
-            "ros",
-            "sim",
-            "--task",
-            "coaster",
-            "--placement",
-            str(placement),
-            "--perturb",
-            "move",
-            "--skill",
-            str(skill),
-            "--exit-after-run",
-            "--report",
-            str(report),
-            "--interpolate-from-desired-state",
-        )!r
-    },
-    stdout=subprocess.PIPE, text=True)
-for line in sim.stdout:
-    if line.startswith("ros sim:"):
-        break
-run = subprocess.run({
-        _pbdkit(
-            "ros",
-            "run",
-            str(skill),
-            "--controller",
-            "arm_controller",
-            *OBJECTS,
-            "--grasped",
-            "glass",
-            "--gripper-controller",
-            "gripper_controller",
-            "--gripper-joint",
-            "gripper:0:1",
-            "--timeout",
-            "15",
-        )!r
-    }, capture_output=True, text=True)
-sim.communicate(timeout=60)
-print("RUN", run.returncode, run.stdout.count("re-planned"))
-"""
+    sim_cmd = _pbdkit("ros", "sim", "--task", "coaster", "--placement", str(placement),
+                      "--perturb", "move", "--skill", str(skill), "--exit-after-run",
+                      "--report", str(report), "--interpolate-from-desired-state")  # fmt: skip
+    run_cmd = _pbdkit("ros", "run", str(skill), "--controller", "arm_controller", *OBJECTS,
+                      "--grasped", "glass", "--gripper-controller", "gripper_controller",
+                      "--gripper-joint", "gripper:0:1", "--timeout", "15")  # fmt: skip
+    script = (
+        "import subprocess\n"
+        f"sim = subprocess.Popen({sim_cmd!r}, stdout=subprocess.PIPE, text=True)\n"
+        "for line in sim.stdout:\n"
+        "    if line.startswith('ros sim:'):\n"
+        "        break\n"
+        f"run = subprocess.run({run_cmd!r}, capture_output=True, text=True)\n"
+        "sim.communicate(timeout=60)\n"
+        "print('RUN', run.returncode, run.stdout.count('re-planned'))\n"
+    )
     env = private_graph_env(f"ros_coaster_{placement}")
     cmd = [sys.executable, "-c", script]
     if os.geteuid() == 0 and shutil.which("unshare"):
