@@ -140,3 +140,45 @@ def test_record_learn_and_run_the_coaster_over_a_real_graph(tmp_path: Path) -> N
                                 str(tmp_path), timeout=240)  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK: success"), done.stdout
+
+
+def test_object_sources_a_live_node_cannot_read_are_refused() -> None:
+    from pbdkit.ros._objects import check_sources
+
+    with pytest.raises(ValueError, match=r"tf is not read on a live graph.*PoseStamped"):
+        check_sources({"glass": "tf:glass_link"})
+    with pytest.raises(ValueError, match=r"give a topic \(/NAME\)"):
+        check_sources({"glass": "glass_topic"})
+    check_sources({"glass": "/objects/glass", "coaster": np.zeros(3)})  # both readable
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [("gripper", "NAME:OPEN:CLOSED"), ("gripper:0:x", "NAME:OPEN:CLOSED"),
+     (":0:1", "two different finite"), ("gripper:1:1", "two different finite"),
+     ("gripper:0:inf", "two different finite")],
+)  # fmt: skip
+def test_a_malformed_gripper_joint_is_refused(text: str, match: str) -> None:
+    import typer
+
+    from pbdkit.apps._cli_ros import parse_gripper_joint
+
+    with pytest.raises(typer.BadParameter, match=match):
+        parse_gripper_joint(text)
+    assert parse_gripper_joint("finger:0.04:0.0") == ("finger", 0.04, 0.0)
+
+
+def test_run_and_record_settings_refuse_what_cannot_work() -> None:
+    from pbdkit.ros._record import RecordSettings
+    from pbdkit.ros._run import RunSettings
+
+    with pytest.raises(ValueError, match="--gripper-controller and --gripper-joint go together"):
+        RunSettings(gripper_controller="gripper_controller")
+    with pytest.raises(ValueError, match="--gripper-seconds must be > 0"):
+        RunSettings(gripper_seconds=0.0)
+    with pytest.raises(ValueError, match="--auto needs --takes N"):
+        RecordSettings(auto=True)
+    with pytest.raises(ValueError, match="--takes must be >= 1"):
+        RecordSettings(takes=0)
+    with pytest.raises(ValueError, match="--rest must be > 0"):
+        RecordSettings(rest=0.0)

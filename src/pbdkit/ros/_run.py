@@ -128,7 +128,7 @@ def run_skill(
     listener = JointStateListener(node, settings.joint_states, order)
     topic = f"/{settings.controller}/joint_trajectory"
     pub = node.create_publisher(JointTrajectory, topic, QOS_DEPTH)
-    gripper = _Gripper.create(node, settings)
+    gripper = _Gripper(node, settings)
     runner = _Runner(node, pub, order, settings, log)
 
     def spin(seconds: float) -> None:
@@ -310,10 +310,6 @@ class _Gripper:
 
             self.topic = f"/{settings.gripper_controller}/joint_trajectory"
             self.pub = node.create_publisher(JointTrajectory, self.topic, QOS_DEPTH)
-
-    @classmethod
-    def create(cls, node: Any, settings: RunSettings) -> _Gripper:
-        return cls(node, settings)
 
     def publishers(self) -> list[tuple[Any, str]]:
         return [] if self.pub is None else [(self.pub, self.topic)]

@@ -400,20 +400,8 @@ class TaskWorld:
         :meth:`TrajectoryFollower.receive`, the measured state the sim arm's. The first one
         accepted starts the run. Raises RejectedTrajectory (a ValueError) as the JTC refuses,
         counted in :attr:`messages`."""
-        if self.replay is not None:
-            self.messages["arm"]["rejected"] += 1
-            raise RejectedTrajectory(
-                "the world replays the teacher (teach): it follows no trajectory"
-            )
         measured = (self._scene().joints(), self.joint_velocities())
-        try:
-            self.arm.receive(
-                self.t, names, times, positions, velocities, accelerations, measured=measured
-            )
-        except ValueError:
-            self.messages["arm"]["rejected"] += 1
-            raise
-        self.messages["arm"]["accepted"] += 1
+        self._receive("arm", self.arm, measured, names, times, positions, velocities, accelerations)
         self._extend_run(float(np.max(times)), start=True)
 
     def receive_gripper(
@@ -426,21 +414,38 @@ class TaskWorld:
     ) -> None:
         """A gripper trajectory (one joint, :data:`GRIPPER_JOINT`) arriving now: closed while
         its desired position is > 0.5. Raises RejectedTrajectory as the JTC refuses."""
+        measured = ([1.0 if self.closed else 0.0], [0.0])
+        self._receive(
+            "gripper", self.gripper, measured, names, times, positions, velocities, accelerations
+        )
+        self._extend_run(float(np.max(times)), start=False)
+
+    def _receive(
+        self,
+        kind: str,
+        follower: TrajectoryFollower,
+        measured: Any,
+        names: Sequence[str],
+        times: Any,
+        positions: Any,
+        velocities: Any,
+        accelerations: Any,
+    ) -> None:
+        """One trajectory to ``follower`` (``kind``: "arm" or "gripper"), counted in
+        :attr:`messages`; refused while the world replays the teacher."""
         if self.replay is not None:
-            self.messages["gripper"]["rejected"] += 1
+            self.messages[kind]["rejected"] += 1
             raise RejectedTrajectory(
                 "the world replays the teacher (teach): it follows no trajectory"
             )
-        measured = ([1.0 if self.closed else 0.0], [0.0])
         try:
-            self.gripper.receive(
+            follower.receive(
                 self.t, names, times, positions, velocities, accelerations, measured=measured
             )
         except ValueError:
-            self.messages["gripper"]["rejected"] += 1
+            self.messages[kind]["rejected"] += 1
             raise
-        self.messages["gripper"]["accepted"] += 1
-        self._extend_run(float(np.max(times)), start=False)
+        self.messages[kind]["accepted"] += 1
 
     def _extend_run(self, duration: float, *, start: bool) -> None:
         """A trajectory of ``duration`` s accepted now: the run starts (an arm trajectory, no
