@@ -20,7 +20,7 @@ import yaml
 from hostile import bounded
 from typer.testing import CliRunner
 
-from pbdkit import robots
+from pbdkit import _yaml, robots
 from pbdkit.apps._cli import app
 from pbdkit.robots import _joint_limits
 from pbdkit.robots._joint_limits import joint_limits_mapping, read_joint_limits
@@ -146,7 +146,7 @@ def test_yaml_the_loader_chokes_on_is_refused_naming_the_file(
     text, detail = CHOKING[case]
     megabytes: float | None = 20
     if loader == "python":
-        monkeypatch.setattr(_joint_limits, "_SAFE_LOADER", yaml.SafeLoader, raising=False)
+        monkeypatch.setattr(_yaml, "SAFE_LOADER", yaml.SafeLoader)
         megabytes = None
     path = tmp_path / "limits.yaml"
     path.write_text(text, encoding="utf-8")
@@ -209,7 +209,7 @@ def test_yaml_text_over_the_cap_is_refused() -> None:
 
 @pytest.mark.skipif(not yaml.__with_libyaml__, reason="PyYAML built without libyaml")
 def test_libyamls_safe_loader_reads_a_large_file_fast(tmp_path: Path) -> None:
-    assert _joint_limits._SAFE_LOADER is yaml.CSafeLoader  # 5x the pure-Python loader's speed
+    assert _yaml.SAFE_LOADER is yaml.CSafeLoader  # 5x the pure-Python loader's speed
     entry = "{has_velocity_limits: true, max_velocity: 1.5, has_jerk_limits: false}"
     lines = ["joint_limits:", *(f"  joint_{i}: {entry}" for i in range(3000))]
     path = tmp_path / "limits.yaml"

@@ -81,11 +81,13 @@ def _all_of(path: Path) -> list[str]:
 def test_the_public_surface_is_what_the_packages_curate() -> None:
     # Implementation modules are private (_name.py); the public modules are the packages'
     # __init__s and the two public sub-modules, whose __all__s are the public surface (the docs
-    # show exactly these names): at most 120 names (issue 33: 547 before).
+    # show exactly these names): at most 135 names (issue 33: 547 before, 117 after; issue 38's
+    # collisions add a package of 7 and 8 names elsewhere).
     modules = dict(_public_modules())
     assert set(modules) == {
         "pbdkit",
         "pbdkit.apps",
+        "pbdkit.collision",
         "pbdkit.data",
         "pbdkit.datasets",
         "pbdkit.motion",
@@ -100,7 +102,7 @@ def test_the_public_surface_is_what_the_packages_curate() -> None:
     }
     counts = {name: len(_all_of(path)) for name, path in modules.items()}
     assert all(counts.values()), counts
-    assert sum(counts.values()) <= 120, counts
+    assert sum(counts.values()) <= 135, counts
     for name in modules:
         module = importlib.import_module(name)
         for public in module.__all__:

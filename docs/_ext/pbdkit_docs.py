@@ -48,6 +48,7 @@ PUBLIC_PACKAGES = (
     "pbdkit.prob",
     "pbdkit.motion",
     "pbdkit.robots",
+    "pbdkit.collision",
     "pbdkit.data",
     "pbdkit.reproduction",
     "pbdkit.skill",

@@ -61,6 +61,7 @@ from ._validation import short
 
 if TYPE_CHECKING:
     from . import datasets, robots
+    from .collision import Box, Cylinder, Scene, Sphere
     from .data import (
         Demonstration,
         LimitWarning,
@@ -81,6 +82,10 @@ if TYPE_CHECKING:
 # so that `import pbdkit` and the command line start in a fraction of a second: scikit-learn,
 # SciPy and pinocchio are loaded when a name that needs them is first used.
 _WHERE = {
+    "Box": "collision",
+    "Cylinder": "collision",
+    "Scene": "collision",
+    "Sphere": "collision",
     "GMM": "prob",
     "FrameModel": "prob",
     "Command": "reproduction",
@@ -105,15 +110,19 @@ _SUBMODULES = {"datasets": "datasets", "gaussian": "prob.gaussian", "robots": "r
 
 __all__ = [
     "GMM",
+    "Box",
     "Command",
     "Controller",
+    "Cylinder",
     "Demonstration",
     "FrameModel",
     "LimitWarning",
     "ReachWarning",
     "ReproductionResult",
     "Robot",
+    "Scene",
     "Skill",
+    "Sphere",
     "align",
     "align_trajectories",
     "damped_pinv",

@@ -30,19 +30,31 @@ handling constraints in joint space and task space", IROS 2008.
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from collections.abc import Mapping
 
+import numpy as np
 import numpy.typing as npt
 
+from .._validation import check_positive_float
+from ..collision import CollisionChecker, Scene
 from ..motion._limits import MotionLimits
 from ..robots._protocols import KinematicModel
-from ._constraints import Constraints
+from ._avoid import DEFAULT_MARGIN, Avoidance
+from ._constraints import JOINT, Constraints
 from ._result import ReproductionResult
-from ._setup import RunOptions, setup_run
+from ._setup import RunOptions, RunSetup, setup_run
+from ._steps import CLEARANCE
 from ._table_ii import _path_result, _table_ii
 from ._timing import check_timing, timed_path
 
-__all__ = ["solve"]
+__all__ = ["CollisionWarning", "solve"]
+
+
+class CollisionWarning(UserWarning):
+    """A reproduction with avoidance still collides: a tight constraint of the skill and the
+    clearance cannot both hold (the message names the first sample and the bodies)."""
 
 
 def solve(
@@ -55,6 +67,9 @@ def solve(
     reach: float | None = None,
     limits: MotionLimits | None = None,
     dt: float | None = None,
+    scene: Scene | None = None,
+    avoid: bool = True,
+    margin: float = DEFAULT_MARGIN,
 ) -> ReproductionResult:
     """Closed-loop reproduction of Table II for new object positions: the probabilistic
     inverse kinematics over the whole time grid (what :meth:`pbdkit.Skill.reproduce` runs).
@@ -89,6 +104,14 @@ def solve(
         from ``q0`` and rest at both ends. Needs ``dt``.
     dt : float, optional
         The duration of a step at the demonstrations' pace (s), with ``limits``.
+    scene : pbdkit.Scene, optional
+        Obstacles and object shapes (:doc:`/collisions`): the result then has its
+        ``clearance`` and ``collisions``, and with ``avoid`` the fused controller keeps
+        ``margin`` from them (the robot needs a collision model).
+    avoid : bool
+        With a scene: keep clear (True) or only check (False).
+    margin : float
+        The clearance (m) avoidance keeps; pairs farther apart add nothing.
 
     Returns
     -------
@@ -105,8 +128,65 @@ def solve(
         step_limit=step_limit,
         reach=reach,
     )
+    res = _run(robot, run, limits, dt, timed)
+    if scene is None:
+        return res
+    return _with_scene(robot, run, res, scene, avoid, margin, (limits, dt, timed))
+
+
+def _run(
+    robot: KinematicModel, run: RunSetup, limits: MotionLimits | None, dt: float | None, timed: bool
+) -> ReproductionResult:
     if timed:
         assert limits is not None and dt is not None
         return timed_path(robot, run, limits, dt)
     path = _table_ii(robot, run, run.theta0)
     return _path_result(robot, run, run.constraints.t.copy(), path)
+
+
+def _with_scene(
+    robot: KinematicModel,
+    run: RunSetup,
+    res: ReproductionResult,
+    scene: Scene,
+    avoid: bool,
+    margin: float,
+    timing: tuple[MotionLimits | None, float | None, bool],
+) -> ReproductionResult:
+    """The run checked against ``scene`` and, with ``avoid`` and a fused controller where it
+    comes within ``margin``, run again with the clearance constraint (:mod:`._avoid`)."""
+    margin = check_positive_float(margin, "margin")
+    checker = CollisionChecker(robot, scene, run.objects)
+    report = checker.check(res.joints, res.gripper_signal)
+    fused = avoid and JOINT in run.used and bool(run.tasks) and not run.constraints.oriented
+    if avoid and not fused:
+        raise ValueError(
+            "avoid=True needs the fused controller of position constraints (use=None or "
+            "'joint' with objects); pass avoid=False to check only"
+        )
+    if fused:
+        if report.min_clearance < margin:
+            own = ~res.lead_in if res.lead_in is not None else np.ones(len(res.t), dtype=bool)
+            signal = None if res.gripper_signal is None else res.gripper_signal[own]
+            checker.plan_grasps(res.joints[own], signal)
+            avoidance = Avoidance(checker, margin)
+            res = _run(robot, dataclasses.replace(run, avoid=avoidance), *timing)
+            report = checker.check(res.joints, res.gripper_signal)
+        else:
+            zero = np.zeros(len(res.t))
+            res = dataclasses.replace(
+                res,
+                influence={**res.influence, CLEARANCE: zero},
+                influence_joint_space={**res.influence_joint_space, CLEARANCE: zero.copy()},
+            )
+    infeasible = None
+    if avoid and report.collisions:
+        step, first, second = report.collisions[0]
+        infeasible = (
+            f"the skill's constraints and the clearance cannot both hold: {first} and {second} "
+            f"collide from sample {step} ({len(report.collisions)} contacts in all)"
+        )
+        warnings.warn(CollisionWarning(infeasible), stacklevel=4)
+    return dataclasses.replace(
+        res, clearance=report.clearance, collisions=report.collisions, infeasible=infeasible
+    )

@@ -94,6 +94,16 @@ class ReproductionResult:
 
     With motion limits the result has a sample per step of the skill plus the lead-in samples:
     T = L + n_steps. :meth:`save` writes it to a file, :meth:`load` reads it back.
+    clearance : ndarray, shape (T,), or None
+        With a scene (``scene=`` of :meth:`pbdkit.Skill.reproduce`): per sample, the smallest
+        signed distance (m) between the arm, with what it carries, and the scene or itself
+        (negative: a penetration); None without a scene.
+    collisions : list of (int, str, str)
+        With a scene: (sample, body, body) for every sample and pair in contact beyond the
+        allowed ones (URDF link, shape and object names, sorted); empty when the run is free.
+    infeasible : str or None
+        With avoidance: why the run still collides (the first sample and bodies where the
+        skill's constraints and the clearance cannot both hold); None when it is free.
     """
 
     t: Float
@@ -114,6 +124,9 @@ class ReproductionResult:
     nominal_dt: float = float("nan")
     orientations: Float | None = None
     orientation_errors: dict[str, Float] = dataclasses.field(default_factory=dict)
+    clearance: Float | None = None
+    collisions: list[tuple[int, str, str]] = dataclasses.field(default_factory=list)
+    infeasible: str | None = None
 
     @property
     def stretch(self) -> float:
@@ -203,6 +216,10 @@ _KEYS = frozenset(
         "gripper_signal",
         "limited",
         "nominal_dt",
+        "clearance",
+        "collision_steps",
+        "collision_bodies",
+        "infeasible",
     }
 )
 _PREFIXES = {
@@ -279,6 +296,14 @@ def _arrays(res: ReproductionResult) -> dict[str, Any]:
     arrays.update({f"{prefix}{k}": v for k, v in res.influence_joint_space.items()})
     if math.isfinite(res.nominal_dt):  # NaN (no timing): left out, as before it was stored
         arrays["nominal_dt"] = np.array(res.nominal_dt, dtype=np.float64)
+    if res.clearance is not None:  # with a scene
+        arrays["clearance"] = res.clearance
+        arrays["collision_steps"] = np.array([c[0] for c in res.collisions], dtype=np.int64)
+        arrays["collision_bodies"] = np.array(
+            [c[1:] for c in res.collisions], dtype=np.str_
+        ).reshape(-1, 2)
+    if res.infeasible is not None:
+        arrays["infeasible"] = np.array(res.infeasible, dtype=np.str_)
     return arrays
 
 
@@ -331,7 +356,7 @@ def _fields(data: NpzArchive) -> Mapping[str, Any]:
         "influence": influence,
         "influence_joint_space": _named(data, "influence_joint_space", (n_samples,)),
         "task_errors": _named(data, "task_errors", (n_samples,)),
-        "used": tuple(influence),
+        "used": tuple(k for k in influence if k != "clearance"),
         "limited": (
             _read(data, "limited", (n_samples,), "b")
             if "limited" in data
@@ -350,4 +375,31 @@ def _fields(data: NpzArchive) -> Mapping[str, Any]:
             _read(data, "orientations", (n_samples, 3, 3)) if "orientations" in data else None
         ),
         "orientation_errors": _named(data, "orientation_errors", (n_samples,)),
+        **_collision_fields(data, n_samples),
     }
+
+
+def _collision_fields(data: NpzArchive, n_samples: int) -> dict[str, Any]:
+    """``clearance``, ``collisions`` and ``infeasible`` of a file (defaults without them)."""
+    out: dict[str, Any] = {}
+    if "clearance" in data:
+        out["clearance"] = _read(data, "clearance", (n_samples,))
+        steps, bodies = data["collision_steps"], data["collision_bodies"]
+        if steps.dtype != np.int64 or steps.ndim != 1:
+            raise ValueError(f"collision_steps must be int64 of shape (N,), got {steps.dtype}")
+        if bodies.dtype.kind != "U" or bodies.shape != (steps.shape[0], 2):
+            raise ValueError(
+                f"collision_bodies must be strings of shape ({steps.shape[0]}, 2), got "
+                f"{bodies.dtype} of shape {bodies.shape}"
+            )
+        if steps.size and not (int(steps.min()) >= 0 and int(steps.max()) < n_samples):
+            raise ValueError(f"collision_steps must be samples in [0, {n_samples})")
+        out["collisions"] = [
+            (int(k), str(a), str(b)) for k, (a, b) in zip(steps, bodies, strict=True)
+        ]
+    if "infeasible" in data:
+        note = data["infeasible"]
+        if note.dtype.kind != "U" or note.shape != ():
+            raise ValueError(f"infeasible must be a string, got {note.dtype} {note.shape}")
+        out["infeasible"] = str(note)
+    return out

@@ -13,7 +13,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -112,6 +112,8 @@ class RunSetup:
     line_search, newton : bool
     reach : float or None
     on_unreachable : {"raise", "warn"}
+    avoid : Avoidance or None
+        The clearance constraint of the fused step (:mod:`._avoid`), None: no avoidance.
     """
 
     constraints: Constraints
@@ -128,6 +130,7 @@ class RunSetup:
     newton: bool
     reach: float | None
     on_unreachable: str
+    avoid: Any = None
 
 
 def setup_run(

@@ -43,6 +43,9 @@ for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
 # Line search of the fused loop: at most this many halvings of a step (docs: "Stability").
 MAX_HALVINGS = 8
 
+#: The clearance constraint's key in a result's influence (never a constraint name).
+CLEARANCE = "clearance"
+
 
 class LoopOutput(NamedTuple):
     """What a controller's loop over the time grid gives, for steps ``start`` .. T - 1 (row 0:
@@ -236,6 +239,8 @@ class FusedStep(ControllerStep):
         self.free2 = _free_step2(max_step, step_limit)
         # Lists of per-step views are cheaper to index in the loop than the arrays.
         self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
+        # The clearance constraint (None: none; docs: "Collisions").
+        self.avoid = run.avoid
         self.set_objects(run.objects)
 
     def set_objects(self, objs: Mapping[str, Float]) -> None:
@@ -278,6 +283,10 @@ class FusedStep(ControllerStep):
         # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
         # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
         rhs = self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x)
+        clearance = None if self.avoid is None else self.avoid.terms(j, theta)
+        if clearance is not None:  # one more Gaussian: its precision and information add
+            lam_j = lam_j + clearance[0]
+            rhs = rhs + clearance[1]
         _, target, info = dposv(lam_j, rhs)
         if info != 0:
             raise np.linalg.LinAlgError(f"the fused precision at step {j} is not positive definite")
@@ -318,7 +327,11 @@ class FusedStep(ControllerStep):
             z_new[:n], z_new[n:] = new, x_new
             q_t, b_t = self.q_list[j], self.b_list[j]
             halvings = 0
-            while (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0 and halvings < MAX_HALVINGS:
+            while halvings < MAX_HALVINGS and (
+                (z_new - z).dot(q_t.dot(z_new + z) - b_t) > 0.0
+                if clearance is None
+                else _rises(z, z_new, q_t, b_t, clearance)
+            ):
                 halvings += 1
                 new = theta + 0.5 * (new - theta)
                 x_new, jac_new, axes_new = self.kinematics(new)
@@ -329,8 +342,11 @@ class FusedStep(ControllerStep):
     advance = __call__  # type: ignore[assignment]
 
     def covariance(self, j: int, jac: Float) -> Float:
-        """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used."""
+        """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used
+        (plus the clearance's precision where it acted)."""
         lam = self.prec_list[j] + jac.T.dot(self.p_sum[j]).dot(jac)
+        if self.avoid is not None and j in self.avoid.precisions:
+            lam = lam + self.avoid.precisions[j]
         inv = np.linalg.inv(lam)
         return np.asarray(0.5 * (inv + inv.T))
 
@@ -341,6 +357,17 @@ class FusedStep(ControllerStep):
             k: float(np.trace(s_hand @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)
         }
         return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
+
+
+def _rises(z: Float, z_new: Float, q_t: Float, b_t: Float, clearance: tuple[Float, Float]) -> bool:
+    """Whether z_new = [theta' | f(theta')] raises the fused energy of the step over z: the
+    constraints' E_j (exact: quadratic in z) plus, where the clearance acts, its own quadratic
+    energy in theta, 1/2 theta^T Lambda_c theta - theta . eta_c."""
+    d = z_new - z
+    lam_c, eta_c = clearance
+    n = eta_c.shape[0]
+    rise = d.dot(q_t.dot(z_new + z) - b_t) + d[:n].dot(0.5 * lam_c.dot(z_new[:n] + z[:n]) - eta_c)
+    return bool(rise > 0.0)
 
 
 def _fused_loop(
@@ -374,6 +401,12 @@ def _fused_loop(
     jt = np.swapaxes(jac_used, -1, -2)
     prec_j, prec, p_sum = c.joint_prec[start:], step.prec[start:], step.p_sum[start:]
     lam = prec_j + jt @ p_sum @ jac_used
+    clearance = None if step.avoid is None else np.zeros_like(lam)
+    if clearance is not None:
+        for j, lam_c in step.avoid.precisions.items():
+            if start <= j < n_steps:
+                clearance[j - start] = lam_c
+        lam = lam + clearance
     cov = _spd_inverse(lam)
     # Hand space: S = J Sigma J^T, S^-1 = (J Sigma_theta J^T)^-1 + sum_n P_n (Woodbury), so
     # share_n = tr(S P_n) / 3 and the joint constraint has the rest
@@ -381,10 +414,16 @@ def _fused_loop(
     s_hand = jac_used @ cov @ jt  # (T, 3, 3)
     traces = [np.einsum("tij,tji->t", s_hand, prec[:, i]) for i in range(len(tasks))]
     influence = {k: tr / 3 for k, tr in zip(tasks, traces, strict=True)}
-    influence = {JOINT: np.clip(1.0 - sum(influence.values()), 0.0, 1.0), **influence}
     # Joint space: tr(Sigma Lambda_c) / n, with tr(Sigma J^T P_n J) = tr(S P_n).
     influence_js = {JOINT: np.einsum("tij,tji->t", cov, prec_j) / n}
     influence_js.update({k: tr / n for k, tr in zip(tasks, traces, strict=True)})
+    if clearance is not None:
+        # The clearance acts on link points, not on the hand: its share is its joint-space
+        # one in both spaces, taken from the joint constraint's rest (docs: "Collisions").
+        influence_js[CLEARANCE] = np.einsum("tij,tji->t", cov, clearance) / n
+        influence[CLEARANCE] = influence_js[CLEARANCE]
+    rest = 1.0 - sum(influence.values())
+    influence = {JOINT: np.clip(rest, 0.0, 1.0), **influence}
     mask = _limited_mask(n_steps - start, limited)
     return LoopOutput(joints, positions, cov, influence, influence_js, mask)
 

@@ -135,3 +135,30 @@ def _chain_fk_jacobian(
         j6[:, 3:] = np.where(revolute[None, :, None], axes, 0.0).transpose(0, 2, 1)
         return tf, j6
     return x, np.ascontiguousarray(cols.transpose(0, 2, 1))
+
+
+def _chain_frames(
+    q: NDArray[np.float64], consts: NDArray[np.float64], revolute: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Every joint's frame for a batch q (M, n): rotations (M, n + 1, 3, 3) and origins
+    (M, n + 1, 3) in the base frame, entry 0 the base itself (identity), entry i joint i's frame
+    after its motion (what pinocchio's ``data.oMi[i]`` holds), the same loop as
+    :func:`_chain_fk_jacobian`'s."""
+    m, n = q.shape
+    s, c1 = np.sin(q), 1.0 - np.cos(q)
+    rots = np.empty((m, n + 1, 3, 3))
+    origins = np.zeros((m, n + 1, 3))
+    rots[:, 0] = np.eye(3)
+    for i in range(n):
+        b = (rots[:, i].reshape(m * 3, 3) @ consts[i]).reshape(m, 3, 11)
+        if revolute[i]:
+            origins[:, i + 1] = origins[:, i] + b[:, :, 9]
+            rots[:, i + 1] = (
+                b[:, :, 0:3]
+                + s[:, i, None, None] * b[:, :, 3:6]
+                + c1[:, i, None, None] * b[:, :, 6:9]
+            )
+        else:
+            origins[:, i + 1] = origins[:, i] + b[:, :, 9] + q[:, i, None] * b[:, :, 10]
+            rots[:, i + 1] = b[:, :, 0:3]
+    return rots, origins

@@ -49,11 +49,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 from numpy.typing import NDArray
 
 from .._limit_values import LIMIT_RANGES
 from .._validation import short
+from .._yaml import parse_yaml, read_capped_text
 
 __all__ = [
     "JointLimits",
@@ -77,9 +77,6 @@ MAX_YAML_BYTES = 1024 * 1024
 
 # A string holding "joint_limits:" (or a newline) is YAML text, anything else a file path.
 _LOOKS_LIKE_YAML = re.compile(r"\n|joint_limits['\"]?\s*:")
-
-# libyaml's safe loader where PyYAML was built with it (no python/* tags either way).
-_SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 @dataclass(frozen=True)
@@ -302,45 +299,14 @@ def _load(source: JointLimitsSource) -> tuple[Any, str]:
                 "(MAX_YAML_BYTES; a joint_limits.yaml is a few KB)"
             )
     else:
-        text = _read_text(Path(source), label)
-    try:
-        return yaml.load(text, Loader=_SAFE_LOADER), label
-    except Exception as exc:
-        # The loader raises more than YAMLError on hostile text: RecursionError (PyYAML's
-        # composer, YAML nested 5000 deep), ValueError (a 13th month, 5000 digits), ...
-        detail = " ".join(str(exc).split())
-        if isinstance(exc, RecursionError):
-            detail = f"nested too deeply: {detail}"
-        elif not isinstance(exc, yaml.YAMLError):
-            detail = f"{type(exc).__name__}: {detail}"
-        if len(detail) > 300:  # an alias or tag name of any length
-            detail = f"{detail[:200]}...{detail[-80:]}"
-        raise ValueError(f"{label} is not valid YAML ({detail})") from exc
-
-
-def _read_text(path: Path, label: str) -> str:
-    """A joint_limits file's text: an existing file of at most MAX_YAML_BYTES, UTF-8."""
-    if not path.is_file():
-        what = "is a directory" if path.is_dir() else "does not exist"
-        raise ValueError(
-            f"{label} {what}; pass an existing joint_limits.yaml path, the YAML text or a mapping"
+        text = read_capped_text(
+            Path(source),
+            label,
+            MAX_YAML_BYTES,
+            "MAX_YAML_BYTES; a joint_limits.yaml is a few KB",
+            "joint_limits.yaml path, the YAML text or a mapping",
         )
-    size, data = path.stat().st_size, b""
-    if size <= MAX_YAML_BYTES:
-        with path.open("rb") as file:
-            data = file.read(MAX_YAML_BYTES + 1)  # it may have grown since
-        size = max(size, len(data))
-    if size > MAX_YAML_BYTES:
-        raise ValueError(
-            f"{label} has {size} bytes, over the cap of {MAX_YAML_BYTES} (MAX_YAML_BYTES; a "
-            "joint_limits.yaml is a few KB)"
-        )
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"{label} is not UTF-8 text (byte {exc.start}: {exc.reason}); expected YAML"
-        ) from exc
+    return parse_yaml(text, label), label
 
 
 def _flag(entry: Mapping[str, Any], key: str, where: str) -> bool | None:

@@ -26,6 +26,10 @@ declared limit has inf.
 
 :meth:`Robot.from_dh` loads the URDF that :func:`pbdkit.robots.urdf_from_dh` writes from a
 Denavit-Hartenberg table.
+
+Collision. The URDF's ``<collision>`` elements and an SRDF's disabled pairs make
+:attr:`Robot.collision_model` (:mod:`pbdkit.robots._collision`), built on first use: loading a
+robot reads no mesh.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -43,6 +48,13 @@ from numpy.typing import NDArray
 
 from .._validation import check_array, shape_str, short
 from ._chain import _chain_constants, _chain_fk_jacobian
+from ._collision import (
+    CollisionModel,
+    _frame_id,
+    _joints_to_lock,
+    build_collision_model,
+    has_collision_elements,
+)
 from ._ik import ik
 from ._joint_limits import (
     JointLimits,
@@ -51,6 +63,7 @@ from ._joint_limits import (
     limits_on_chain,
     read_joint_limits,
 )
+from ._srdf import read_srdf
 from ._urdf import (
     _choose_tip,
     _normalize_joints,
@@ -121,6 +134,14 @@ class Robot:
         The URDF XML text that was loaded (continuous joints already turned into revolute ones,
         position limits from the joint_limits YAML written into the ``<limit>`` tags), so that a
         simulator can load the same model.
+    srdf : str or None
+        The SRDF XML text that was loaded (its ``<disable_collisions>`` pairs are in
+        :attr:`collision_model`), or None.
+    has_collision_model : bool
+        Whether the URDF has ``<collision>`` geometry (decided from the XML, no mesh read).
+    collision_model : CollisionModel or None
+        The collision geometry on the robot's joints, built on first access (meshes are read
+        then), None without ``<collision>`` elements.
 
     All limit arrays are float64 and read-only.
     """
@@ -130,6 +151,8 @@ class Robot:
         urdf: str,
         tip: str | None = None,
         joint_limits: JointLimitsSource | None = None,
+        srdf: str | os.PathLike[str] | None = None,
+        mesh_dir: str | os.PathLike[str] | None = None,
     ) -> None:
         """Build from URDF XML text; prefer :meth:`from_urdf`, which also accepts a file path.
 
@@ -141,6 +164,12 @@ class Robot:
             The frame to control (see :meth:`from_urdf`).
         joint_limits : str, path-like or mapping, optional
             Velocity, acceleration and jerk limits (see :meth:`from_urdf`).
+        srdf : str or path-like, optional
+            Disabled collision pairs (see :meth:`from_urdf`).
+        mesh_dir : str or path-like, optional
+            The folder relative collision mesh paths are in (:meth:`from_urdf` gives the URDF
+            file's); without it, a relative mesh path is an error when the collision model is
+            built.
         """
         declared = {} if joint_limits is None else read_joint_limits(joint_limits)
         root = _parse_urdf(urdf)
@@ -158,10 +187,7 @@ class Robot:
                 f"tip frame '{tip_name}' does not exist in the URDF; available frames: "
                 f"{frame_names}"
             )
-        full_tip_id = self._frame_id(full, tip_name)
-        tip_joint = full.frames[full_tip_id].parentJoint
-        supports = set(full.supports[tip_joint])
-        to_lock = [j for j in range(1, full.njoints) if j not in supports]
+        to_lock = _joints_to_lock(full, tip_name)
         model = pin.buildReducedModel(full, to_lock, pin.neutral(full)) if to_lock else full
         if model.nq == 0:
             raise ValueError(
@@ -206,7 +232,7 @@ class Robot:
             )
         self._model = model
         self._data = model.createData()
-        self._tip_id = self._frame_id(model, tip_name)
+        self._tip_id = _frame_id(model, tip_name)
         self._consts, self._revolute, self._tip_rot, self._tip_trans = _chain_constants(
             model, self._data, self._tip_id
         )
@@ -233,16 +259,42 @@ class Robot:
         self.base: str = base_name
         self.name: str = root.get("name", "")
         self.urdf: str = urdf
+        self.srdf: str | None = None
+        self._srdf_disabled: frozenset[tuple[str, str]] = frozenset()
+        if srdf is not None:
+            links = [str(link.get("name", "")) for link in root.findall("link")]
+            self.srdf, self._srdf_disabled = read_srdf(srdf, links, self.name)
+        self._mesh_dir = None if mesh_dir is None else Path(mesh_dir).resolve()
+        self._has_collision = has_collision_elements(root)
+        self._collision: CollisionModel | None = None
         self._lf = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         self._oMf = self._data.oMf
         self._single_shape = (self.n_joints,)
 
-    @staticmethod
-    def _frame_id(model: Any, name: str) -> int:
-        # A link and a joint may share a name: prefer the link (BODY) frame.
-        if model.existFrame(name, pin.FrameType.BODY):
-            return int(model.getFrameId(name, pin.FrameType.BODY))
-        return int(model.getFrameId(name))
+    @property
+    def has_collision_model(self) -> bool:
+        """Whether the URDF has ``<collision>`` geometry (so :attr:`collision_model` is not
+        None); decided from the XML alone."""
+        return self._has_collision
+
+    @property
+    def collision_model(self) -> CollisionModel | None:
+        """The URDF's collision geometry on this robot's joints, with the SRDF's disabled
+        pairs (:class:`~pbdkit.robots.CollisionModel`); None without ``<collision>`` elements.
+
+        Built on first access and kept: collision meshes are read then, relative paths from the
+        URDF file's folder, ``package://`` ones from ``ROS_PACKAGE_PATH``.
+
+        Raises
+        ------
+        ValueError
+            A collision mesh that cannot be found or read (the message names it).
+        """
+        if self._collision is None and self._has_collision:
+            self._collision = build_collision_model(
+                self.urdf, self.tip, self._srdf_disabled, self._mesh_dir, self._model
+            )
+        return self._collision
 
     # ---------------------------------------------------------------- constructors
 
@@ -252,14 +304,19 @@ class Robot:
         path_or_xml: str | os.PathLike[str],
         tip: str | None = None,
         joint_limits: JointLimitsSource | None = None,
+        srdf: str | os.PathLike[str] | None = None,
     ) -> Robot:
-        """Load a robot from a URDF file or URDF XML text, and optionally a joint_limits YAML.
+        """Load a robot from a URDF file or URDF XML text, and optionally a joint_limits YAML
+        and an SRDF.
 
         Parameters
         ----------
         path_or_xml : str or path-like
             A path to a ``.urdf`` file, or the XML text itself (a string starting with ``<``).
-            Mesh files are never opened, so they need not exist.
+            Mesh files are not opened here, so they need not exist: the ``<collision>``
+            geometry is read when :attr:`collision_model` is first used (meshes then, relative
+            paths from the URDF file's folder, ``package://pkg/...`` from the
+            ``ROS_PACKAGE_PATH`` folders).
         tip : str, optional
             Name of the frame (link or joint) to control. If None, the URDF must be a chain
             (no branches) and its last link is used.
@@ -291,9 +348,13 @@ class Robot:
             joint_limits file is missing, over 1 MiB or not YAML, has no ``joint_limits``
             mapping, names a joint the URDF does not have, a ``has_*`` flag is not a boolean, a
             flag is true without its value, or a value is not a number > 0 (the message names
-            the source, the joint and the key).
+            the source, the joint and the key); if the SRDF is missing, over the cap, not XML,
+            has a ``<!DOCTYPE>`` or names a link the URDF does not have (the message names the
+            link and the file).
         """
-        return cls(_read_urdf_text(path_or_xml), tip, joint_limits)
+        text = _read_urdf_text(path_or_xml)
+        folder = None if text is path_or_xml else Path(path_or_xml).resolve().parent
+        return cls(text, tip, joint_limits, srdf, folder)
 
     @classmethod
     def from_dh(
@@ -367,15 +428,19 @@ link_prefix, tip, velocity, effort
         )
         return cls(urdf, tip, limits)
 
-    def __reduce__(self) -> tuple[type[Robot], tuple[str, str, dict[str, Any]]]:
-        """Pickle as the URDF text, tip and limits (for worker processes; never for files):
+    def __reduce__(
+        self,
+    ) -> tuple[type[Robot], tuple[str, str, dict[str, Any], str | None, str | None]]:
+        """Pickle as the URDF text, tip, limits, SRDF text and mesh folder (for worker
+        processes; never for files):
         rebuilt from them, the copy computes exactly what this robot computes and has the same
         limits (position limits from a joint_limits YAML are in :attr:`urdf`). Pickling
         pinocchio's model and data as they are loses the work data of the fast paths."""
         limits = joint_limits_mapping(
             self.joint_names, self.velocity_limit, self.acceleration_limit, self.jerk_limit
         )
-        return (type(self), (self.urdf, self.tip, limits))
+        mesh_dir = None if self._mesh_dir is None else str(self._mesh_dir)
+        return (type(self), (self.urdf, self.tip, limits, self.srdf, mesh_dir))
 
     def __repr__(self) -> str:
         return (

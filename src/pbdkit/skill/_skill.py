@@ -21,6 +21,7 @@ file's keys: :doc:`/reproduction`.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from collections.abc import Mapping, Sequence
@@ -34,12 +35,14 @@ from numpy.typing import NDArray
 from .._defaults import MAX_COMPONENTS
 from .._io import open_npz, save_npz_atomic
 from .._validation import check_int, short
+from ..collision import CollisionChecker, CollisionReport, Scene
 from ..data._align import align as align_demos
 from ..data._demonstration import Demonstration, check_demonstrations
 from ..data._placement import is_pose
-from ..motion._limits import LimitSpec, MotionLimits, defaults_where_declared
+from ..motion._limits import LimitSpec, MotionLimits
 from ..prob import GMM, ModelSelection, SelectionWarning
 from ..prob._gmr import CovarianceMode
+from ..reproduction._avoid import DEFAULT_MARGIN
 from ..reproduction._constraints import JOINT, Constraints
 from ..reproduction._controller import Controller
 from ..reproduction._probabilistic_ik import solve
@@ -47,6 +50,7 @@ from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import RunOptions, reach_from_samples, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
 from ._calibration import check_calibration, step_factors
+from ._run_limits import run_limits
 from ._skill_file import (
     FORMAT_NAME,
     MAX_DURATION,
@@ -501,6 +505,9 @@ class Skill:
         jerk_limit: LimitSpec = "robot",
         line_search: bool = True,
         newton: bool = True,
+        scene: Scene | None = None,
+        avoid: bool = True,
+        margin: float = DEFAULT_MARGIN,
     ) -> ReproductionResult:
         """Reproduce the skill for new object positions (paper Table II), within the arm's
         velocity, acceleration and jerk limits.
@@ -554,6 +561,17 @@ class Skill:
             which removes the limit cycle of Gauss-Newton where a tight task constraint meets a
             loose joint constraint (:doc:`/reproduction`, "Stability").
 
+        scene : pbdkit.Scene, optional
+            Obstacles, and shapes for the skill's objects (:doc:`/collisions`): the result has
+            ``clearance`` and ``collisions``; with ``avoid`` the fused controller keeps
+            ``margin`` from them (a clearance constraint in the product, ``influence`` key
+            "clearance") and warns (``CollisionWarning``, ``res.infeasible``) where it
+            cannot. Needs a robot with a collision model.
+        avoid : bool
+            With a scene: keep clear (default) or only check (False).
+        margin : float
+            The clearance kept (m); a run never this close to anything is the run without
+            a scene, to the bit.
         Returns
         -------
         result : ReproductionResult
@@ -587,38 +605,32 @@ class Skill:
             reach=self.reach,
             limits=limits,
             dt=dt,
+            scene=scene,
+            avoid=avoid,
+            margin=margin,
         )
+
+    def check(
+        self,
+        joints: npt.ArrayLike,
+        scene: Scene,
+        *,
+        objects: Mapping[str, npt.ArrayLike] | None = None,
+        gripper: npt.ArrayLike | None = None,
+    ) -> CollisionReport:
+        """Clearance and collisions of any joint trajectory (T, n) of this skill's robot (a
+        bag, another planner's) in ``scene``: :class:`~pbdkit.collision.CollisionReport`.
+        ``objects`` places the skill's objects that have a shape in the scene; ``gripper``
+        (T,), closed where True or > 0.5, tells the grasps (:doc:`/collisions`)."""
+        return CollisionChecker(self.robot, scene, objects).check(joints, gripper)
 
     def _motion_limits(
         self, velocity: LimitSpec, acceleration: LimitSpec, jerk: LimitSpec
     ) -> tuple[float, MotionLimits | None]:
         """The step duration and the limits a reproduction or controller runs within (None:
         none apply)."""
-        dt = self.step_seconds
-        limits = MotionLimits.from_robot(
-            self.robot, self.n_joints, velocity=velocity, acceleration=acceleration, jerk=jerk
-        )
-        if not np.isfinite(dt):
-            explicit = [
-                name
-                for name, spec in (
-                    ("velocity_limit", velocity),
-                    ("acceleration_limit", acceleration),
-                    ("jerk_limit", jerk),
-                )
-                if spec is not None and not (isinstance(spec, str) and spec == "robot")
-            ]
-            if explicit:
-                raise ValueError(
-                    f"{explicit[0]} is per second and needs the duration of a step; it is "
-                    "unknown (the skill has no known duration): pass None, or bound the steps "
-                    "in rad with max_step"
-                )
-            return dt, None
-        if not limits.any:
-            return dt, None
-        return dt, defaults_where_declared(
-            limits, self.robot.joint_names, velocity, acceleration, jerk
+        return run_limits(
+            self.robot, self.n_joints, self.step_seconds, velocity, acceleration, jerk
         )
 
     def motion_limits(
@@ -780,15 +792,5 @@ class Skill:
         # Sizes and keys are checked from the archive's headers before any array is loaded.
         with open_npz(p, what=FORMAT_NAME + " file", max_bytes=MAX_FILE_BYTES) as data:
             stored = read_skill(data, p, robot)
-        return cls(
-            stored.robot,
-            stored.gmms,
-            n_steps=stored.n_steps,
-            object_names=stored.object_names,
-            has_gripper=stored.has_gripper,
-            reach=stored.reach,
-            duration=stored.duration,
-            rotation_base=stored.rotation_base,
-            aligned=stored.aligned,
-            calibration=stored.calibration,
-        )
+        keywords = {f.name: getattr(stored, f.name) for f in dataclasses.fields(stored)}
+        return cls(keywords.pop("robot"), keywords.pop("gmms"), **keywords)

@@ -95,8 +95,10 @@ def skill_arrays(
     n_joints = int(robot.n_joints)
     # The one place a robot is asked what it is: one built from a URDF is rebuilt from it.
     urdf = tip = ""
+    srdf: str | None = None
     if isinstance(robot, RobotDescription):
         urdf, tip = robot.urdf, robot.tip
+        srdf = getattr(robot, "srdf", None)  # a pbdkit.Robot's disabled collision pairs
     limits: dict[str, NDArray[np.float64]] = {}
     for kind, value in (
         ("velocity", robot.velocity_limit),
@@ -120,6 +122,7 @@ def skill_arrays(
         "duration": np.array(duration),
         "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
         "robot_tip": np.array(tip if isinstance(tip, str) else ""),
+        **({"robot_srdf": np.array(srdf)} if isinstance(srdf, str) and srdf else {}),
         **limits,
         # What learning did about timing (optional: files of before it have none).
         "aligned_requested": np.array(aligned.requested),
@@ -190,6 +193,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         duration = float(data["duration"]) if "duration" in data else float("nan")
         urdf = str(data["robot_urdf"])
         tip = str(data["robot_tip"])
+        srdf = str(data["robot_srdf"]) if "robot_srdf" in data else None
         gmms: dict[str, GMM] = {}
         rotation_base: dict[str, Float] = {}
         calibration: dict[str, Float] = {}
@@ -249,10 +253,10 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         from ..robots._robot import Robot
 
         try:
-            robot = Robot.from_urdf(urdf, tip=tip or None)
+            robot = Robot.from_urdf(urdf, tip=tip or None, srdf=srdf)
             if stored_limits and robot.n_joints == n_joints:  # else refused below
                 limits = joint_limits_mapping(robot.joint_names, **stored_limits)
-                robot = Robot.from_urdf(urdf, tip=tip or None, joint_limits=limits)
+                robot = Robot.from_urdf(urdf, tip=tip or None, joint_limits=limits, srdf=srdf)
         except ValueError as exc:
             raise ValueError(
                 f"{p} is not a valid {FORMAT_NAME} file: its robot URDF does not load: {exc}"
@@ -325,6 +329,7 @@ _BASE_KEYS = frozenset(
         "duration",
         "robot_urdf",
         "robot_tip",
+        "robot_srdf",
         "robot_velocity_limit",
         "robot_acceleration_limit",
         "robot_jerk_limit",

@@ -1,0 +1,458 @@
+"""Distances between the arm (with what it carries), a scene and the arm itself (private).
+
+:class:`CollisionChecker` puts a robot's collision model (:attr:`pbdkit.Robot.collision_model`),
+a :class:`~pbdkit.collision.Scene`'s obstacles and the shapes of the skill's objects (at their
+placements) in one world, and measures, per posture, the signed distance of every pair that
+may not touch: the arm's links against each other (the robot's ``self_pairs``), against the
+obstacles and the objects, and a carried object against all of them. A negative distance is a
+penetration (coal's signed distance); a collision is a distance below 0.
+
+**What may touch.** The hand (the bodies on the tip's joint) may touch the objects it grasps.
+A grasped object moves with the hand (rigidly, from the posture where the gripper closes) and
+may touch what it rested on when grasped (its support: within :data:`SUPPORT_GAP`) and what it
+is put on when released (its target). The objects and the obstacles are not checked against
+each other (a glass stands on the table).
+
+**Grasps.** Where the gripper signal closes (False -> True), the object whose shape is nearest
+the tip, within :data:`GRASP_REACH`, is grasped; where it opens, the object stays where the
+hand left it.
+
+**Cost.** Each pair first gets a lower bound from bounding spheres (vectorized); coal's GJK runs
+only on the pairs whose bound is below the smallest distance found so far (or the margin).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+from numpy.typing import NDArray
+
+from .._rotations import as_pose, pose_matrix
+from .._validation import short
+from ..robots._chain import _chain_constants, _chain_frames
+from ._bounds import ShapeTable, lower_bounds
+from ._shapes import Scene
+
+__all__ = ["GRASP_REACH", "SUPPORT_GAP", "CollisionChecker", "CollisionReport", "Proximity"]
+
+Float = NDArray[np.float64]
+
+#: A closing gripper grasps the object whose shape is nearest its tip, if within this (m).
+GRASP_REACH = 0.05
+
+#: A grasped object may touch what lies within this (m) of it when grasped or released.
+SUPPORT_GAP = 0.005
+
+_STATIC = -1  # the joint of a body that does not move with the arm
+
+
+@dataclass(frozen=True, eq=False)
+class CollisionReport:
+    """What :meth:`pbdkit.Skill.check` (and a reproduction with a scene) finds.
+
+    Attributes
+    ----------
+    clearance : ndarray, shape (T,)
+        Per step, the smallest signed distance (m) between the arm (with what it carries) and
+        the scene or itself, over the pairs that may not touch; negative: a penetration.
+    collisions : list of (int, str, str)
+        (step, body, body) for every step and pair closer than 0, the two names sorted (URDF
+        link names, shape names, object names), the list sorted; empty when the run is free.
+    """
+
+    clearance: Float
+    collisions: list[tuple[int, str, str]]
+
+    @property
+    def free(self) -> bool:
+        """True when nothing collides."""
+        return not self.collisions
+
+    @property
+    def min_clearance(self) -> float:
+        """The smallest clearance over the run (m)."""
+        return float(np.min(self.clearance)) if self.clearance.size else float("inf")
+
+
+class Proximity(NamedTuple):
+    """One pair closer than a margin at one posture.
+
+    ``points`` are the nearest points (or, in a penetration, the deepest ones) in the base
+    frame, ``normal`` the unit vector from body 1 towards body 2, and ``joints`` the chain
+    joint each body moves with (0: the base; -1: static).
+    """
+
+    distance: float
+    bodies: tuple[str, str]
+    points: tuple[Float, Float]
+    normal: Float
+    joints: tuple[int, int]
+
+
+class _State(NamedTuple):
+    """What the hand carries (body -> pose in the hand joint's frame) and what it has put
+    down (body -> world pose), over a stretch of a run."""
+
+    carried: dict[int, Float]
+    released: dict[int, Float]
+
+
+@dataclass
+class _Grasp:
+    """One grasp of a run: the object, and the steps where it closes and opens."""
+
+    body: int
+    closes: int
+    opens: int | None
+    allowed: set[int] = field(default_factory=set)
+
+
+class CollisionChecker:
+    """The arm, the scene and the placed objects in one world (see the module docstring).
+
+    Parameters
+    ----------
+    robot : pbdkit.Robot
+        With a collision model (:attr:`pbdkit.Robot.has_collision_model`).
+    scene : Scene
+        Obstacles and object shapes.
+    placements : dict str -> array-like, shape (3,), (4, 4) or (7,), optional
+        Where the objects are; an object with a shape in the scene and no placement here is
+        left out (with its shape).
+    """
+
+    def __init__(
+        self,
+        robot: Any,
+        scene: Scene,
+        placements: Mapping[str, npt.ArrayLike] | None = None,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise ValueError(f"scene must be a pbdkit.Scene, got {type(scene).__name__}")
+        model = robot.collision_model
+        if model is None:
+            raise ValueError(
+                f"robot {short(robot.name)} has no collision model (its URDF has no <collision> "
+                "elements); add them, or check without a scene"
+            )
+        self.robot = robot
+        pin_model = model.model
+        consts = _chain_constants(pin_model, pin_model.createData(), model.tip_frame)
+        self._consts, self._revolute, tip_rot, tip_trans = consts
+        self._tip_local = pose_matrix(tip_trans, tip_rot)
+        self._hand_joint = int(pin_model.frames[model.tip_frame].parentJoint)
+        names: list[str] = []
+        geoms: list[Any] = []
+        joints: list[int] = []
+        local: list[Float] = []
+        for k, obj in enumerate(model.geometry.geometryObjects):
+            names.append(model.links[k])
+            geoms.append(obj.geometry)
+            joints.append(int(obj.parentJoint))
+            local.append(pose_matrix(obj.placement.translation, obj.placement.rotation))
+        self._n_arm = len(names)
+        self._self_pairs = [tuple(p) for p in model.self_pairs]
+        for shape in scene.shapes:
+            names.append(str(shape.name))
+            geoms.append(shape.geometry())
+            joints.append(_STATIC)
+            local.append(np.array(shape.pose))
+        self.object_bodies: dict[str, int] = {}
+        for name, where in (placements or {}).items():
+            if name not in scene.objects:
+                continue
+            shape = scene.objects[name]
+            position, rotation = as_pose(where, f"objects[{short(name)}]")
+            self.object_bodies[name] = len(names)
+            names.append(name)
+            geoms.append(shape.geometry())
+            joints.append(_STATIC)
+            local.append(pose_matrix(position, rotation) @ shape.pose)
+        self.names = names
+        self._geoms = geoms
+        self._joints = np.array(joints)
+        self._local = np.array(local).reshape(-1, 4, 4)
+        self._table = ShapeTable(geoms)
+        import coal
+
+        self._request = coal.DistanceRequest()  # signed distances (coal's default)
+        self._result = coal.DistanceResult()
+        self._functors: dict[tuple[int, int], Any] = {}
+        self._grasps: list[_Grasp] = []
+
+    # ------------------------------------------------------------------ world poses
+
+    def _frames(self, joints: Float) -> tuple[Float, Float]:
+        """Joint frames (M, n + 1, 3, 3), (M, n + 1, 3) of postures (M, n)."""
+        return _chain_frames(joints, self._consts, self._revolute)
+
+    def tip_poses(self, joints: npt.ArrayLike) -> Float:
+        """The tip's transforms (M, 4, 4) at postures (M, n)."""
+        q = np.atleast_2d(np.asarray(joints, dtype=np.float64))
+        rots, origins = self._frames(q)
+        out = np.zeros((q.shape[0], 4, 4))
+        hand_rot = rots[:, self._hand_joint]
+        out[:, :3, :3] = hand_rot @ self._tip_local[:3, :3]
+        out[:, :3, 3] = origins[:, self._hand_joint] + hand_rot @ self._tip_local[:3, 3]
+        out[:, 3, 3] = 1.0
+        return out
+
+    def _poses(
+        self,
+        rots: Float,
+        origins: Float,
+        carried: Mapping[int, Float],
+        released: Mapping[int, Float],
+    ) -> tuple[Float, Float]:
+        """World rotations (M, B, 3, 3) and positions (M, B, 3) of every body at M postures,
+        given their joint frames (M, n + 1, 3, 3), (M, n + 1, 3); ``carried`` maps a body to
+        its pose in the hand joint's frame, ``released`` a body to its world pose."""
+        joint = self._joints.copy()
+        local = self._local.copy()
+        for body, offset in carried.items():
+            joint[body] = self._hand_joint
+            local[body] = offset
+        for body, pose in released.items():
+            local[body] = pose
+        m = rots.shape[0]
+        rot = np.broadcast_to(local[:, :3, :3], (m, *local[:, :3, :3].shape)).copy()
+        pos = np.broadcast_to(local[:, :3, 3], (m, *local[:, :3, 3].shape)).copy()
+        moving = np.flatnonzero(joint >= 0)
+        jr, jp = rots[:, joint[moving]], origins[:, joint[moving]]
+        rot[:, moving] = jr @ local[moving, :3, :3]
+        pos[:, moving] = jp + np.einsum("mbij,bj->mbi", jr, local[moving, :3, 3])
+        return rot, pos
+
+    # ------------------------------------------------------------------ pairs
+
+    def _pairs(self, carried: int | None, held: set[int], allowed: set[int]) -> NDArray[np.intp]:
+        """The pairs checked while ``carried`` is in the hand (None: nothing); ``held``: the
+        objects the hand may touch (those it grasps in the run); ``allowed``: what the carried
+        object may touch."""
+        pairs: list[tuple[int, int]] = list(self._self_pairs)
+        hand = {a for a in range(self._n_arm) if self._joints[a] == self._hand_joint}
+        others = [b for b in range(self._n_arm, len(self.names)) if b != carried]
+        for a in range(self._n_arm):
+            if self._joints[a] == 0:  # fixed to the base, as the scene: mounted, not a collision
+                continue
+            for b in others:
+                if a in hand and b in held:
+                    continue
+                pairs.append((a, b))
+        if carried is not None:
+            for b in range(len(self.names)):
+                if b == carried or b in allowed or b in hand:
+                    continue
+                pairs.append((min(b, carried), max(b, carried)))
+        return np.array(sorted(set(pairs)), dtype=np.intp).reshape(-1, 2)
+
+    def _distance(self, a: int, b: int, rot: Float, pos: Float) -> tuple[float, Any]:
+        """coal's signed distance of bodies a and b at one posture's rot (B, 3, 3), pos (B, 3),
+        and its result (nearest points and normal; valid until the next call)."""
+        import coal
+
+        functor = self._functors.get((a, b))
+        if functor is None:  # coal's cached pair solver: a third of coal.distance's cost
+            functor = self._functors[(a, b)] = coal.ComputeDistance(self._geoms[a], self._geoms[b])
+        result = self._result
+        result.clear()
+        d = functor(
+            coal.Transform3s(rot[a], pos[a]),
+            coal.Transform3s(rot[b], pos[b]),
+            self._request,
+            result,
+        )
+        return float(d), result
+
+    def _scan(
+        self, pairs: NDArray[np.intp], rot: Float, pos: Float, below: float
+    ) -> tuple[Float, list[list[tuple[int, int, float]]]]:
+        """Per posture of rot (M, B, 3, 3), pos (M, B, 3): the smallest distance over
+        ``pairs`` (M,), and the pairs closer than ``below`` with their distances."""
+        m = rot.shape[0]
+        best = np.full(m, np.inf)
+        close: list[list[tuple[int, int, float]]] = [[] for _ in range(m)]
+        if not len(pairs):
+            return best, close
+        bounds = lower_bounds(self._table, pairs, rot, pos)
+        first = np.argmin(bounds, axis=1)
+        for t in range(m):
+            row, rot_t, pos_t = bounds[t], rot[t], pos[t]
+            k0 = int(first[t])
+            d0 = self._distance(int(pairs[k0, 0]), int(pairs[k0, 1]), rot_t, pos_t)[0]
+            found = [(k0, d0)]
+            low = d0
+            for k in np.flatnonzero(row < max(d0, below)):
+                if k == k0:
+                    continue
+                d = self._distance(int(pairs[k, 0]), int(pairs[k, 1]), rot_t, pos_t)[0]
+                found.append((int(k), d))
+                low = min(low, d)
+            best[t] = low
+            close[t] = [(int(pairs[k, 0]), int(pairs[k, 1]), d) for k, d in found if d < below]
+        return best, close
+
+    # ------------------------------------------------------------------ grasps
+
+    def plan_grasps(self, joints: Float, gripper: npt.ArrayLike | None) -> None:
+        """Find the run's grasps from its gripper signal (closed where True or > 0.5): which
+        object each closing takes, and what it may touch (see the module docstring)."""
+        self._grasps = []
+        if gripper is None or not self.object_bodies:
+            return
+        closed = np.asarray(gripper, dtype=np.float64) > 0.5
+        if closed.shape != (joints.shape[0],):
+            raise ValueError(
+                f"gripper must have one value per step ({joints.shape[0]}), got shape "
+                f"{closed.shape}"
+            )
+        edges = np.flatnonzero(np.diff(closed.astype(np.int8)))
+        closes = [int(e) + 1 for e in edges if closed[e + 1]]
+        opens = [int(e) + 1 for e in edges if not closed[e + 1]]
+        tips = self.tip_poses(joints)
+        for k in closes:
+            body = self._nearest_object(tips[k])
+            if body is None:
+                continue
+            release = next((o for o in opens if o > k), None)
+            self._grasps.append(_Grasp(body, k, release))
+        self._plan_contacts(joints)
+
+    def _nearest_object(self, tip: Float) -> int | None:
+        import coal
+
+        probe = coal.Sphere(1e-4)
+        where = coal.Transform3s(np.eye(3), tip[:3, 3])
+        best, found = GRASP_REACH, None
+        for body in self.object_bodies.values():
+            d = coal.distance(
+                probe,
+                where,
+                self._geoms[body],
+                coal.Transform3s(self._local[body, :3, :3], self._local[body, :3, 3]),
+                coal.DistanceRequest(),
+                coal.DistanceResult(),
+            )
+            if d <= best:
+                best, found = d, body
+        return found
+
+    def _offset(self, grasp: _Grasp, tips: Float) -> Float:
+        """The grasped body's pose in the hand joint's frame, fixed where the gripper closes."""
+        hand = tips[grasp.closes] @ np.linalg.inv(self._tip_local)
+        return np.asarray(np.linalg.inv(hand) @ self._local[grasp.body])
+
+    def _plan_contacts(self, joints: Float) -> None:
+        """What each grasped object may touch: what lies within SUPPORT_GAP of it where it is
+        grasped and where it is released."""
+        tips = self.tip_poses(joints)
+        for g in self._grasps:
+            for step in (g.closes, g.opens):
+                if step is None:
+                    continue
+                rots, origins = self._frames(joints[step : step + 1])
+                rot, pos = self._poses(rots, origins, {g.body: self._offset(g, tips)}, {})
+                for b in range(self._n_arm, len(self.names)):
+                    if b != g.body and self._distance(g.body, b, rot[0], pos[0])[0] <= SUPPORT_GAP:
+                        g.allowed.add(b)
+
+    def _segments(self, n_steps: int, tips: Float) -> list[tuple[int, int, _State]]:
+        """The run cut where a grasp closes or opens: (first step, end step, state), the state
+        being what is carried (body -> pose in the hand joint's frame) and what was released
+        (body -> world pose)."""
+        cuts = sorted(
+            {0, n_steps, *(g.closes for g in self._grasps)}
+            | {g.opens for g in self._grasps if g.opens is not None}
+        )
+        out = []
+        for lo, hi in itertools.pairwise(cuts):
+            carried: dict[int, Float] = {}
+            released: dict[int, Float] = {}
+            for g in self._grasps:
+                offset = self._offset(g, tips)
+                if g.closes <= lo and (g.opens is None or lo < g.opens):
+                    carried[g.body] = offset
+                elif g.opens is not None and g.opens <= lo:
+                    hand = tips[g.opens] @ np.linalg.inv(self._tip_local)
+                    released[g.body] = hand @ offset
+            out.append((lo, hi, _State(carried, released)))
+        return out
+
+    # ------------------------------------------------------------------ checks
+
+    def check(self, joints: npt.ArrayLike, gripper: npt.ArrayLike | None = None) -> CollisionReport:
+        """Clearance and collisions along a joint trajectory (T, n) (see
+        :class:`CollisionReport`); ``gripper`` (T,) is the gripper signal, for the grasps."""
+        q = np.atleast_2d(self.robot.check_joints(joints, "joints"))
+        self.plan_grasps(q, gripper)
+        rots, origins = self._frames(q)
+        tips = self.tip_poses(q)
+        clearance = np.empty(q.shape[0])
+        collisions: set[tuple[int, str, str]] = set()
+        for lo, hi, state in self._segments(q.shape[0], tips):
+            pairs = self._state_pairs(state)
+            rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
+            clearance[lo:hi], close = self._scan(pairs, rot, pos, 0.0)
+            for t, found in enumerate(close):
+                for a, b, _ in found:
+                    first, second = sorted((self.names[a], self.names[b]))
+                    collisions.add((lo + t, first, second))
+        return CollisionReport(clearance, sorted(collisions))
+
+    def _state_pairs(self, state: _State) -> NDArray[np.intp]:
+        carried = next(iter(state.carried), None)
+        allowed: set[int] = set()
+        for g in self._grasps:
+            if g.body == carried:
+                allowed = g.allowed
+        return self._pairs(carried, {g.body for g in self._grasps}, allowed)
+
+    def near(
+        self,
+        q: Float,
+        margin: float,
+        carried: Mapping[int, Float] | None = None,
+        released: Mapping[int, Float] | None = None,
+    ) -> list[Proximity]:
+        """The pairs closer than ``margin`` at one posture q (n,), with their nearest points,
+        given what the hand carries (body -> pose in the hand joint's frame) and where released
+        objects lie (body -> world pose). The grasps are those of the last :meth:`check` or
+        :meth:`plan_grasps`."""
+        state = _State(dict(carried or {}), dict(released or {}))
+        pairs = self._state_pairs(state)
+        if not len(pairs):
+            return []
+        rots, origins = self._frames(q[None])
+        rot, pos = self._poses(rots, origins, state.carried, state.released)
+        bounds = lower_bounds(self._table, pairs, rot, pos)[0]
+        joint = self._joints.copy()
+        for body in state.carried:
+            joint[body] = self._hand_joint
+        out: list[Proximity] = []
+        for k in np.flatnonzero(bounds < margin):
+            a, b = int(pairs[k, 0]), int(pairs[k, 1])
+            d, result = self._distance(a, b, rot[0], pos[0])
+            if d < margin:
+                out.append(
+                    Proximity(
+                        d,
+                        (self.names[a], self.names[b]),
+                        (
+                            np.array(result.getNearestPoint1(), dtype=np.float64),
+                            np.array(result.getNearestPoint2(), dtype=np.float64),
+                        ),
+                        np.array(result.normal, dtype=np.float64),
+                        (int(joint[a]), int(joint[b])),
+                    )
+                )
+        return out
+
+    @property
+    def grasps(self) -> list[tuple[str, int, int | None]]:
+        """(object, closing step, opening step or None) of the last check's grasps."""
+        return [(self.names[g.body], g.closes, g.opens) for g in self._grasps]

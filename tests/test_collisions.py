@@ -1,0 +1,233 @@
+"""Checking a trajectory against a scene and the arm itself (issue 38, item 3): the clearance
+against a brute-force computation through pinocchio's own geometry placements, the grasps,
+the allowed contacts, and the bad inputs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pbdkit.collision import Box, CollisionChecker, Cylinder, Scene, Sphere
+from pbdkit.data._demonstration import Demonstration
+from pbdkit.motion._limits import MotionLimits
+from pbdkit.reproduction._avoid import SIGMA_0, SIGMA_SLOPE, Avoidance
+from pbdkit.reproduction._probabilistic_ik import CollisionWarning
+from pbdkit.reproduction._result import ReproductionResult
+from pbdkit.robots import katana, panda, urdf_from_dh
+from pbdkit.robots._robot import Robot
+from pbdkit.skill._skill import Skill
+
+
+def _scene() -> Scene:
+    return Scene(
+        [
+            Box((1.3, 1.5, 0.04), (0.25, 0.0, -0.02), name="table"),
+            Sphere(0.05, (0.3, 0.0, 0.25), name="ball"),
+            Box((0.1, 0.2, 0.3), (0.2, 0.25, 0.15, 0.9238795, 0.0, 0.0, 0.3826834), name="crate"),
+            Cylinder(0.03, 0.5, (0.0, -0.3, 0.25), name="post"),
+        ]
+    )
+
+
+def _brute_force(robot: Robot, scene: Scene, joints: np.ndarray) -> np.ndarray:
+    """The clearance through pinocchio: geometry placed by pin.updateGeometryPlacements, every
+    pair measured (no bound, no culling), the same pairs the checker means."""
+    cm = robot.collision_model
+    assert cm is not None
+    model, geom = cm.model, cm.geometry.copy()
+    n_arm = len(geom.geometryObjects)
+    for shape in scene.shapes:
+        placement = pin.SE3(shape.pose[:3, :3].copy(), shape.pose[:3, 3].copy())
+        geom.addGeometryObject(pin.GeometryObject(str(shape.name), 0, placement, shape.geometry()))
+    pairs = [tuple(p) for p in cm.self_pairs]
+    for a in range(n_arm):
+        if geom.geometryObjects[a].parentJoint == 0:
+            continue
+        pairs += [(a, b) for b in range(n_arm, n_arm + len(scene.shapes))]
+    for a, b in pairs:
+        geom.addCollisionPair(pin.CollisionPair(a, b))
+    data, gdata = model.createData(), pin.GeometryData(geom)
+    out = np.empty(joints.shape[0])
+    for t, q in enumerate(joints):
+        pin.updateGeometryPlacements(model, data, geom, gdata, q)
+        pin.computeDistances(geom, gdata)
+        out[t] = min(r.min_distance for r in gdata.distanceResults)
+    return out
+
+
+@pytest.mark.parametrize("make", [katana, panda], ids=["katana", "panda"])
+def test_the_clearance_is_pinocchios_over_every_pair(make: object) -> None:
+    robot = make()  # type: ignore[operator]
+    rng = np.random.default_rng(7)
+    joints = rng.uniform(robot.lower, robot.upper, (300, robot.n_joints))
+    scene = _scene()
+    report = CollisionChecker(robot, scene).check(joints)
+    expected = _brute_force(robot, scene, joints)
+    np.testing.assert_allclose(report.clearance, expected, atol=1e-6)
+    # Random postures hit the table, the post or the arm itself: there is something to find.
+    colliding = np.flatnonzero(expected < 0.0)
+    assert colliding.size > 10
+    assert {c[0] for c in report.collisions} == set(colliding.tolist())
+
+
+def test_a_collision_names_its_step_and_bodies_sorted() -> None:
+    robot = katana()
+    q = np.zeros((3, robot.n_joints))
+    hand = robot.fk(q[0])
+    # A ball at the tool point, 2 cm past the end of the gripper's box: a 3 cm ball reaches in.
+    scene = Scene([Sphere(0.03, hand, name="ball")])
+    report = CollisionChecker(robot, scene).check(q)
+    assert report.collisions == [(t, "ball", "gripper") for t in range(3)]
+    assert not report.free and report.min_clearance < 0.0
+    far = CollisionChecker(robot, Scene([Sphere(0.02, hand + np.array([0.0, 0.0, 2.0]))])).check(q)
+    alone = CollisionChecker(robot, Scene()).check(q)  # the arm against itself
+    assert far.free and alone.free
+    np.testing.assert_array_equal(far.clearance, alone.clearance)
+
+
+def test_the_base_on_its_table_is_not_a_collision() -> None:
+    robot = katana()
+    table = Scene([Box((1.0, 1.0, 0.04), (0.0, 0.0, -0.02), name="table")])
+    q = np.zeros((1, robot.n_joints))
+    report = CollisionChecker(robot, table).check(q)
+    assert report.free, report.collisions
+
+
+def test_a_grasped_object_moves_with_the_hand_and_may_touch_its_support() -> None:
+    robot = katana()
+    rng = np.random.default_rng(2)
+    start = (robot.lower + robot.upper) / 2
+    end = start + rng.uniform(-0.3, 0.3, robot.n_joints)
+    joints = np.linspace(start, end, 50)
+    glass_at = robot.fk(start)
+    # The glass stands on a stand, the hand closes on it at step 10 and opens at step 40.
+    scene = Scene(
+        [Box((0.1, 0.1, 0.02), glass_at - [0.0, 0.0, 0.06], name="stand")],
+        objects={"glass": Cylinder(0.03, 0.1, (0.0, 0.0, 0.0))},
+    )
+    gripper = np.zeros(50)
+    gripper[10:40] = 1.0
+    joints[:10] = start  # the hand waits at the glass until it closes
+    checker = CollisionChecker(robot, scene, {"glass": glass_at})
+    report = checker.check(joints, gripper)
+    assert checker.grasps == [("glass", 10, 40)]
+    # The hand holds the glass (allowed), the glass rests on the stand at the grasp (allowed).
+    assert not any("glass" in c and "gripper" in c for c in report.collisions)
+    assert not any(c[1:] == ("glass", "stand") for c in report.collisions)
+    # After the release the glass stays where the hand left it: the arm is near it at step 40.
+    tips = checker.tip_poses(joints)
+    left_at = tips[40, :3, 3]
+    assert np.linalg.norm(left_at - glass_at) > 0.02  # it was carried away
+
+
+def test_a_robot_without_a_collision_model_is_refused() -> None:
+    robot = Robot.from_urdf(
+        urdf_from_dh([(0.0, 0.0, 0.3, 0.0), (0.2, 0.0, 0.0, 0.0)], lower=[-1, -1], upper=[1, 1])
+    )
+    with pytest.raises(ValueError, match="has no collision model"):
+        CollisionChecker(robot, Scene())
+
+
+# ----------------------------------------------------------------------------- avoidance
+def _mid_carry(res: ReproductionResult) -> np.ndarray:
+    """The hand where it moves fastest while it holds the glass."""
+    speed = np.linalg.norm(np.diff(res.positions, axis=0), axis=1)
+    closed = np.flatnonzero(res.gripper[:-1])
+    return np.asarray(res.positions[closed[np.argmax(speed[closed])]])
+
+
+@pytest.fixture(scope="module")
+def plain(skill: Skill, demos: list[Demonstration]) -> tuple[dict[str, np.ndarray], object]:
+    objects = {"glass": np.mean([d.objects["glass"] for d in demos], axis=0)}
+    return objects, skill.reproduce(objects)
+
+
+def test_a_box_far_from_the_path_changes_no_joint(skill: Skill, plain: tuple) -> None:
+    objects, res = plain
+    far = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res) + np.array([0.0, 0.0, 0.6]), name="far")])
+    with_scene = skill.reproduce(objects, scene=far)
+    assert np.max(np.abs(with_scene.joints - res.joints)) <= 1e-9
+    assert with_scene.collisions == [] and with_scene.infeasible is None
+    assert with_scene.clearance is not None and with_scene.clearance.shape == res.t.shape
+    assert not np.any(with_scene.influence["clearance"])
+    assert res.clearance is None and "clearance" not in res.influence
+
+
+def test_a_box_in_the_carry_is_avoided_within_the_limits(
+    skill: Skill, plain: tuple, limits: MotionLimits
+) -> None:
+    objects, res = plain
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    checked = skill.reproduce(objects, scene=box, avoid=False)
+    np.testing.assert_array_equal(checked.joints, res.joints)  # check only
+    assert any("box" in c for c in checked.collisions)
+    avoided = skill.reproduce(objects, scene=box)
+    assert avoided.collisions == [] and avoided.infeasible is None
+    assert avoided.clearance is not None and avoided.clearance.min() > 0.005
+    # The skill's own constraint still holds where it is tight: the grasp and the end.
+    grasp = int(np.flatnonzero(res.gripper)[0])
+    for k in (grasp, -1):
+        err, err0 = avoided.task_errors["glass"][k], res.task_errors["glass"][k]
+        assert err <= err0 + 1e-3, (k, err, err0)
+    # The clearance took a share where it pushed; it is not a constraint of the skill.
+    assert avoided.influence["clearance"].max() > 0.05
+    assert "clearance" not in avoided.used and "clearance" not in skill.constraint_names
+    total = sum(avoided.influence.values())
+    np.testing.assert_allclose(total, 1.0, atol=1e-9)
+    # Timed within the arm's limits, as any reproduction.
+    assert avoided.velocities is not None and avoided.times is not None
+    assert np.all(np.abs(avoided.velocities) <= limits.velocity * (1 + 1e-6))
+    report = skill.check(avoided.joints, box)
+    np.testing.assert_allclose(report.clearance, avoided.clearance)
+
+
+def test_a_glass_inside_a_box_is_reported_infeasible(skill: Skill, plain: tuple) -> None:
+    objects, _ = plain
+    inside = Scene([Box((0.12, 0.12, 0.12), objects["glass"], name="crate")])
+    with pytest.warns(CollisionWarning, match=r"crate and gripper collide from sample \d+"):
+        out = skill.reproduce(objects, scene=inside)
+    assert out.infeasible is not None and "crate" in out.infeasible
+    assert any("crate" in c for c in out.collisions)
+
+
+def test_the_clearance_row_is_the_distances_derivative(skill: Skill, plain: tuple) -> None:
+    _, res = plain
+    robot = skill.robot
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    checker = CollisionChecker(robot, box)
+    avoid = Avoidance(checker, margin=0.05)
+    rng = np.random.default_rng(4)
+    checked = 0
+    for t in range(len(res.t)):
+        q = res.joints[t]
+        near = checker.near(q, 0.05)
+        if not near or near[0].distance <= 0.0:
+            continue
+        prox = near[0]
+        terms = avoid.terms(t + 1, q)
+        assert terms is not None
+        lam, _ = terms
+        dq = rng.normal(size=q.shape) * 1e-5
+        d1 = checker.near(q + dq, 1.0)
+        after = next(p.distance for p in d1 if p.bodies == prox.bodies)
+        # Lambda = w r^T r with one pair: r dq = +-sqrt(dq^T Lambda dq / w)
+        sigma = SIGMA_0 + SIGMA_SLOPE * prox.distance
+        predicted = np.sqrt(dq @ lam @ dq) * sigma
+        assert abs(abs(after - prox.distance) - predicted) <= 0.05 * predicted + 1e-9
+        checked += 1
+    assert checked >= 3
+
+
+def test_a_result_with_a_scene_round_trips(skill: Skill, plain: tuple, tmp_path: Path) -> None:
+    objects, res = plain
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    checked = skill.reproduce(objects, scene=box, avoid=False)
+    path = tmp_path / "res.npz"
+    checked.save(path)
+    back = ReproductionResult.load(path)
+    assert back.clearance is not None
+    np.testing.assert_array_equal(back.clearance, checked.clearance)
+    assert back.collisions == checked.collisions and back.used == checked.used
