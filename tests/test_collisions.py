@@ -13,7 +13,7 @@ import pytest
 from pbdkit.collision import Box, CollisionChecker, Cylinder, Scene, Sphere
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion._limits import MotionLimits
-from pbdkit.reproduction._avoid import SIGMA_0, SIGMA_SLOPE, Avoidance
+from pbdkit.reproduction._avoid import SIGMA, Avoidance
 from pbdkit.reproduction._probabilistic_ik import CollisionWarning
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.robots import katana, panda, urdf_from_dh
@@ -193,30 +193,37 @@ def test_a_glass_inside_a_box_is_reported_infeasible(skill: Skill, plain: tuple)
     assert any("crate" in c for c in out.collisions)
 
 
-def test_the_clearance_row_is_the_distances_derivative(skill: Skill, plain: tuple) -> None:
+def test_the_clearance_gaussian_is_the_distances_linearization(skill: Skill, plain: tuple) -> None:
+    # r = d(distance)/d(theta) against central differences of coal's distance; the Gaussian
+    # is r theta ~ N(r q + m - d, SIGMA^2): Lambda = r^T r / SIGMA^2, information
+    # Lambda q + r (m - d) / SIGMA^2.
     _, res = plain
-    robot = skill.robot
-    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
-    checker = CollisionChecker(robot, box)
-    avoid = Avoidance(checker, margin=0.05)
-    rng = np.random.default_rng(4)
+    checker = CollisionChecker(skill.robot, Scene([Box((0.06, 0.06, 0.06), _mid_carry(res))]))
+    margin = 0.05
+    avoid = Avoidance(checker, margin=margin)
     checked = 0
-    for t in range(len(res.t)):
-        q = res.joints[t]
-        near = checker.near(q, 0.05)
+    for q in res.joints[::3]:
+        near = checker.near(q, margin)
         if not near or near[0].distance <= 0.0:
             continue
         prox = near[0]
-        terms = avoid.terms(t + 1, q)
+        terms = avoid._gaussians(q, [(prox, 1.0)])
         assert terms is not None
-        lam, _ = terms
-        dq = rng.normal(size=q.shape) * 1e-5
-        d1 = checker.near(q + dq, 1.0)
-        after = next(p.distance for p in d1 if p.bodies == prox.bodies)
-        # Lambda = w r^T r with one pair: r dq = +-sqrt(dq^T Lambda dq / w)
-        sigma = SIGMA_0 + SIGMA_SLOPE * prox.distance
-        predicted = np.sqrt(dq @ lam @ dq) * sigma
-        assert abs(abs(after - prox.distance) - predicted) <= 0.05 * predicted + 1e-9
+        lam, info = terms
+        h = 1e-6
+        r = np.empty(q.shape)
+        for i in range(q.shape[0]):
+            dq = np.zeros(q.shape)
+            dq[i] = h
+            up = checker.near(q + dq, 1.0, include={prox.bodies})
+            down = checker.near(q - dq, 1.0, include={prox.bodies})
+            d_up = next(p.distance for p in up if p.bodies == prox.bodies)
+            d_down = next(p.distance for p in down if p.bodies == prox.bodies)
+            r[i] = (d_up - d_down) / (2 * h)
+        w = 1.0 / SIGMA**2
+        np.testing.assert_allclose(lam, w * np.outer(r, r), rtol=1e-4, atol=1e-3 * w * r @ r)
+        expected = lam @ q + w * r * (margin - prox.distance)
+        np.testing.assert_allclose(info, expected, rtol=1e-4, atol=1e-4 * np.abs(expected).max())
         checked += 1
     assert checked >= 3
 

@@ -245,7 +245,7 @@ def test_a_perturbation_is_one_registry_entry(coaster: TaskSkill) -> None:
         # The command line's choices and help come from the registry.
         r = CliRunner().invoke(app, ["evaluate", "--perturb", "shake"])
         said = " ".join(r.output.replace("│", " ").split())  # the error box's lines wrap
-        assert r.exit_code == 2 and "must be one of none, move, push, rotate, tap" in said
+        assert r.exit_code == 2 and "must be one of none, move, push, rotate, obstacle, tap" in said
         r = CliRunner().invoke(app, ["evaluate", "--help"])
         words = " ".join(r.output.replace("│", " ").split())  # the help's lines wrap
         assert "or tap (a 1 N tap on the gripper at the grasp)." in words

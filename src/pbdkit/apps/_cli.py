@@ -385,6 +385,15 @@ def evaluate(
     constrain_fixed: ConstrainFixedOption = False,
     online: OnlineOption = False,
     perturb: PerturbOption = "none",
+    avoid_scene: Annotated[
+        bool,
+        typer.Option(
+            "--avoid-scene",
+            help="The fused controller keeps clear of the task's whole scene (the table, the "
+            "shelf, the walls), not only --perturb obstacle's box. Every run is checked "
+            "against the scene either way (collision_rate, min_clearance_m). Offline only.",
+        ),
+    ] = False,
     controller: Annotated[
         list[str] | None,
         typer.Option(
@@ -445,6 +454,7 @@ def evaluate(
             controllers=controller or None,
             workers=workers,
             scheduler=scheduler,
+            avoid_scene=avoid_scene,
         )
     if json_path is not None:
         write_json(json_path, result.as_dict())

@@ -24,7 +24,7 @@ only on the pairs whose bound is below the smallest distance found so far (or th
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -385,9 +385,17 @@ class CollisionChecker:
 
     # ------------------------------------------------------------------ checks
 
-    def check(self, joints: npt.ArrayLike, gripper: npt.ArrayLike | None = None) -> CollisionReport:
+    def check(
+        self,
+        joints: npt.ArrayLike,
+        gripper: npt.ArrayLike | None = None,
+        *,
+        contact: float = 0.0,
+    ) -> CollisionReport:
         """Clearance and collisions along a joint trajectory (T, n) (see
-        :class:`CollisionReport`); ``gripper`` (T,) is the gripper signal, for the grasps."""
+        :class:`CollisionReport`); ``gripper`` (T,) is the gripper signal, for the grasps;
+        ``contact``: a pair closer than this (m) is a collision (0: penetrating only; a
+        measured run that stops at a contact touches at about 1 mm)."""
         q = np.atleast_2d(self.robot.check_joints(joints, "joints"))
         self.plan_grasps(q, gripper)
         rots, origins = self._frames(q)
@@ -397,7 +405,7 @@ class CollisionChecker:
         for lo, hi, state in self._segments(q.shape[0], tips):
             pairs = self._state_pairs(state)
             rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
-            clearance[lo:hi], close = self._scan(pairs, rot, pos, 0.0)
+            clearance[lo:hi], close = self._scan(pairs, rot, pos, float(contact))
             for t, found in enumerate(close):
                 for a, b, _ in found:
                     first, second = sorted((self.names[a], self.names[b]))
@@ -418,11 +426,14 @@ class CollisionChecker:
         margin: float,
         carried: Mapping[int, Float] | None = None,
         released: Mapping[int, Float] | None = None,
+        *,
+        include: Collection[tuple[str, str]] = (),
     ) -> list[Proximity]:
         """The pairs closer than ``margin`` at one posture q (n,), with their nearest points,
         given what the hand carries (body -> pose in the hand joint's frame) and where released
-        objects lie (body -> world pose). The grasps are those of the last :meth:`check` or
-        :meth:`plan_grasps`."""
+        objects lie (body -> world pose), and the pairs ``include`` names (body names, as in
+        :attr:`Proximity.bodies`) at any distance. The grasps are those of the last
+        :meth:`check` or :meth:`plan_grasps`."""
         state = _State(dict(carried or {}), dict(released or {}))
         pairs = self._state_pairs(state)
         if not len(pairs):
@@ -434,10 +445,15 @@ class CollisionChecker:
         for body in state.carried:
             joint[body] = self._hand_joint
         out: list[Proximity] = []
-        for k in np.flatnonzero(bounds < margin):
+        wanted = set(include)
+        names = self.names
+        for k in range(len(pairs)):
             a, b = int(pairs[k, 0]), int(pairs[k, 1])
+            always = bool(wanted) and (names[a], names[b]) in wanted
+            if bounds[k] >= margin and not always:
+                continue
             d, result = self._distance(a, b, rot[0], pos[0])
-            if d < margin:
+            if d < margin or always:
                 out.append(
                     Proximity(
                         d,

@@ -38,10 +38,10 @@ import numpy as np
 import numpy.typing as npt
 
 from .._validation import check_positive_float
-from ..collision import CollisionChecker, Scene
+from ..collision import CollisionChecker, CollisionReport, Scene
 from ..motion._limits import MotionLimits
 from ..robots._protocols import KinematicModel
-from ._avoid import DEFAULT_MARGIN, Avoidance
+from ._avoid import DEFAULT_MARGIN, MAX_PASSES, TOLERANCE, Avoidance
 from ._constraints import JOINT, Constraints
 from ._result import ReproductionResult
 from ._setup import RunOptions, RunSetup, setup_run
@@ -144,6 +144,35 @@ def _run(
     return _path_result(robot, run, run.constraints.t.copy(), path)
 
 
+def _avoid_passes(
+    robot: KinematicModel,
+    run: RunSetup,
+    res: ReproductionResult,
+    checker: CollisionChecker,
+    margin: float,
+    timing: tuple[MotionLimits | None, float | None, bool],
+) -> tuple[ReproductionResult, CollisionReport]:
+    """The passes of :mod:`._avoid`: Table II again with the pairs each pass catches, until
+    the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the largest smallest
+    clearance) and its check."""
+    avoidance = Avoidance(checker, margin)
+    run = dataclasses.replace(run, avoid=avoidance)
+    best: tuple[ReproductionResult, CollisionReport] | None = None
+    for _ in range(MAX_PASSES):
+        own = ~res.lead_in if res.lead_in is not None else np.ones(len(res.t), dtype=bool)
+        signal = None if res.gripper_signal is None else res.gripper_signal[own]
+        checker.plan_grasps(res.joints[own], signal)
+        avoidance.update(res.joints[own], signal)
+        res = _run(robot, run, *timing)
+        report = checker.check(res.joints, res.gripper_signal)
+        if best is None or report.min_clearance > best[1].min_clearance:
+            best = (res, report)
+        if report.min_clearance >= margin - TOLERANCE:
+            break
+    assert best is not None
+    return best
+
+
 def _with_scene(
     robot: KinematicModel,
     run: RunSetup,
@@ -166,12 +195,7 @@ def _with_scene(
         )
     if fused:
         if report.min_clearance < margin:
-            own = ~res.lead_in if res.lead_in is not None else np.ones(len(res.t), dtype=bool)
-            signal = None if res.gripper_signal is None else res.gripper_signal[own]
-            checker.plan_grasps(res.joints[own], signal)
-            avoidance = Avoidance(checker, margin)
-            res = _run(robot, dataclasses.replace(run, avoid=avoidance), *timing)
-            report = checker.check(res.joints, res.gripper_signal)
+            res, report = _avoid_passes(robot, run, res, checker, margin, timing)
         else:
             zero = np.zeros(len(res.t))
             res = dataclasses.replace(

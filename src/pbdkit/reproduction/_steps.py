@@ -45,6 +45,10 @@ MAX_HALVINGS = 8
 
 #: The clearance constraint's key in a result's influence (never a constraint name).
 CLEARANCE = "clearance"
+#: Where the clearance acts, the trust region is this many times ``max_step``: the passes
+#: linearize the clearance again at each path, and a tight trust region keeps a pass from
+#: leaving where the one before it pushed (docs: "Collisions").
+CLEARANCE_STEP = 6.0
 
 
 class LoopOutput(NamedTuple):
@@ -283,8 +287,10 @@ class FusedStep(ControllerStep):
         # Solve for the new posture directly: sum_c Lambda_c (theta + dtheta_c)
         # = eta_joint + J^T (h - P x) + J^T P J theta = eta_joint + J^T h + A (J theta - x).
         rhs = self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x)
-        clearance = None if self.avoid is None else self.avoid.terms(j, theta)
-        if clearance is not None:  # one more Gaussian: its precision and information add
+        # The clearance, where a pass caught a pair at this step: one more Gaussian, whose
+        # precision and information add (docs: "Collisions").
+        clearance = None if self.avoid is None else self.avoid.terms(j)
+        if clearance is not None:
             lam_j = lam_j + clearance[0]
             rhs = rhs + clearance[1]
         _, target, info = dposv(lam_j, rhs)
@@ -312,7 +318,14 @@ class FusedStep(ControllerStep):
         else:
             step2 = step.dot(step)
         limited = False
-        if step2 > self.free2:  # velocity bound, trust region of the linearization
+        # Velocity bound, trust region of the linearization; not where the clearance acts:
+        # the passes linearize it again at each path (docs: "Collisions").
+        if clearance is not None:
+            bound = CLEARANCE_STEP * self.max_step
+            if step2 > bound * bound:
+                target = theta + step * (bound / np.sqrt(step2))
+                limited = True
+        elif step2 > self.free2:
             scale = _step_scale(step, step2, self.step_limit, self.max_step)
             if scale < 1.0:
                 target = theta + step * scale
@@ -421,7 +434,10 @@ def _fused_loop(
         # The clearance acts on link points, not on the hand: its share is its joint-space
         # one in both spaces, taken from the joint constraint's rest (docs: "Collisions").
         influence_js[CLEARANCE] = np.einsum("tij,tji->t", cov, clearance) / n
-        influence[CLEARANCE] = influence_js[CLEARANCE]
+        influence[CLEARANCE] = influence_js[CLEARANCE].copy()
+        # Shares of two spaces: where they add up to more than 1, scaled down to 1.
+        total = np.maximum(sum(influence.values()), 1.0)
+        influence = {k: v / total for k, v in influence.items()}
     rest = 1.0 - sum(influence.values())
     influence = {JOINT: np.clip(rest, 0.0, 1.0), **influence}
     mask = _limited_mask(n_steps - start, limited)

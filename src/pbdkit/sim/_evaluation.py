@@ -48,11 +48,31 @@ class ControllerStats:
         ``following_error_rad``, the servo stream's ``peak_*_ratio`` and ``peak_*``),
         ``{"mean", "median", "max"}`` over the trials where it is defined (None where it
         never is): for a peak ratio, ``max`` is the worst trial.
+    collision_rate : float or None
+        The share of the trials whose run touched something it may not (the task's scene,
+        :mod:`pbdkit.sim._obstacle`); None for a task without a scene.
+    min_clearance_m : float or None
+        The smallest clearance (m) over every trial's run (negative: a penetration).
     """
 
     success_rate: float
     successes: int
     metrics: dict[str, dict[str, float] | None]
+    collision_rate: float | None = None
+    min_clearance_m: float | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"success_rate", "successes", "metrics"}``, and with a scene
+        ``"collision_rate"`` and ``"min_clearance_m"``."""
+        out: dict[str, Any] = {
+            "success_rate": self.success_rate,
+            "successes": self.successes,
+            "metrics": self.metrics,
+        }
+        if self.collision_rate is not None:
+            out["collision_rate"] = self.collision_rate
+            out["min_clearance_m"] = self.min_clearance_m
+        return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -92,8 +112,8 @@ class Evaluation:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready: ``{"task", "trials", "seed", "n_demos", "n_components", "constraints",
-        "constrain_fixed", "learn_seconds", "vision", "online", "perturb", "controllers":
-        {NAME: {"success_rate", "successes", "metrics"}}, "tracking_error_mm",
+        "constrain_fixed", "learn_seconds", "vision", "online", "perturb", "avoid_scene",
+        "controllers": {NAME: ControllerStats.as_dict()}, "tracking_error_mm",
         "tracking_failures", "placements", "observed", "perturbations", "runs"}`` (``runs``:
         per controller, one summary per trial; ``perturbations``: one disturbance per
         trial); for a task with objects placed as poses (:attr:`posed`), also
@@ -113,10 +133,8 @@ class Evaluation:
             "vision": self.vision,
             "online": self.conditions.online,
             "perturb": self.conditions.perturb,
-            "controllers": {
-                k: {"success_rate": v.success_rate, "successes": v.successes, "metrics": v.metrics}
-                for k, v in self.controllers.items()
-            },
+            "avoid_scene": self.conditions.avoid_scene,
+            "controllers": {k: v.as_dict() for k, v in self.controllers.items()},
             "tracking_error_mm": self.tracking_error_mm,
             "tracking_failures": self.tracking_failures,
             "placements": [{k: v.tolist() for k, v in t.truth.items()} for t in self.trials],
@@ -156,7 +174,7 @@ def summarize(
                 k
                 for r in rows
                 for k, v in r.items()
-                if k != "success" and (v is None or isinstance(v, (int, float)))
+                if k not in ("success", "collided") and (v is None or isinstance(v, (int, float)))
             )
         )
         metrics: dict[str, dict[str, float] | None] = {}
@@ -171,8 +189,17 @@ def summarize(
                 if len(vals)
                 else None
             )
+        checked = [r for r in rows if "collided" in r]
         stats[name] = ControllerStats(
-            success_rate=successes / len(rows), successes=successes, metrics=metrics
+            success_rate=successes / len(rows),
+            successes=successes,
+            metrics=metrics,
+            collision_rate=(
+                sum(bool(r["collided"]) for r in checked) / len(checked) if checked else None
+            ),
+            min_clearance_m=(
+                float(min(r["min_clearance_m"] for r in checked)) if checked else None
+            ),
         )
     errors = [t.tracking_error_mm for t in trials if t.tracking_error_mm is not None]
     # The yaw error of the tracked objects placed as poses (4x4 placements), where the
@@ -216,6 +243,7 @@ def evaluate(
     perturb: str = "none",
     workers: int | None = None,
     scheduler: str | None = None,
+    avoid_scene: bool = False,
 ) -> Evaluation:
     """Success rate of every controller over ``trials`` random new placements.
 
@@ -257,6 +285,9 @@ def evaluate(
     workers, scheduler
         Run the trials in parallel (:func:`run_trials`): ``workers`` local processes, or on
         the Dask cluster at ``scheduler``. The results are those of the serial run.
+    avoid_scene : bool
+        The fused controller avoids the task's whole scene, not only ``"obstacle"``'s box
+        (offline only; :attr:`TrialConditions.avoid_scene`).
 
     Returns
     -------
@@ -266,7 +297,11 @@ def evaluate(
     spec = get_task(task)
     trials = check_int(trials, "trials", minimum=1, maximum=MAX_TRIALS)
     conditions = TrialConditions(
-        online=online, perturb=perturb, ground_truth=ground_truth, seed=seed
+        online=online,
+        perturb=perturb,
+        ground_truth=ground_truth,
+        seed=seed,
+        avoid_scene=avoid_scene,
     )
     check_perturb(conditions.perturb, spec)
     # The cluster starts first: its workers import while the skill is learned here.

@@ -31,6 +31,9 @@ time of the first step where the skill's generalized gripper command closes.
   inside the object's yaw range (the demonstrated range). An offline trajectory, planned for the
   tray's first yaw, puts the block in at that yaw; the online controller is told the turned pose
   and follows it.
+- ``"obstacle"``: a 5 cm cube, static, centred on the fused controller's path (reproduced
+  without avoidance for the trial's placement) at its mid-carry step; the fused controller
+  avoids it, the others meet it (:mod:`pbdkit.sim._obstacle`).
 - ``"push"``: a horizontal force of 40 N on the gripper for 0.3 s, starting halfway to the
   grasp (``t_grasp / 2``), across the arm (perpendicular to the vertical plane through the
   base axis and the grasped object, :attr:`pbdkit.sim.TaskSpec.grasped`), with a random
@@ -50,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import short
+from ..collision import Box
 from ._registry import Registry
 from ._scene import Simulation
 from ._tasks import TaskSpec, yaw_of
@@ -81,6 +85,9 @@ PUSH_BODY = "gripper"
 SLIDE_DURATION = 1.0  # s
 #: ``"rotate"`` while carried: the turn starts this long after ``t_grasp`` (s; module docstring).
 TURN_DELAY = 1.0
+#: ``"obstacle"``: the side of its cube (m), and its name in the scene and collision reports.
+OBSTACLE_SIZE = 0.05
+OBSTACLE_NAME = "obstacle"
 
 
 class Disturbance:
@@ -312,6 +319,8 @@ class DisturbanceSetup:
         The skill's generalized gripper command.
     rng : numpy.random.Generator
         The trial's own stream for the disturbance's draws (the same for every controller).
+    skill : pbdkit.Skill, optional
+        The trial's skill (``"obstacle"`` reproduces it to find its path).
     """
 
     task: TaskSpec
@@ -319,6 +328,7 @@ class DisturbanceSetup:
     times: Float
     gripper: Float | None
     rng: np.random.Generator
+    skill: Any = None
 
     def grasp_time(self) -> float:
         """``t_grasp``: :func:`grasp_time` of the skill's command (ValueError if it never
@@ -542,5 +552,62 @@ register_perturbation(
         "20-30 degrees while the block is carried",
         _turn,
         check=_has_rotate,
+    )
+)
+
+
+def _has_scene(spec: TaskSpec) -> None:
+    if spec.scene is None:
+        raise ValueError(
+            f"task {short(spec.name)} declares no scene (TaskSpec.scene): --perturb obstacle "
+            "needs one to check against"
+        )
+
+
+@dataclass
+class PlaceObstacle(Disturbance):
+    """A static box in the way (``--perturb obstacle``): it acts by being there, not over
+    time (:meth:`apply` does nothing)."""
+
+    box: Box
+    step: int
+    name = "obstacle"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "centre": [float(v) for v in self.box.pose[:3, 3]],
+            "size": [float(v) for v in self.box.size],
+            "step": self.step,
+        }
+
+
+def place_obstacle(setup: DisturbanceSetup) -> PlaceObstacle:
+    """The box at the fused path's mid-carry step (module docstring, ``"obstacle"``;
+    :mod:`pbdkit.sim._obstacle`)."""
+    skill = setup.skill
+    if skill is None:
+        raise ValueError("--perturb obstacle needs the trial's skill (DisturbanceSetup.skill)")
+    told = {k: setup.objects[k] for k in skill.object_names}
+    res = skill.reproduce(told, on_unreachable="warn")
+    own = np.ones(len(res.t), dtype=bool) if res.lead_in is None else ~res.lead_in
+    closed = np.flatnonzero(res.gripper & own)
+    if not closed.size:
+        raise ValueError("--perturb obstacle needs a skill that closes its gripper (a carry)")
+    first = int(closed[0])
+    gaps = np.flatnonzero(np.diff(closed) > 1)
+    last = int(closed[gaps[0]]) if gaps.size else int(closed[-1])
+    step = (first + last) // 2
+    box = Box([OBSTACLE_SIZE] * 3, res.positions[step], name=OBSTACLE_NAME)
+    return PlaceObstacle(box=box, step=step)
+
+
+register_perturbation(
+    Perturbation(
+        "obstacle",
+        f"a {OBSTACLE_SIZE * 100:g} cm box on the fused path at mid-carry, put there after the "
+        "demonstrations (pbdkit.sim._obstacle)",
+        place_obstacle,
+        check=_has_scene,
     )
 )

@@ -12,14 +12,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..collision import Scene
 from ..motion._limits import MotionLimits
+from ..reproduction._probabilistic_ik import CollisionWarning
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import ReachWarning
 from ..skill._skill import Skill
 from ._execute import ExecutionResult, execute
 from ._metrics import run_summary
+from ._obstacle import run_collisions
 from ._online import Observer, OnlineRun, TruthObserver, VisionObserver, execute_online
-from ._perturb import Disturbance
+from ._perturb import Disturbance, PlaceObstacle
 from ._scene import Simulation
 from ._task_skill import TaskSkill
 from ._tracking import SimTracker
@@ -44,6 +47,7 @@ class ControllerRun:
     warnings: list[str] = field(default_factory=list)
     velocity_limit: Float | None = None
     force_window: tuple[float, float] | None = None
+    collisions: dict[str, Any] = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -57,7 +61,10 @@ class ControllerRun:
         ``peak_jerk_ratio`` (<= 1: within the limits) with the absolute ``peak_velocity``,
         ``peak_acceleration``, ``peak_jerk`` (rad/s, rad/s^2, rad/s^3;
         :func:`pbdkit.sim._metrics.servo_peaks`); all outside a push."""
-        return run_summary(self.execution, self.velocity_limit, self.force_window)
+        return {
+            **run_summary(self.execution, self.velocity_limit, self.force_window),
+            **self.collisions,
+        }
 
 
 @dataclass(kw_only=True)
@@ -123,6 +130,7 @@ def run_controller(
     fps: float = 15.0,
     sim_objects: dict[str, Float] | None = None,
     disturbance: Disturbance | None = None,
+    avoid: Scene | None = None,
 ) -> ControllerRun:
     """Reproduce with one controller for ``objects`` and execute it in a fresh simulation.
 
@@ -141,12 +149,15 @@ def run_controller(
         An unknown controller or object, or a moving object without a position.
     """
     skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
+    scene = avoid if avoid is not None and _avoids(skill, use) else None
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        res = skill.reproduce(told, use=use, on_unreachable="warn")
+        warnings.simplefilter("always", CollisionWarning)
+        res = skill.reproduce(told, use=use, on_unreachable="warn", scene=scene)
     rep_s = time.perf_counter() - start
-    sim = Simulation.from_task(ts.task, world)
+    boxes = [disturbance.box] if isinstance(disturbance, PlaceObstacle) else []
+    sim = Simulation.from_task(ts.task, world, obstacles=boxes)
     try:
         ex = execute(
             sim,
@@ -170,7 +181,15 @@ def run_controller(
         warnings=[str(w.message) for w in caught],
         velocity_limit=_velocity_limit(skill),
         force_window=None if disturbance is None else disturbance.force_window(),
+        collisions=run_collisions(skill.robot, ts.task, world, ex, disturbance),
     )
+
+
+def _avoids(skill: Skill, use: list[str] | None) -> bool:
+    """Whether the controller (``use``) of ``skill`` can keep a clearance: the fused one of
+    position constraints (:doc:`/collisions`)."""
+    fused = use is None or ("joint" in use and len(use) > 1)
+    return fused and bool(skill.object_names) and not skill.oriented
 
 
 def run_online(

@@ -23,7 +23,7 @@ integer values are pixel centres, (0, 0) being the centre of the top-left pixel.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -31,6 +31,7 @@ import numpy.typing as npt
 from numpy.typing import NDArray
 
 from .._validation import short
+from ..collision import Shape
 from ..data._placement import position_of, rotation_of
 from ._gl import mujoco
 from ._glass import GLASS_PATCH_CENTER
@@ -172,9 +173,11 @@ class Simulation:
         spec: TaskSpec,
         objects: Mapping[str, npt.ArrayLike] | None = None,
         seed: int | None = 0,
+        *,
+        obstacles: Sequence[Shape] = (),
     ) -> Simulation:
         """Build the scene of the task ``spec`` (see :func:`build_scene`) and wrap it."""
-        model, info = build_scene(spec, objects, seed)
+        model, info = build_scene(spec, objects, seed, obstacles=obstacles)
         return cls(model, info)
 
     # -- state -------------------------------------------------------------------------------

@@ -211,6 +211,10 @@ ViaPoints = Callable[[Mapping[str, Float], np.random.Generator, float], list[Via
 #: measurements.
 Judge = Callable[[Any, RunStats], Outcome]
 
+#: ``scene(objects) -> pbdkit.Scene``: what the arm must not hit for a placement (its obstacles,
+#: and its objects' shapes in their own frames).
+SceneOf = Callable[[Mapping[str, Float]], Any]
+
 
 @dataclass(frozen=True)
 class CameraRig:
@@ -413,6 +417,12 @@ class TaskSpec:
         The object the gripper holds, a glass built with ``add_glass(..., name=grasped)``: the
         simulation's grasp, tilt and release checks, the record of a run, the online loop's
         held object and the push's direction are about it.
+    scene : callable, optional
+        ``scene(objects) -> pbdkit.Scene``: the task's obstacles (the table, a shelf, the
+        walls of a basin or a tray) for a placement (every object's, as
+        :func:`pbdkit.sim._world.build_scene` gets them), and its objects' shapes in their own
+        frames. ``evaluate`` checks every run against it (:mod:`pbdkit.sim._obstacle`); None:
+        the task declares none (no run is checked).
     """
 
     name: str
@@ -427,6 +437,7 @@ class TaskSpec:
     move: ObjectMove | None = None
     grasped: str = "glass"
     rotate: ObjectTurn | None = None
+    scene: SceneOf | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -461,6 +472,8 @@ class TaskSpec:
                 "rig), "
                 f"got {short(self.cameras)}"
             )
+        if self.scene is not None and not callable(self.scene):
+            raise ValueError(f"scene of task {short(self.name)} must be callable or None")
         if self.n_liquid < 0:
             raise ValueError(f"n_liquid must be >= 0, got {self.n_liquid}")
         if self.move is not None and (

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from .._validation import check_int, check_positive_float, short
 from ._metrics import tracking_errors
+from ._obstacle import avoided_scene
 from ._parallel import run_fanout
 from ._perturb import Disturbance, DisturbanceSetup, check_perturb, make_disturbance
 from ._runs import run_controller, run_online
@@ -72,6 +73,10 @@ class TrialConditions:
     noise_mm : float
         Gaussian noise added to the positions the skill is told of the moving objects (after
         the cameras, if any), of mean 3-D length ``noise_mm`` (:func:`run_trial`); >= 0.
+    avoid_scene : bool
+        The fused controllers avoid the task's whole scene (:attr:`pbdkit.sim.TaskSpec.scene`),
+        not only ``--perturb obstacle``'s box; offline only. Every run is checked against the
+        scene either way (:mod:`pbdkit.sim._obstacle`).
 
     Raises
     ------
@@ -85,9 +90,10 @@ class TrialConditions:
     ground_truth: bool = False
     seed: int = 0
     noise_mm: float = 0.0
+    avoid_scene: bool = False
 
     def __post_init__(self) -> None:
-        for flag in ("online", "ground_truth"):
+        for flag in ("online", "ground_truth", "avoid_scene"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"{flag} must be True or False, got {short(getattr(self, flag))}")
         if not isinstance(self.perturb, str):
@@ -95,6 +101,11 @@ class TrialConditions:
         object.__setattr__(self, "seed", check_int(self.seed, "seed", minimum=0))
         noise = check_positive_float(self.noise_mm, "noise_mm", allow_zero=True)
         object.__setattr__(self, "noise_mm", noise)
+        if self.online and (self.avoid_scene or self.perturb == "obstacle"):
+            raise ValueError(
+                "avoidance runs offline for now: the online controller does not keep a "
+                "clearance yet; drop --online, or --avoid-scene and --perturb obstacle"
+            )
 
     @property
     def vision(self) -> bool:
@@ -218,7 +229,12 @@ def run_trial_controller(
         ).as_dict()
     else:
         summary = run_controller(
-            ts, seen.told, controller, sim_objects=truth, disturbance=act
+            ts,
+            seen.told,
+            controller,
+            sim_objects=truth,
+            disturbance=act,
+            avoid=avoided_scene(ts.task, truth, act, whole=conditions.avoid_scene),
         ).as_dict()
     return ControllerOutcome(controller=controller, summary=summary, disturbance=act.as_dict())
 
@@ -262,6 +278,7 @@ def trial_disturbance(
         times=grid,
         gripper=ts.skill.constraints().gripper,
         rng=np.random.default_rng([conditions.seed, 2, index]),
+        skill=ts.skill,
     )
     return make_disturbance(conditions.perturb, setup)
 

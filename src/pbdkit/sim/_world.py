@@ -23,7 +23,7 @@ of its wall boxes, which gives many contacts and a stable stand).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,7 +31,9 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._rotations import quaternion_from_matrix
 from .._validation import short
+from ..collision import Box, Cylinder, Shape, Sphere
 from ..data._placement import position_of
 from ..robots import katana
 from ._gl import mujoco
@@ -173,12 +175,17 @@ def _check_objects(spec: TaskSpec, objects: Mapping[str, npt.ArrayLike] | None) 
     return out
 
 
+#: The table: half sides (m) and centre (its top face at z = 0).
+TABLE_HALF = (0.65, 0.75, 0.02)
+TABLE_CENTRE = (0.25, 0.0, -0.02)
+
+
 def _add_table(world: Any) -> None:
     world.add_geom(
         name="table",
         type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[0.65, 0.75, 0.02],
-        pos=[0.25, 0.0, -0.02],
+        size=list(TABLE_HALF),
+        pos=list(TABLE_CENTRE),
         rgba=[0.78, 0.68, 0.52, 1.0],
         contype=SOLID | LIQUID,
         conaffinity=SOLID | LIQUID,
@@ -189,6 +196,28 @@ def _add_table(world: Any) -> None:
         size=[3.0, 3.0, 0.1],
         pos=[0.0, 0.0, -0.75],
         rgba=[0.35, 0.35, 0.38, 1.0],
+    )
+
+
+def _add_obstacle(world: Any, shape: Shape) -> None:
+    """A static geom of ``shape`` (a box, sphere or cylinder posed in the base frame)."""
+    if isinstance(shape, Box):
+        kind, size = mujoco.mjtGeom.mjGEOM_BOX, [float(v) / 2 for v in shape.size]
+    elif isinstance(shape, Sphere):
+        kind, size = mujoco.mjtGeom.mjGEOM_SPHERE, [shape.radius, 0.0, 0.0]
+    elif isinstance(shape, Cylinder):
+        kind, size = mujoco.mjtGeom.mjGEOM_CYLINDER, [shape.radius, shape.length / 2, 0.0]
+    else:
+        raise ValueError(f"obstacles: a Box, Sphere or Cylinder, got {type(shape).__name__}")
+    world.add_geom(
+        name=str(shape.name),
+        type=kind,
+        size=size,
+        pos=shape.pose[:3, 3].tolist(),
+        quat=quaternion_from_matrix(shape.pose[:3, :3]).tolist(),
+        rgba=[0.95, 0.45, 0.1, 1.0],
+        contype=SOLID,
+        conaffinity=SOLID,
     )
 
 
@@ -428,6 +457,8 @@ def build_scene(
     spec: TaskSpec,
     objects: Mapping[str, npt.ArrayLike] | None = None,
     seed: int | None = 0,
+    *,
+    obstacles: Sequence[Shape] = (),
 ) -> tuple[Any, SceneInfo]:
     """Compile the MuJoCo model of a task.
 
@@ -444,6 +475,9 @@ def build_scene(
         Seeds the task's jitter (0.2 mm on the liquid spheres' initial positions). The default,
         0, makes the scene, and so every run under physics, the same each time for the same
         inputs; None draws a new jitter.
+    obstacles : sequence of pbdkit.collision.Shape
+        Static bodies added to the world (``--perturb obstacle``'s box), solid for the arm and
+        what it carries.
 
     Returns
     -------
@@ -490,6 +524,8 @@ def build_scene(
     _add_table(world)
     _add_cameras_and_lights(world, spec.cameras)
     spec.add_objects(world, objs, rng)
+    for shape in obstacles:
+        _add_obstacle(world, shape)
 
     model = mj.compile()
     names = [model.body(i).name for i in range(model.nbody)]

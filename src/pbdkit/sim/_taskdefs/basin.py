@@ -21,14 +21,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...collision import Box, Scene
 from .._gl import mujoco
 from .._glass import GLASS_HEIGHT, GLASS_PATCH_CENTER, GLASS_RADIUS, GRASP_OFFSET
 from .._scene import Simulation
+from .._task_scenes import glass_shape, table_shape
 from .._tasks import ObjectMove, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint
 from .._teacher import UP, Person, between, grasp_via_points, radial
 from .._world import LIQUID, SOLID, add_glass, add_liquid
 
-__all__ = ["SPEC", "add_objects", "judge", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "scene", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -61,23 +63,17 @@ DESCRIPTION = (
 )
 
 
-def _add_basin(world: Any, pos: Float) -> None:
-    # Basin frame: floor centre on the table; pos[2] is the floor's top face.
-    body = world.add_body(name="basin", pos=[pos[0], pos[1], 0.0])
-    half = BASIN_INNER / 2
-    wall = 0.008
-    grey = [0.85, 0.85, 0.8, 1.0]
-    body.add_geom(
-        name="basin_floor",
-        type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[half + wall, half + wall, BASIN_FLOOR / 2],
-        pos=[0.0, 0.0, BASIN_FLOOR / 2],
-        rgba=grey,
-        contype=SOLID | LIQUID,
-        conaffinity=SOLID | LIQUID,
-    )
-    h = BASIN_WALL_HEIGHT
+BASIN_WALL = 0.008  # wall thickness (m)
+
+
+def _basin_boxes() -> list[tuple[str, tuple[float, float, float], tuple[float, float, float]]]:
+    """The basin's floor and walls: (name, half sides, centre in the basin's frame, whose
+    origin is the floor's centre on the table)."""
+    half, wall, h = BASIN_INNER / 2, BASIN_WALL, BASIN_WALL_HEIGHT
     zc = BASIN_FLOOR + h / 2
+    boxes = [
+        ("basin_floor", (half + wall, half + wall, BASIN_FLOOR / 2), (0.0, 0.0, BASIN_FLOOR / 2))
+    ]
     for i, (x, y, sx, sy) in enumerate(
         [
             (half + wall / 2, 0.0, wall / 2, half + wall),
@@ -86,11 +82,30 @@ def _add_basin(world: Any, pos: Float) -> None:
             (0.0, -half - wall / 2, half, wall / 2),
         ]
     ):
+        boxes.append((f"basin_wall{i}", (sx, sy, h / 2), (x, y, zc)))
+    return boxes
+
+
+def scene(objects: Mapping[str, Float]) -> Scene:
+    """The table, the basin's floor and walls (fixed obstacles); the glass's shape."""
+    p = objects["basin"]
+    parts = [
+        Box([2.0 * v for v in size], (p[0] + c[0], p[1] + c[1], c[2]), name=name)
+        for name, size, c in _basin_boxes()
+    ]
+    return Scene([table_shape(), *parts], objects={"glass": glass_shape()})
+
+
+def _add_basin(world: Any, pos: Float) -> None:
+    # Basin frame: floor centre on the table; pos[2] is the floor's top face.
+    body = world.add_body(name="basin", pos=[pos[0], pos[1], 0.0])
+    grey = [0.85, 0.85, 0.8, 1.0]
+    for name, size, centre in _basin_boxes():
         body.add_geom(
-            name=f"basin_wall{i}",
+            name=name,
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[sx, sy, h / 2],
-            pos=[x, y, zc],
+            size=list(size),
+            pos=list(centre),
             rgba=grey,
             contype=SOLID | LIQUID,
             conaffinity=SOLID | LIQUID,
@@ -177,4 +192,5 @@ SPEC = TaskSpec(
     n_liquid=N_LIQUID,
     # --perturb move: the glass slides 4 cm on the table before the grasp.
     move=ObjectMove("glass", 0.04, "before_grasp"),
+    scene=scene,
 )

@@ -20,14 +20,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...collision import Box, Cylinder, Scene
 from .._gl import mujoco
 from .._glass import GLASS_PATCH_CENTER, GLASS_PATCH_PREFIX, GRASP_OFFSET
 from .._scene import Simulation
+from .._task_scenes import glass_shape, table_shape
 from .._tasks import ObjectMove, Outcome, PlacementRange, RunStats, TaskSpec, ViaPoint
 from .._teacher import APPROACH, UP, Person, between, grasp_via_points, radial
 from .._world import add_glass
 
-__all__ = ["SPEC", "add_objects", "judge", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "scene", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -61,9 +63,42 @@ DESCRIPTION = (
 )
 
 
+SHELF_THICKNESS = 0.015  # the board (m)
+SHELF_LEG = 0.02  # the legs' side (m), 1.5 cm in from the board's corners
+
+
+def _leg_centres() -> list[tuple[float, float]]:
+    (x0, x1), (y0, y1) = SHELF_X, SHELF_Y
+    return [
+        (x0 + 0.015, y0 + 0.015),
+        (x0 + 0.015, y1 - 0.015),
+        (x1 - 0.015, y0 + 0.015),
+        (x1 - 0.015, y1 - 0.015),
+    ]
+
+
+def scene(objects: Mapping[str, Float]) -> Scene:
+    """The table, the shelf's board and legs; the glass's and the coaster's shapes."""
+    (x0, x1), (y0, y1) = SHELF_X, SHELF_Y
+    thick, leg_h = SHELF_THICKNESS, SHELF_HEIGHT - SHELF_THICKNESS
+    board = Box(
+        (x1 - x0, y1 - y0, thick),
+        ((x0 + x1) / 2, (y0 + y1) / 2, SHELF_HEIGHT - thick / 2),
+        name="shelf_board",
+    )
+    legs = [
+        Box((SHELF_LEG, SHELF_LEG, leg_h), (x, y, leg_h / 2), name=f"shelf_leg{i}")
+        for i, (x, y) in enumerate(_leg_centres())
+    ]
+    coaster = Cylinder(COASTER_RADIUS, COASTER_THICKNESS, (0.0, 0.0, -COASTER_THICKNESS / 2))
+    return Scene(
+        [table_shape(), board, *legs], objects={"glass": glass_shape(), "coaster": coaster}
+    )
+
+
 def _add_shelf(world: Any) -> None:
     (x0, x1), (y0, y1) = SHELF_X, SHELF_Y
-    thick = 0.015
+    thick = SHELF_THICKNESS
     body = world.add_body(name="shelf", pos=[0.0, 0.0, 0.0])
     wood = [0.55, 0.4, 0.25, 1.0]
     body.add_geom(
@@ -74,18 +109,11 @@ def _add_shelf(world: Any) -> None:
         rgba=wood,
     )
     leg_h = SHELF_HEIGHT - thick
-    for i, (x, y) in enumerate(
-        [
-            (x0 + 0.015, y0 + 0.015),
-            (x0 + 0.015, y1 - 0.015),
-            (x1 - 0.015, y0 + 0.015),
-            (x1 - 0.015, y1 - 0.015),
-        ]
-    ):
+    for i, (x, y) in enumerate(_leg_centres()):
         body.add_geom(
             name=f"shelf_leg{i}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.01, 0.01, leg_h / 2],
+            size=[SHELF_LEG / 2, SHELF_LEG / 2, leg_h / 2],
             pos=[x, y, leg_h / 2],
             rgba=wood,
         )
@@ -187,4 +215,5 @@ SPEC = TaskSpec(
     patches={"glass": GLASS_PATCH_PREFIX, "coaster": "coaster"},
     # --perturb move: the coaster slides 5 cm while the glass is carried.
     move=ObjectMove("coaster", 0.05, "while_carried"),
+    scene=scene,
 )

@@ -41,17 +41,23 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...collision import Box, Scene
 from .._parts import (
     BLOCK_GRASP_HEIGHT,
     BLOCK_HEIGHT,
+    BLOCK_LENGTH,
+    BLOCK_WIDTH,
     TRAY_DEPTH,
+    TRAY_LENGTH,
     TRAY_RIM_HEIGHT,
+    TRAY_WIDTH,
     add_block,
     add_tray,
     footprint_margin,
     mark_prefix,
 )
 from .._scene import Simulation
+from .._task_scenes import table_shape
 from .._tasks import (
     CameraRig,
     ObjectTurn,
@@ -64,7 +70,7 @@ from .._tasks import (
 )
 from .._teacher import UP, Person
 
-__all__ = ["SPEC", "add_objects", "judge", "via_points"]
+__all__ = ["SPEC", "add_objects", "judge", "scene", "via_points"]
 
 Float = NDArray[np.float64]
 
@@ -117,6 +123,14 @@ def _roll_for(yaw: float, p: Float) -> float:
     """The wrist roll that closes the fingers across an object of ``yaw`` at ``p``, always the
     same solution (module docstring, "Symmetry")."""
     return math.remainder(yaw - _pan(p), 2 * math.pi)
+
+
+def scene(objects: Mapping[str, Float]) -> Scene:
+    """The table; the block's and the tray's shapes (the tray as its outer box: the block's
+    target, which it may touch)."""
+    block = Box((BLOCK_LENGTH, BLOCK_WIDTH, BLOCK_HEIGHT), (0.0, 0.0, -BLOCK_HEIGHT / 2))
+    tray = Box((TRAY_LENGTH, TRAY_WIDTH, TRAY_RIM_HEIGHT), (0.0, 0.0, -TRAY_RIM_HEIGHT / 2))
+    return Scene([table_shape()], objects={"block": block, "tray": tray})
 
 
 def add_objects(world: Any, objects: Mapping[str, Float], rng: np.random.Generator) -> None:
@@ -202,4 +216,5 @@ SPEC = TaskSpec(
     # --perturb rotate: the tray turns about its centre while the block is carried, its yaw
     # staying inside YAW_RANGE (pbdkit.sim._perturb).
     rotate=ObjectTurn("tray", (20.0, 30.0), "while_carried"),
+    scene=scene,
 )

@@ -1,0 +1,136 @@
+"""The simulated tasks' scenes, ``--perturb obstacle`` and the collision check of every run
+(issue 38, item 6)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pbdkit.collision import Box, CollisionChecker
+from pbdkit.robots import katana
+from pbdkit.sim import get_task
+from pbdkit.sim._evaluation import evaluate
+from pbdkit.sim._obstacle import avoided_scene, run_collisions
+from pbdkit.sim._perturb import OBSTACLE_NAME, DisturbanceSetup, place_obstacle
+from pbdkit.sim._task_skill import TaskSkill
+from pbdkit.sim._trials import TrialConditions
+from pbdkit.sim._world import build_scene
+
+
+@pytest.fixture(scope="module")
+def coaster(small_task_skill: Callable[..., TaskSkill]) -> TaskSkill:
+    # Small: 3 fast demonstrations, a coarse time grid (test_online.py's too).
+    return small_task_skill("coaster", 3, seed=1, n_steps=150)
+
+
+def _setup(ts: TaskSkill, truth: dict[str, np.ndarray]) -> DisturbanceSetup:
+    """What ``--perturb obstacle``'s factory is given for a trial at ``truth``."""
+    return DisturbanceSetup(
+        task=ts.task,
+        objects=truth,
+        times=np.zeros(2),
+        gripper=None,
+        rng=np.random.default_rng(0),
+        skill=ts.skill,
+    )
+
+
+@pytest.mark.parametrize("task", ["coaster", "basin", "slot"])
+def test_a_tasks_scene_is_its_simulated_worlds_bodies(task: str) -> None:
+    # Every obstacle of the scene is the MuJoCo geom of the same name: same centre, same size.
+    mujoco = pytest.importorskip("mujoco")
+    spec = get_task(task)
+    objects = spec.sample_objects(np.random.default_rng(3))
+    scene = spec.scene(spec.full_placement(objects))
+    model, _ = build_scene(spec, objects)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for shape in scene.shapes:
+        assert isinstance(shape, Box)
+        geom = model.geom(str(shape.name))
+        np.testing.assert_allclose(data.geom_xpos[geom.id], shape.pose[:3, 3], atol=1e-9)
+        np.testing.assert_allclose(2.0 * model.geom_size[geom.id], shape.size, atol=1e-9)
+    assert scene.names[0] == "table"
+    assert set(scene.objects) <= set(spec.ranges)
+
+
+@pytest.mark.parametrize("task", ["coaster", "basin", "slot"])
+def test_the_teachers_demonstrations_are_free_of_the_scene(
+    task: str, fast_demos: Callable[..., list]
+) -> None:
+    # The grasp rules at work: the hand closes on the grasped object, which rests on its
+    # support and is put on its target; nothing else touches.
+    spec = get_task(task)
+    for demo in fast_demos(task, 2, 1):
+        objects = spec.full_placement(dict(demo.objects))
+        checker = CollisionChecker(katana(), spec.scene(objects), objects)
+        report = checker.check(demo.joints, demo.gripper)
+        assert report.free, report.collisions[:3]
+        assert [g[0] for g in checker.grasps] == [spec.grasped]
+
+
+def test_the_obstacle_sits_on_the_fused_path_at_mid_carry(coaster: TaskSkill) -> None:
+    spec, skill = coaster.task, coaster.skill
+    truth = spec.sample_objects(np.random.default_rng(0))
+    act = place_obstacle(_setup(coaster, truth))
+    res = skill.reproduce({k: truth[k] for k in skill.object_names}, on_unreachable="warn")
+    np.testing.assert_allclose(act.box.pose[:3, 3], res.positions[act.step])
+    closed = np.flatnonzero(res.gripper & ~res.lead_in)
+    assert closed[0] < act.step < closed[-1]
+    assert abs(act.step - (closed[0] + closed[-1]) / 2) <= 1
+    assert act.as_dict()["name"] == "obstacle" and act.box.name == OBSTACLE_NAME
+    # What the fused controller avoids: the box and the objects' shapes (the carried glass).
+    scene = avoided_scene(spec, spec.full_placement(truth), act, whole=False)
+    assert scene is not None and scene.names == [OBSTACLE_NAME]
+    assert set(scene.objects) == {"glass", "coaster"}
+    whole = avoided_scene(spec, spec.full_placement(truth), act, whole=True)
+    assert whole is not None and {"table", "shelf_board", OBSTACLE_NAME} <= set(whole.names)
+
+
+def test_a_run_through_the_obstacle_is_a_collision(coaster: TaskSkill) -> None:
+    spec, skill = coaster.task, coaster.skill
+    truth = spec.full_placement(spec.sample_objects(np.random.default_rng(0)))
+    res = skill.reproduce({k: truth[k] for k in skill.object_names}, on_unreachable="warn")
+    ex = SimpleNamespace(t=res.times, joints=res.joints, gripper=res.gripper)
+    act = place_obstacle(_setup(coaster, truth))
+    hit = run_collisions(skill.robot, spec, truth, ex, act)  # type: ignore[arg-type]
+    assert hit["collided"] and hit["min_clearance_m"] < 0.0
+    assert any(OBSTACLE_NAME in c for c in hit["contacts"])
+    free = run_collisions(skill.robot, spec, truth, ex, None)  # type: ignore[arg-type]
+    assert not free["collided"] and free["contacts"] == []
+
+
+def test_avoidance_runs_offline_only() -> None:
+    with pytest.raises(ValueError, match="avoidance runs offline"):
+        TrialConditions(online=True, perturb="obstacle")
+    with pytest.raises(ValueError, match="avoidance runs offline"):
+        TrialConditions(online=True, avoid_scene=True)
+    with pytest.raises(ValueError, match="avoid_scene must be True or False"):
+        TrialConditions(avoid_scene="yes")  # type: ignore[arg-type]
+
+
+def test_evaluate_reports_collisions_per_controller(coaster: TaskSkill) -> None:
+    ev = evaluate(
+        "coaster",
+        1,
+        0,
+        task_skill=coaster,
+        controllers=["fused", "joint"],
+        ground_truth=True,
+        perturb="obstacle",
+    )
+    data = ev.as_dict()
+    assert data["perturb"] == "obstacle" and data["avoid_scene"] is False
+    for name in ("fused", "joint"):
+        stats = data["controllers"][name]
+        (row,) = data["runs"][name]
+        assert stats["collision_rate"] == float(row["collided"])
+        assert stats["min_clearance_m"] == row["min_clearance_m"]
+    (p,) = data["perturbations"]
+    assert p["name"] == "obstacle" and p["size"] == [0.05, 0.05, 0.05]
+    # The joint-space controller does not avoid: it meets the box.
+    (joint,) = data["runs"]["joint"]
+    assert joint["collided"] and any(OBSTACLE_NAME in c for c in joint["contacts"])
