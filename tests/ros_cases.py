@@ -512,6 +512,117 @@ def coaster_round_trip(workdir: str, takes: str = "5", placement: str = "5") -> 
 
 CASES["coaster_round_trip"] = coaster_round_trip
 
+KATANA = ["pan", "lift1", "lift2", "lift3", "wrist_roll"]
+
+
+def moving_katana(seconds: str) -> None:
+    """A driver's Katana joint states at 100 Hz, stamped with its clock, the pan joint
+    sweeping slowly, for ``seconds``."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    rclpy.init()
+    node = rclpy.create_node("katana_driver")
+    pub = node.create_publisher(JointState, "/joint_states", 10)
+    start = time.monotonic()
+    while (elapsed := time.monotonic() - start) < float(seconds):
+        msg = JointState(name=KATANA, position=[0.1 * elapsed, 1.2, -1.8, -0.5, 0.0])
+        msg.header.stamp = node.get_clock().now().to_msg()
+        pub.publish(msg)
+        time.sleep(0.01)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def _wait_for_text(proc: subprocess.Popen[str], text: str, lines: list[str]) -> None:
+    """Read ``proc``'s stdout into ``lines`` until a line holds ``text``."""
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.append(line)
+        if text in line:
+            return
+    raise AssertionError(f"no line with {text!r}: {lines}")
+
+
+def record_on_enter(workdir: str) -> None:
+    """`pbdkit ros record` without --auto: Enter starts and stops each take. Two takes of
+    about 1.0 s and 0.6 s, timed by the joint states' stamps."""
+    demos = Path(workdir) / "demos.npz"
+    driver = subprocess.Popen([sys.executable, __file__, "moving_katana", "30"])
+    rec = subprocess.Popen(
+        [sys.executable, "-m", "pbdkit", "ros", "record", "--out", str(demos), "--takes", "2",
+         "--object", "glass=0.4,0.1,0.1", "--timeout", "15"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert rec.stdin is not None
+    lines: list[str] = []
+    for seconds in (1.0, 0.6):
+        _wait_for_text(rec, "Enter starts a take", lines)
+        rec.stdin.write("\n")
+        rec.stdin.flush()
+        _wait_for_text(rec, "recording (Enter stops it)", lines)
+        time.sleep(seconds)
+        rec.stdin.write("\n")
+        rec.stdin.flush()
+    out, err = rec.communicate(timeout=30)
+    driver.terminate()
+    driver.wait(timeout=10)
+    said = "".join(lines) + out
+    assert rec.returncode == 0 and "2 take(s) recorded" in said, (rec.returncode, said, err)
+    from pbdkit import load_demonstrations
+
+    takes = load_demonstrations(demos)
+    durations = [float(d.t[-1] - d.t[0]) for d in takes]
+    assert len(takes) == 2 and abs(durations[0] - 1.0) < 0.3 and abs(durations[1] - 0.6) < 0.3, (
+        durations
+    )
+    for d in takes:  # the pan joint sweeps at 0.1 rad/s: the samples are the driver's
+        pan_speed = np.polyfit(d.t, d.joints[:, 0], 1)[0]
+        assert abs(pan_speed - 0.1) < 0.01, pan_speed
+        np.testing.assert_allclose(d.objects["glass"], [0.4, 0.1, 0.1])
+    print(f"OK: 2 takes of {durations[0]:.2f} s and {durations[1]:.2f} s")
+
+
+def sim_cameras() -> None:
+    """`pbdkit ros sim --cameras` publishes the stereo tracker's estimates on /objects/NAME:
+    within 3 mm of the placement, not the placement itself."""
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+
+    from pbdkit.ros._task_world import placement_objects
+    from pbdkit.sim import get_task
+
+    sim = _pbdkit("ros", "sim", "--task", "coaster", "--placement", "3", "--cameras")
+    rclpy.init()
+    node = rclpy.create_node("object_listener")
+    seen: dict[str, np.ndarray] = {}
+    for name in ("glass", "coaster"):
+        node.create_subscription(
+            PoseStamped,
+            f"/objects/{name}",
+            lambda msg, name=name: seen.__setitem__(
+                name, np.array([msg.pose.position.x, msg.pose.position.y, msg.pose.position.z])
+            ),
+            10,
+        )
+    start = time.monotonic()
+    while len(seen) < 2 and time.monotonic() - start < 60.0:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    sim.terminate()
+    out, err = sim.communicate(timeout=20)
+    node.destroy_node()
+    rclpy.shutdown()
+    assert len(seen) == 2, (seen, out, err)
+    truth = placement_objects(get_task("coaster"), 0, 3)
+    errors = {k: float(np.linalg.norm(seen[k] - truth[k])) for k in seen}
+    assert all(0.0 < e < 3e-3 for e in errors.values()), errors
+    print(f"OK: tracked within {max(errors.values()) * 1e3:.2f} mm")
+
+
+CASES["moving_katana"] = moving_katana
+CASES["sim_cameras"] = sim_cameras
+CASES["record_on_enter"] = record_on_enter
+
 
 if __name__ == "__main__":
     case, *rest = sys.argv[1:]

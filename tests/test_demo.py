@@ -181,6 +181,9 @@ def test_evaluate_basin_lists_the_controllers_of_its_constraints(
             "peak_speed_ratio",
             "following_error_rad",
             *(f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("_ratio", "")),
+            "collided",  # the basin task has a scene: every run is checked against it
+            "min_clearance_m",
+            "contacts",
         }
     assert data["online"] is False and data["perturb"] == "none"
     assert data["perturbations"] == [{"name": "none"}]

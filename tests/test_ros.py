@@ -142,6 +142,23 @@ def test_record_learn_and_run_the_coaster_over_a_real_graph(tmp_path: Path) -> N
     assert done.stdout.startswith("OK: success"), done.stdout
 
 
+def test_record_starts_and_stops_takes_on_enter(tmp_path: Path) -> None:
+    # `pbdkit ros record` without --auto, Enter pressed on its stdin (tests/ros_cases.py,
+    # record_on_enter): two takes, timed by the driver's stamps, with the driver's samples.
+    done = run_on_private_graph("test_record_on_enter", "record_on_enter", str(tmp_path),
+                                timeout=90)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK: 2 takes"), done.stdout
+
+
+def test_ros_sim_publishes_what_the_cameras_see() -> None:
+    # `pbdkit ros sim --cameras` over a private graph (tests/ros_cases.py, sim_cameras): the
+    # objects' topics carry the stereo tracker's estimates.
+    done = run_on_private_graph("test_sim_cameras", "sim_cameras", timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK: tracked within"), done.stdout
+
+
 def test_object_sources_a_live_node_cannot_read_are_refused() -> None:
     from pbdkit.ros._objects import check_sources
 

@@ -899,7 +899,12 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         )
         same = evaluate(C.SPEC, 1, 0, task_skill=ts_glass, controllers=["fused"],
                           ground_truth=True)  # fmt: skip
-        assert cup.trials[0].runs == same.trials[0].runs
+        # (the coaster task checks its runs against its scene; the cup task declares none)
+        checked = {"collided", "min_clearance_m", "contacts"}
+        assert checked <= set(same.trials[0].runs["fused"])
+        assert cup.trials[0].runs["fused"] == {
+            k: v for k, v in same.trials[0].runs["fused"].items() if k not in checked
+        }
         run = cup.trials[0].runs["fused"]
         # Carried and set down upright on the coaster, released (3 fast demonstrations on a
         # 200-step grid: placed 23 mm off centre, beyond the task's 15 mm).

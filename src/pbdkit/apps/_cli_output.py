@@ -110,6 +110,15 @@ def print_lasa_demo(shape: str, metrics: dict[str, Any], out: Path) -> None:
     console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
 
 
+def _cell(value: Any, key: str) -> str:
+    """A metric in the demo's table: "-" where undefined, yes/no, the clearance in mm."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return f"{1e3 * value if key == 'min_clearance_m' else value:.1f}"
+
+
 def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Path) -> None:
     """The tables and lines of ``pbdkit demo`` for a robot task (``metrics``: its
     metrics.json)."""
@@ -121,14 +130,14 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
     peaks = tuple(
         f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("", "_ratio")
     )
-    extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks)
+    extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks, "contacts")
     keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
     for k in keys:
-        table.add_column(k, justify="right")
+        table.add_column("clearance mm" if k == "min_clearance_m" else k, justify="right")
     table.add_column("limits used", justify="right")
     for name, row in metrics["controllers"].items():
         cells = [("[green]yes" if row["success"] else "[red]no")]
-        cells += ["-" if row[k] is None else f"{row[k]:.1f}" for k in keys]
+        cells += [_cell(row[k], k) for k in keys]
         worst = max(
             (row.get(f"peak_{k}_ratio") or 0.0) for k in ("velocity", "acceleration", "jerk")
         )
