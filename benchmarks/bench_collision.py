@@ -55,7 +55,7 @@ def cases() -> list[tuple[str, Skill, dict[str, np.ndarray], Scene]]:
     panda_skill = Skill.learn(data.demos, robot)
     box = np.asarray(data.boxes, dtype=np.float64).mean(axis=0)
     panda_scene = Scene(
-        [Box((1.2, 1.2, 0.04), (0.4, 0.0, -0.07), name="table")],
+        [Box((1.2, 1.2, 0.04), (0.4, 0.0, -0.12), name="table")],
         objects={"box": Box((0.04, 0.04, 0.04), (0.0, 0.0, -0.02))},
     )
     return [
@@ -74,10 +74,15 @@ def measure(
     t_check = median_time(lambda: skill.check(plain.joints, scene, objects=told), repeat=repeat)
     check_row = [name, str(n), fmt_time(t_check), fmt_time(t_check / n), str(len(scene.shapes))]
     t_plain = median_time(lambda: skill.reproduce(told), repeat=repeat)
-    near = skill.reproduce(told, scene=scene)
-    t_near = median_time(lambda: skill.reproduce(told, scene=scene), repeat=repeat)
+    far = Scene(
+        [Box((0.05, 0.05, 0.05), _mid_carry(plain) + np.array([0.0, 1.5, 0.0]), name="far")]
+    )
+    near = skill.reproduce(told, scene=far)
+    t_near = median_time(lambda: skill.reproduce(told, scene=far), repeat=repeat)
     same = bool(np.array_equal(near.joints, plain.joints))
-    blocked = scene.with_shapes(Box((0.05, 0.05, 0.05), _mid_carry(plain), name="obstacle"))
+    blocked = Scene(
+        [Box((0.05, 0.05, 0.05), _mid_carry(plain), name="obstacle")], objects=scene.objects
+    )
     avoided = skill.reproduce(told, scene=blocked)
     t_avoid = median_time(lambda: skill.reproduce(told, scene=blocked), repeat=repeat)
     assert avoided.clearance is not None
@@ -109,7 +114,7 @@ def main() -> None:
         [
             "skill",
             "no scene (peer)",
-            "scene, nothing near",
+            "a box 1.5 m away (nothing near)",
             "obstacle at mid-carry, avoided",
             "its smallest clearance",
         ],

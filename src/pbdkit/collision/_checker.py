@@ -63,10 +63,14 @@ class CollisionReport:
     collisions : list of (int, str, str)
         (step, body, body) for every step and pair closer than 0, the two names sorted (URDF
         link names, shape names, object names), the list sorted; empty when the run is free.
+    scene_clearance : ndarray, shape (T,), or None
+        The same as ``clearance`` without the arm's pairs with itself: what avoidance keeps
+        clear (inf at a step with nothing to check).
     """
 
     clearance: Float
     collisions: list[tuple[int, str, str]]
+    scene_clearance: Float | None = None
 
     @property
     def free(self) -> bool:
@@ -401,16 +405,20 @@ class CollisionChecker:
         rots, origins = self._frames(q)
         tips = self.tip_poses(q)
         clearance = np.empty(q.shape[0])
+        outside = np.empty(q.shape[0])
         collisions: set[tuple[int, str, str]] = set()
         for lo, hi, state in self._segments(q.shape[0], tips):
             pairs = self._state_pairs(state)
+            arm = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
             rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
-            clearance[lo:hi], close = self._scan(pairs, rot, pos, float(contact))
+            own, close_own = self._scan(pairs[arm], rot, pos, float(contact))
+            outside[lo:hi], close = self._scan(pairs[~arm], rot, pos, float(contact))
+            clearance[lo:hi] = np.minimum(own, outside[lo:hi])
             for t, found in enumerate(close):
-                for a, b, _ in found:
+                for a, b, _ in [*found, *close_own[t]]:
                     first, second = sorted((self.names[a], self.names[b]))
                     collisions.add((lo + t, first, second))
-        return CollisionReport(clearance, sorted(collisions))
+        return CollisionReport(clearance, sorted(collisions), outside)
 
     def _state_pairs(self, state: _State) -> NDArray[np.intp]:
         carried = next(iter(state.carried), None)

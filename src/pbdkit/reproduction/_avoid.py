@@ -93,10 +93,14 @@ class Avoidance:
         self._terms.clear()
         self.precisions.clear()
         tips = checker.tip_poses(joints)
+        links = set(checker.names[: checker._n_arm])
+        arm = {(a, b) for a in links for b in links}
         for lo, hi, state in checker._segments(joints.shape[0], tips):
             for j in range(lo, hi):
                 near = checker.near(joints[j], margin, state.carried, state.released)
                 for prox in near:
+                    if prox.joints[0] >= 0 and prox.joints[1] >= 0 and prox.bodies in arm:
+                        continue  # the arm with itself: checked, not avoided (docs)
                     if prox.bodies not in self.caught.setdefault(j, set()):
                         self.caught[j].add(prox.bodies)
                         new += 1

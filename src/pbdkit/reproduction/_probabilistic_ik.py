@@ -165,12 +165,19 @@ def _avoid_passes(
         avoidance.update(res.joints[own], signal)
         res = _run(robot, run, *timing)
         report = checker.check(res.joints, res.gripper_signal)
-        if best is None or report.min_clearance > best[1].min_clearance:
+        kept = _scene_min(report)
+        if best is None or kept > _scene_min(best[1]):
             best = (res, report)
-        if report.min_clearance >= margin - TOLERANCE:
+        if kept >= margin - TOLERANCE:
             break
     assert best is not None
     return best
+
+
+def _scene_min(report: CollisionReport) -> float:
+    """The smallest clearance to the scene (the arm's pairs with itself left out)."""
+    outside = report.scene_clearance
+    return float(outside.min()) if outside is not None and outside.size else float("inf")
 
 
 def _with_scene(
@@ -194,7 +201,8 @@ def _with_scene(
             "'joint' with objects); pass avoid=False to check only"
         )
     if fused:
-        if report.min_clearance < margin:
+        outside = report.scene_clearance
+        if outside is not None and outside.size and float(outside.min()) < margin:
             res, report = _avoid_passes(robot, run, res, checker, margin, timing)
         else:
             zero = np.zeros(len(res.t))
