@@ -188,6 +188,7 @@ class CollisionChecker:
         self._result = coal.DistanceResult()
         self._functors: dict[tuple[int, int], Any] = {}
         self._grasps: list[_Grasp] = []
+        self._pair_cache: dict[int | None, NDArray[np.intp]] = {}
 
     # ------------------------------------------------------------------ world poses
 
@@ -195,16 +196,23 @@ class CollisionChecker:
         """Joint frames (M, n + 1, 3, 3), (M, n + 1, 3) of postures (M, n)."""
         return _chain_frames(joints, self._consts, self._revolute)
 
-    def tip_poses(self, joints: npt.ArrayLike) -> Float:
-        """The tip's transforms (M, 4, 4) at postures (M, n)."""
-        q = np.atleast_2d(np.asarray(joints, dtype=np.float64))
-        rots, origins = self._frames(q)
-        out = np.zeros((q.shape[0], 4, 4))
-        hand_rot = rots[:, self._hand_joint]
-        out[:, :3, :3] = hand_rot @ self._tip_local[:3, :3]
-        out[:, :3, 3] = origins[:, self._hand_joint] + hand_rot @ self._tip_local[:3, 3]
+    def _hands(self, rots: Float, origins: Float) -> Float:
+        """The hand joint's frames (M, 4, 4) from the joint frames (M, n + 1, 3, 3), (M, n + 1,
+        3): what a grasped body moves with."""
+        out = np.zeros((rots.shape[0], 4, 4))
+        out[:, :3, :3] = rots[:, self._hand_joint]
+        out[:, :3, 3] = origins[:, self._hand_joint]
         out[:, 3, 3] = 1.0
         return out
+
+    def hand_frames(self, joints: npt.ArrayLike) -> Float:
+        """The hand joint's frames (M, 4, 4) at postures (M, n)."""
+        q = np.atleast_2d(np.asarray(joints, dtype=np.float64))
+        return self._hands(*self._frames(q))
+
+    def tip_poses(self, joints: npt.ArrayLike) -> Float:
+        """The tip's transforms (M, 4, 4) at postures (M, n)."""
+        return np.asarray(self.hand_frames(joints) @ self._tip_local)
 
     def _poses(
         self,
@@ -306,66 +314,74 @@ class CollisionChecker:
     def plan_grasps(self, joints: Float, gripper: npt.ArrayLike | None) -> None:
         """Find the run's grasps from its gripper signal (closed where True or > 0.5): which
         object each closing takes, and what it may touch (see the module docstring)."""
+        self._plan(np.atleast_2d(np.asarray(joints, dtype=np.float64)), gripper)
+
+    def _plan(self, q: Float, gripper: npt.ArrayLike | None) -> tuple[Float, Float, Float]:
+        """:meth:`plan_grasps` for postures q (M, n); returns their joint frames and hand
+        frames, computed once for the grasps and for the check that follows."""
+        rots, origins = self._frames(q)
+        hands = self._hands(rots, origins)
         self._grasps = []
+        self._pair_cache.clear()
         if gripper is None or not self.object_bodies:
-            return
+            return rots, origins, hands
         closed = np.asarray(gripper, dtype=np.float64) > 0.5
-        if closed.shape != (joints.shape[0],):
+        if closed.shape != (q.shape[0],):
             raise ValueError(
-                f"gripper must have one value per step ({joints.shape[0]}), got shape "
-                f"{closed.shape}"
+                f"gripper must have one value per step ({q.shape[0]}), got shape {closed.shape}"
             )
         edges = np.flatnonzero(np.diff(closed.astype(np.int8)))
         closes = [int(e) + 1 for e in edges if closed[e + 1]]
         opens = [int(e) + 1 for e in edges if not closed[e + 1]]
-        tips = self.tip_poses(joints)
         for k in closes:
-            body = self._nearest_object(tips[k])
+            body = self._nearest_object((hands[k] @ self._tip_local)[:3, 3])
             if body is None:
                 continue
             release = next((o for o in opens if o > k), None)
             self._grasps.append(_Grasp(body, k, release))
-        self._plan_contacts(joints)
+        self._plan_contacts(rots, origins, hands)
+        return rots, origins, hands
 
     def _nearest_object(self, tip: Float) -> int | None:
+        """The placed object whose shape is nearest the tip point (3,), within GRASP_REACH."""
         import coal
 
         probe = coal.Sphere(1e-4)
-        where = coal.Transform3s(np.eye(3), tip[:3, 3])
+        where = coal.Transform3s(np.eye(3), tip)
         best, found = GRASP_REACH, None
         for body in self.object_bodies.values():
+            self._result.clear()
             d = coal.distance(
                 probe,
                 where,
                 self._geoms[body],
                 coal.Transform3s(self._local[body, :3, :3], self._local[body, :3, 3]),
-                coal.DistanceRequest(),
-                coal.DistanceResult(),
+                self._request,
+                self._result,
             )
             if d <= best:
                 best, found = d, body
         return found
 
-    def _offset(self, grasp: _Grasp, tips: Float) -> Float:
+    def _offset(self, grasp: _Grasp, hands: Float) -> Float:
         """The grasped body's pose in the hand joint's frame, fixed where the gripper closes."""
-        hand = tips[grasp.closes] @ np.linalg.inv(self._tip_local)
-        return np.asarray(np.linalg.inv(hand) @ self._local[grasp.body])
+        return np.asarray(np.linalg.inv(hands[grasp.closes]) @ self._local[grasp.body])
 
-    def _plan_contacts(self, joints: Float) -> None:
+    def _plan_contacts(self, rots: Float, origins: Float, hands: Float) -> None:
         """What each grasped object may touch: what lies within SUPPORT_GAP of it where it is
-        grasped and where it is released."""
-        tips = self.tip_poses(joints)
+        grasped and where it is released (the run's joint and hand frames)."""
         for g in self._grasps:
             for step in (g.closes, g.opens):
                 if step is None:
                     continue
-                rots, origins = self._frames(joints[step : step + 1])
-                rot, pos = self._poses(rots, origins, {g.body: self._offset(g, tips)}, {})
+                at = slice(step, step + 1)
+                carried = {g.body: self._offset(g, hands)}
+                rot, pos = self._poses(rots[at], origins[at], carried, {})
                 for b in range(self._n_arm, len(self.names)):
                     if b != g.body and self._distance(g.body, b, rot[0], pos[0])[0] <= SUPPORT_GAP:
                         g.allowed.add(b)
 
-    def _segments(self, n_steps: int, tips: Float) -> list[tuple[int, int, _State]]:
+    def _segments(self, n_steps: int, hands: Float) -> list[tuple[int, int, _State]]:
         """The run cut where a grasp closes or opens: (first step, end step, state), the state
         being what is carried (body -> pose in the hand joint's frame) and what was released
         (body -> world pose)."""
@@ -378,12 +394,11 @@ class CollisionChecker:
             carried: dict[int, Float] = {}
             released: dict[int, Float] = {}
             for g in self._grasps:
-                offset = self._offset(g, tips)
+                offset = self._offset(g, hands)
                 if g.closes <= lo and (g.opens is None or lo < g.opens):
                     carried[g.body] = offset
                 elif g.opens is not None and g.opens <= lo:
-                    hand = tips[g.opens] @ np.linalg.inv(self._tip_local)
-                    released[g.body] = hand @ offset
+                    released[g.body] = hands[g.opens] @ offset
             out.append((lo, hi, _State(carried, released)))
         return out
 
@@ -401,13 +416,11 @@ class CollisionChecker:
         ``contact``: a pair closer than this (m) is a collision (0: penetrating only; a
         measured run that stops at a contact touches at about 1 mm)."""
         q = np.atleast_2d(self.robot.check_joints(joints, "joints"))
-        self.plan_grasps(q, gripper)
-        rots, origins = self._frames(q)
-        tips = self.tip_poses(q)
+        rots, origins, hands = self._plan(q, gripper)
         clearance = np.empty(q.shape[0])
         outside = np.empty(q.shape[0])
         collisions: set[tuple[int, str, str]] = set()
-        for lo, hi, state in self._segments(q.shape[0], tips):
+        for lo, hi, state in self._segments(q.shape[0], hands):
             pairs = self._state_pairs(state)
             arm = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
             rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
@@ -421,12 +434,18 @@ class CollisionChecker:
         return CollisionReport(clearance, sorted(collisions), outside)
 
     def _state_pairs(self, state: _State) -> NDArray[np.intp]:
+        """The pairs checked while ``state``'s object is carried (kept per carried body until
+        the grasps are planned again: :meth:`near` asks at every step)."""
         carried = next(iter(state.carried), None)
-        allowed: set[int] = set()
-        for g in self._grasps:
-            if g.body == carried:
-                allowed = g.allowed
-        return self._pairs(carried, {g.body for g in self._grasps}, allowed)
+        pairs = self._pair_cache.get(carried)
+        if pairs is None:
+            allowed: set[int] = set()
+            for g in self._grasps:
+                if g.body == carried:
+                    allowed = g.allowed
+            pairs = self._pairs(carried, {g.body for g in self._grasps}, allowed)
+            self._pair_cache[carried] = pairs
+        return pairs
 
     def near(
         self,

@@ -68,7 +68,7 @@ class Avoidance:
     (:meth:`pbdkit.collision.CollisionChecker.plan_grasps`), the margin, and per step the
     Gaussians of the pairs caught so far (:meth:`update`).
 
-    :meth:`terms` is what the fused step adds at step j; :attr:`precisions` keeps each step's
+    :meth:`terms` is what the fused step adds at step j; :attr:`precisions` gives each step's
     Lambda_c for the covariance and the influence.
     """
 
@@ -77,8 +77,12 @@ class Avoidance:
         self.margin = float(margin)
         self.n = int(checker._consts.shape[0])
         self.caught: dict[int, set[tuple[str, str]]] = {}
-        self.precisions: dict[int, Float] = {}
         self._terms: dict[int, tuple[Float, Float]] = {}
+
+    @property
+    def precisions(self) -> dict[int, Float]:
+        """Lambda_c (n, n) of every step where the clearance acts."""
+        return {j: lam for j, (lam, _) in self._terms.items()}
 
     def terms(self, j: int) -> tuple[Float, Float] | None:
         """(Lambda_c (n, n), its information (n,)) of step j, None where nothing was caught."""
@@ -91,11 +95,10 @@ class Avoidance:
         checker, margin = self.checker, self.margin
         new = 0
         self._terms.clear()
-        self.precisions.clear()
-        tips = checker.tip_poses(joints)
+        hands = checker.hand_frames(joints)
         links = set(checker.names[: checker._n_arm])
         arm = {(a, b) for a in links for b in links}
-        for lo, hi, state in checker._segments(joints.shape[0], tips):
+        for lo, hi, state in checker._segments(joints.shape[0], hands):
             for j in range(lo, hi):
                 near = checker.near(joints[j], margin, state.carried, state.released)
                 for prox in near:
@@ -113,7 +116,6 @@ class Avoidance:
                 terms = self._gaussians(joints[j], active)
                 if terms is not None:
                     self._terms[j] = terms
-                    self.precisions[j] = terms[0]
         return new
 
     def _tapered(self, lo: int, hi: int) -> dict[int, dict[tuple[str, str], float]]:

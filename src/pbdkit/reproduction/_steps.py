@@ -358,8 +358,9 @@ class FusedStep(ControllerStep):
         """Sigma_j = (Lambda_theta_j + J^T (sum_n P_n) J)^-1 with the Jacobian ``jac`` used
         (plus the clearance's precision where it acted)."""
         lam = self.prec_list[j] + jac.T.dot(self.p_sum[j]).dot(jac)
-        if self.avoid is not None and j in self.avoid.precisions:
-            lam = lam + self.avoid.precisions[j]
+        clearance = None if self.avoid is None else self.avoid.terms(j)
+        if clearance is not None:
+            lam = lam + clearance[0]
         inv = np.linalg.inv(lam)
         return np.asarray(0.5 * (inv + inv.T))
 

@@ -143,7 +143,9 @@ def _chain_frames(
     """Every joint's frame for a batch q (M, n): rotations (M, n + 1, 3, 3) and origins
     (M, n + 1, 3) in the base frame, entry 0 the base itself (identity), entry i joint i's frame
     after its motion (what pinocchio's ``data.oMi[i]`` holds), the same loop as
-    :func:`_chain_fk_jacobian`'s."""
+    :func:`_chain_fk_jacobian`'s. That one keeps only the running frame: built on this one
+    (every frame stored, the axes taken from it), a 1000-posture batch took 8-10 % longer for
+    positions and 24-27 % longer for Jacobians (measured), so the two loops stay apart."""
     m, n = q.shape
     s, c1 = np.sin(q), 1.0 - np.cos(q)
     rots = np.empty((m, n + 1, 3, 3))
