@@ -4,6 +4,7 @@ the allowed contacts, and the bad inputs."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -12,11 +13,13 @@ import pytest
 
 from pbdkit.collision import Box, CollisionChecker, Cylinder, Scene, Sphere
 from pbdkit.data._demonstration import Demonstration
+from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
-from pbdkit.reproduction._avoid import SIGMA, Avoidance
+from pbdkit.reproduction._avoid import SIGMA, TAPER, TAPER_DECADES, TAPER_MIN, Avoidance
 from pbdkit.reproduction._probabilistic_ik import CollisionWarning
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.robots import katana, panda, urdf_from_dh
+from pbdkit.robots._chain import _chain_frames
 from pbdkit.robots._robot import Robot
 from pbdkit.skill._skill import Skill
 
@@ -177,11 +180,18 @@ def test_a_box_in_the_carry_is_avoided_within_the_limits(
     assert "clearance" not in avoided.used and "clearance" not in skill.constraint_names
     total = sum(avoided.influence.values())
     np.testing.assert_allclose(total, 1.0, atol=1e-9)
-    # Timed within the arm's limits, as any reproduction.
-    assert avoided.velocities is not None and avoided.times is not None
-    assert np.all(np.abs(avoided.velocities) <= limits.velocity * (1 + 1e-6))
+    # Timed within the arm's limits, as any reproduction (by divided differences).
+    assert avoided.times is not None
+    assert motion_peaks(avoided.times, avoided.joints, limits).worst <= 1.0 + 1e-9
     report = skill.check(avoided.joints, box)
     np.testing.assert_allclose(report.clearance, avoided.clearance)
+    # Continuous: no step jumps past the box between two clear samples (the joints
+    # interpolated 10 times finer are clear of it too).
+    assert np.abs(np.diff(avoided.joints, axis=0)).max() < 0.1
+    fine = np.linspace(0.0, len(avoided.t) - 1.0, 10 * (len(avoided.t) - 1) + 1)
+    between = np.stack([np.interp(fine, np.arange(len(avoided.t)), q) for q in avoided.joints.T], 1)
+    held = avoided.gripper_signal[np.floor(fine).astype(int)]
+    assert skill.check(between, box, gripper=held).min_clearance > 0.005
 
 
 def test_a_glass_inside_a_box_is_reported_infeasible(skill: Skill, plain: tuple) -> None:
@@ -190,42 +200,64 @@ def test_a_glass_inside_a_box_is_reported_infeasible(skill: Skill, plain: tuple)
     with pytest.warns(CollisionWarning, match=r"crate and gripper collide from sample \d+"):
         out = skill.reproduce(objects, scene=inside)
     assert out.infeasible is not None and "crate" in out.infeasible
+    # Why: keeping clear would leave the grasp, where the glass constraint is tight.
+    assert re.search(
+        r"\d+ mm from the glass constraint at sample \d+, where it is tight", out.infeasible
+    )
     assert any("crate" in c for c in out.collisions)
 
 
-def test_the_clearance_gaussian_is_the_distances_linearization(skill: Skill, plain: tuple) -> None:
-    # r = d(distance)/d(theta) against central differences of coal's distance; the Gaussian
-    # is r theta ~ N(r q + m - d, SIGMA^2): Lambda = r^T r / SIGMA^2, information
-    # Lambda q + r (m - d) / SIGMA^2.
-    _, res = plain
-    checker = CollisionChecker(skill.robot, Scene([Box((0.06, 0.06, 0.06), _mid_carry(res))]))
-    margin = 0.05
-    avoid = Avoidance(checker, margin=margin)
+def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: tuple) -> None:
+    # One encounter with the box: at step k, r = e^T J_p for the point fixed in its body,
+    # against central differences of e . p(theta); the Gaussian is
+    # r theta ~ N(r q + ref_k + a w_k - e . p(q), SIGMA^2 / rho_k):
+    # Lambda = rho_k r^T r / SIGMA^2, information Lambda q + rho_k r (ref_k + a w_k - e . p(q))
+    # / SIGMA^2.
+    objects, res = plain
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    checker = CollisionChecker(skill.robot, box, objects)
+    own = ~res.lead_in
+    joints, signal = res.joints[own], res.gripper_signal[own]
+    checker.plan_grasps(joints, signal)
+    avoid = Avoidance(checker, margin=0.02)
+    assert avoid.update(joints, signal) > 0
+    (enc,) = avoid.encounters
+    assert enc.body == "box" and enc.amplitude > 0.02  # the path goes through it
+    # Passed over, not backed away from: up, without the component along the path.
+    assert enc.escape[2] > 0.7
+    np.testing.assert_allclose(np.linalg.norm(enc.escape), 1.0)
+
+    def point(q: np.ndarray) -> np.ndarray:
+        rots, origins = _chain_frames(q[None], checker._consts, checker._revolute)
+        return np.asarray(rots[0, enc.joint].dot(enc.local) + origins[0, enc.joint])
+
+    taper = enc.taper
+    assert taper == max(TAPER_MIN, round(TAPER * joints.shape[0]))
     checked = 0
-    for q in res.joints[::3]:
-        near = checker.near(q, margin)
-        if not near or near[0].distance <= 0.0:
-            continue
-        prox = near[0]
-        terms = avoid._gaussians(q, [(prox, 1.0)])
+    for k in (enc.lo - taper // 2, (enc.lo + enc.hi) // 2, enc.hi + taper // 3):
+        q = joints[k]
+        terms = avoid.terms(k)
         assert terms is not None
         lam, info = terms
         h = 1e-6
-        r = np.empty(q.shape)
-        for i in range(q.shape[0]):
-            dq = np.zeros(q.shape)
-            dq[i] = h
-            up = checker.near(q + dq, 1.0, include={prox.bodies})
-            down = checker.near(q - dq, 1.0, include={prox.bodies})
-            d_up = next(p.distance for p in up if p.bodies == prox.bodies)
-            d_down = next(p.distance for p in down if p.bodies == prox.bodies)
-            r[i] = (d_up - d_down) / (2 * h)
-        w = 1.0 / SIGMA**2
-        np.testing.assert_allclose(lam, w * np.outer(r, r), rtol=1e-4, atol=1e-3 * w * r @ r)
-        expected = lam @ q + w * r * (margin - prox.distance)
-        np.testing.assert_allclose(info, expected, rtol=1e-4, atol=1e-4 * np.abs(expected).max())
+        r = np.array(
+            [
+                enc.escape.dot(point(q + h * e) - point(q - h * e)) / (2 * h)
+                for e in np.eye(q.shape[0])
+            ]
+        )
+        w = enc.weight(k)
+        rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / SIGMA**2
+        np.testing.assert_allclose(lam, rho * np.outer(r, r), rtol=1e-5, atol=1e-6 * rho * r @ r)
+        push = enc.ref[k] + enc.amplitude * w - enc.escape.dot(point(q))
+        expected = lam @ q + rho * r * push
+        np.testing.assert_allclose(info, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
         checked += 1
-    assert checked >= 3
+    assert checked == 3
+    # The bump: whole over the encounter, a raised cosine to nothing `taper` steps away.
+    assert enc.weight(enc.lo) == enc.weight(enc.hi) == 1.0
+    np.testing.assert_allclose(enc.weight(enc.lo - taper / 2), 0.5, atol=1e-12)
+    assert enc.weight(enc.hi + taper) == 0.0 and avoid.terms(enc.hi + taper + 1) is None
 
 
 def test_a_result_with_a_scene_round_trips(skill: Skill, plain: tuple, tmp_path: Path) -> None:

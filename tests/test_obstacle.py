@@ -14,7 +14,8 @@ from pbdkit.robots import katana
 from pbdkit.sim import get_task
 from pbdkit.sim._evaluation import evaluate
 from pbdkit.sim._obstacle import avoided_scene, run_collisions
-from pbdkit.sim._perturb import OBSTACLE_NAME, DisturbanceSetup, place_obstacle
+from pbdkit.sim._perturb import OBSTACLE_NAME, DisturbanceSetup, PlaceObstacle, place_obstacle
+from pbdkit.sim._runs import run_controller
 from pbdkit.sim._task_skill import TaskSkill
 from pbdkit.sim._trials import TrialConditions
 from pbdkit.sim._world import build_scene
@@ -134,3 +135,21 @@ def test_evaluate_reports_collisions_per_controller(coaster: TaskSkill) -> None:
     # The joint-space controller does not avoid: it meets the box.
     (joint,) = data["runs"]["joint"]
     assert joint["collided"] and any(OBSTACLE_NAME in c for c in joint["contacts"])
+
+
+def test_a_plan_that_cannot_keep_clear_is_not_played(coaster: TaskSkill) -> None:
+    # A crate over the glass: the grasp (a tight constraint) and the clearance cannot both
+    # hold. The plan says so and the simulated arm stays where it starts: a failure, no contact.
+    spec = coaster.task
+    truth = spec.full_placement(spec.sample_objects(np.random.default_rng(0)))
+    crate = Box((0.14, 0.14, 0.14), truth["glass"] + np.array([0.0, 0.0, 0.07]), name="crate")
+    act = PlaceObstacle(box=crate, step=0)
+    run = run_controller(
+        coaster, truth, "fused", disturbance=act, avoid=avoided_scene(spec, truth, act, whole=False)
+    )
+    assert any("cannot both hold" in w for w in run.warnings)
+    summary = run.as_dict()
+    assert "crate" in summary["infeasible"] and not summary["success"]
+    assert not summary["collided"]
+    moved = np.abs(run.execution.joints - run.reproduction.joints[0]).max()
+    assert moved < 0.02  # held at the start (the drives' sag under gravity)

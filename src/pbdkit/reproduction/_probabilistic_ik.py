@@ -51,6 +51,12 @@ from ._timing import check_timing, timed_path
 
 __all__ = ["CollisionWarning", "solve"]
 
+#: A task constraint is tight where its standard deviation, in its loosest direction, is under
+#: this (m): there the clearance does not get to move the hand (:func:`_leaves_tight`).
+TIGHT = 0.005
+#: ... by more than this (m) further from it than the plain run.
+CONFLICT = 0.005
+
 
 class CollisionWarning(UserWarning):
     """A reproduction with avoidance still collides: a tight constraint of the skill and the
@@ -174,6 +180,26 @@ def _avoid_passes(
     return best
 
 
+def _leaves_tight(
+    run: RunSetup, plain: ReproductionResult, avoided: ReproductionResult
+) -> tuple[int, str, float] | None:
+    """Where the avoided run leaves a tight constraint of the skill that the plain run kept:
+    the first (sample, constraint, the avoided run's hand error there in m) whose error grows
+    by more than :data:`CONFLICT` where the constraint's standard deviation (its loosest
+    direction) is under :data:`TIGHT`; None where the clearance and the skill agree."""
+    own = np.flatnonzero(~avoided.lead_in) if avoided.lead_in is not None else None
+    for name in run.tasks:
+        cov = run.constraints.task_cov[name][:, :3, :3]
+        loosest = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
+        grown = avoided.task_errors[name] - plain.task_errors[name]
+        path = grown if own is None else grown[own]
+        bad = np.flatnonzero((loosest < TIGHT) & (path > CONFLICT))
+        if bad.size:
+            sample = int(bad[0] if own is None else own[bad[0]])
+            return (sample, name, float(avoided.task_errors[name][sample]))
+    return None
+
+
 def _scene_min(report: CollisionReport) -> float:
     """The smallest clearance to the scene (the arm's pairs with itself left out)."""
     outside = report.scene_clearance
@@ -200,10 +226,16 @@ def _with_scene(
             "avoid=True needs the fused controller of position constraints (use=None or "
             "'joint' with objects); pass avoid=False to check only"
         )
+    left: tuple[int, str, float] | None = None
     if fused:
         outside = report.scene_clearance
         if outside is not None and outside.size and float(outside.min()) < margin:
-            res, report = _avoid_passes(robot, run, res, checker, margin, timing)
+            avoided, avoided_report = _avoid_passes(robot, run, res, checker, margin, timing)
+            # Where keeping the margin would leave a tight constraint of the skill, the plain
+            # run stays, its contacts reported: the skill is not given up silently.
+            left = _leaves_tight(run, res, avoided)
+            if left is None:
+                res, report = avoided, avoided_report
         else:
             zero = np.zeros(len(res.t))
             res = dataclasses.replace(
@@ -218,6 +250,11 @@ def _with_scene(
             f"the skill's constraints and the clearance cannot both hold: {first} and {second} "
             f"collide from sample {step} ({len(report.collisions)} contacts in all)"
         )
+        if left is not None:
+            infeasible += (
+                f"; keeping clear would take the hand {left[2] * 1e3:.0f} mm from the "
+                f"{left[1]} constraint at sample {left[0]}, where it is tight"
+            )
         warnings.warn(CollisionWarning(infeasible), stacklevel=4)
     return dataclasses.replace(
         res, clearance=report.clearance, collisions=report.collisions, infeasible=infeasible

@@ -45,10 +45,10 @@ MAX_HALVINGS = 8
 
 #: The clearance constraint's key in a result's influence (never a constraint name).
 CLEARANCE = "clearance"
-#: Where the clearance acts, the trust region is this many times ``max_step``: the passes
-#: linearize the clearance again at each path, and a tight trust region keeps a pass from
-#: leaving where the one before it pushed (docs: "Collisions").
-CLEARANCE_STEP = 6.0
+#: Where the clearance acts, the trust region is this many times ``max_step`` (and the velocity
+#: bound ``step_limit`` does not apply: the timing keeps the limits). Larger let the path jump
+#: past an obstacle between two clear samples (docs: "Collisions").
+CLEARANCE_STEP = 1.0
 
 
 class LoopOutput(NamedTuple):
@@ -318,8 +318,8 @@ class FusedStep(ControllerStep):
         else:
             step2 = step.dot(step)
         limited = False
-        # Velocity bound, trust region of the linearization; not where the clearance acts:
-        # the passes linearize it again at each path (docs: "Collisions").
+        # Velocity bound, trust region of the linearization; where the clearance acts, the
+        # trust region alone (docs: "Collisions").
         if clearance is not None:
             bound = CLEARANCE_STEP * self.max_step
             if step2 > bound * bound:

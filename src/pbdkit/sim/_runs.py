@@ -48,6 +48,7 @@ class ControllerRun:
     velocity_limit: Float | None = None
     force_window: tuple[float, float] | None = None
     collisions: dict[str, Any] = field(default_factory=dict)
+    infeasible: str | None = None
 
     @property
     def success(self) -> bool:
@@ -61,10 +62,13 @@ class ControllerRun:
         ``peak_jerk_ratio`` (<= 1: within the limits) with the absolute ``peak_velocity``,
         ``peak_acceleration``, ``peak_jerk`` (rad/s, rad/s^2, rad/s^3;
         :func:`pbdkit.sim._metrics.servo_peaks`); all outside a push."""
-        return {
+        out = {
             **run_summary(self.execution, self.velocity_limit, self.force_window),
             **self.collisions,
         }
+        if self.infeasible is not None:
+            out["infeasible"] = self.infeasible
+        return out
 
 
 @dataclass(kw_only=True)
@@ -158,18 +162,24 @@ def run_controller(
     rep_s = time.perf_counter() - start
     boxes = [disturbance.box] if isinstance(disturbance, PlaceObstacle) else []
     sim = Simulation.from_task(ts.task, world, obstacles=boxes)
+    # A plan that says it cannot keep clear is not played: the arm stays where it starts.
+    refused = scene is not None and res.infeasible is not None
     try:
-        ex = execute(
-            sim,
-            skill.times(res),
-            res.joints,
-            res.gripper,
-            camera=camera,
-            fps=fps,
-            disturbance=disturbance,
-            velocities=res.velocities,
-            accelerations=res.accelerations,
-        )
+        if refused:
+            rest = np.repeat(res.joints[:1], 2, axis=0)
+            ex = execute(sim, [0.0, 1.0], rest, camera=camera, fps=fps)
+        else:
+            ex = execute(
+                sim,
+                skill.times(res),
+                res.joints,
+                res.gripper,
+                camera=camera,
+                fps=fps,
+                disturbance=disturbance,
+                velocities=res.velocities,
+                accelerations=res.accelerations,
+            )
     finally:
         sim.close()
     return ControllerRun(
@@ -182,6 +192,7 @@ def run_controller(
         velocity_limit=_velocity_limit(skill),
         force_window=None if disturbance is None else disturbance.force_window(),
         collisions=run_collisions(skill.robot, ts.task, world, ex, disturbance),
+        infeasible=res.infeasible if refused else None,
     )
 
 
