@@ -448,8 +448,36 @@ def cli_following_error(skill_file: str) -> None:
     print("OK: exit 5")
 
 
+def cli_scene(skill_file: str, workdir: str) -> None:
+    """`pbdkit ros run --scene` with a crate over the glass: the plan would take the gripper
+    into it, so nothing is sent (the arm receives no message) and the exit code is 6; with a
+    crate far away the run goes to its end (exit 0)."""
+    from pbdkit.collision import Box, Scene
+
+    _, glass, q0 = _glass_setup(skill_file)
+    arm = _start_katana_arm(60, q0)
+    crate = Path(workdir) / "crate.yaml"
+    Scene([Box((0.12, 0.12, 0.12), glass, name="crate")]).save(crate)
+    cli = _cli(skill_file, "--object", f"glass={_csv(glass)}", "--scene", str(crate))
+    out, err = cli.communicate(timeout=60)
+    got = _stop_arm(arm)
+    assert cli.returncode == 6, (cli.returncode, out, err)
+    assert "the plan would collide, nothing sent" in err and "crate" in err, err
+    assert " received 0 " in got["out"], got["out"]
+    arm = _start_katana_arm(60, q0)
+    far = Path(workdir) / "far.yaml"
+    Scene([Box((0.12, 0.12, 0.12), glass + np.array([0.0, 0.0, 0.8]), name="far")]).save(far)
+    cli = _cli(skill_file, "--object", f"glass={_csv(glass)}", "--scene", str(far))
+    out, err = cli.communicate(timeout=60)
+    got = _stop_arm(arm)
+    assert cli.returncode == 0, (cli.returncode, out, err)
+    assert "scene: the plan keeps" in out and "done: at rest" in out, out
+    print(f"OK: exit 6, nothing sent; with a far crate exit 0, {got['out'].split()[9]} messages")
+
+
 CASES.update(
     {
+        "cli_scene": cli_scene,
         "publish_pose": publish_pose,
         "cli_topics_renamed_gripper": cli_topics_renamed_gripper,
         "cli_sigint": cli_sigint,

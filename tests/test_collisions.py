@@ -5,6 +5,7 @@ the allowed contacts, and the bad inputs."""
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
 from pbdkit.reproduction._avoid import SIGMA, TAPER, TAPER_DECADES, TAPER_MIN, Avoidance
+from pbdkit.reproduction._controller import PlanFailedWarning
 from pbdkit.reproduction._probabilistic_ik import CollisionWarning
 from pbdkit.reproduction._result import ReproductionResult
 from pbdkit.robots import katana, panda, urdf_from_dh
@@ -270,3 +272,91 @@ def test_a_result_with_a_scene_round_trips(skill: Skill, plain: tuple, tmp_path:
     assert back.clearance is not None
     np.testing.assert_array_equal(back.clearance, checked.clearance)
     assert back.collisions == checked.collisions and back.used == checked.used
+
+
+# ----------------------------------------------------------------------------- online
+def _commands(ctrl: object, q: np.ndarray, move: dict | None = None, at: int = -1) -> tuple:
+    """Fed its own commands from ``q`` (``move`` told at command ``at``): postures, gripper."""
+    joints, held = [q], [False]
+    k = 0
+    while not ctrl.done:  # type: ignore[attr-defined]
+        cmd = ctrl.step(q, move if k == at else None)  # type: ignore[attr-defined]
+        q = cmd.q
+        joints.append(q)
+        held.append(cmd.gripper)
+        k += 1
+    return np.array(joints), np.array(held)
+
+
+def test_the_controller_keeps_clear_of_a_scene_and_replans_for_a_moved_object(
+    skill: Skill, plain: tuple
+) -> None:
+    objects, res = plain
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    q0 = res.joints[0]
+    # Without the scene the commands go through the box; with it they keep clear of it,
+    # through a re-plan for a glass that moved by 5 mm too.
+    blind, g_blind = _commands(skill.controller(objects), q0)
+    assert skill.check(blind, box, gripper=g_blind).min_clearance < 0.0
+    ctrl = skill.controller(objects, scene=box)
+    moved = {"glass": objects["glass"] + np.array([0.005, 0.0, 0.0])}
+    clear, g_clear = _commands(ctrl, q0, moved, at=len(blind) // 3)
+    assert ctrl.replans >= 1 and ctrl.fault is None
+    assert skill.check(clear, box, gripper=g_clear).min_clearance > 0.005
+    # The skill is still done: the hand ends where the skill ends for the moved glass.
+    end = skill.reproduce(moved)
+    np.testing.assert_allclose(skill.robot.fk(clear[-1]), end.positions[-1], atol=2e-3)
+
+
+def test_a_plan_that_would_collide_is_not_followed(skill: Skill, plain: tuple) -> None:
+    objects, res = plain
+    inside = Scene([Box((0.12, 0.12, 0.12), objects["glass"], name="crate")])
+    ctrl = skill.controller(objects, scene=inside)
+    q0 = res.joints[0]
+    with pytest.warns(PlanFailedWarning, match="the plan would collide: .*crate"):
+        joints, _ = _commands(ctrl, q0)
+    assert ctrl.fault is not None and "crate" in ctrl.fault
+    np.testing.assert_allclose(joints, q0[None].repeat(len(joints), axis=0), atol=1e-12)
+
+
+def test_a_controller_without_limits_does_not_take_a_scene(skill: Skill, plain: tuple) -> None:
+    objects, _ = plain
+    none = {"velocity_limit": None, "acceleration_limit": None, "jerk_limit": None}
+    with pytest.raises(ValueError, match="keeps clear of a scene with motion limits"):
+        skill.controller(objects, scene=Scene([]), **none)
+
+
+def test_a_stream_never_streams_a_colliding_plan(skill: Skill, plain: tuple) -> None:
+    # The 1 kHz stream, its plans made in the planner process: the first plan would take the
+    # gripper into the crate, so none is streamed; the setpoints stay at rest and say why.
+    objects, res = plain
+    inside = Scene([Box((0.12, 0.12, 0.12), objects["glass"], name="crate")])
+    q0 = res.joints[0]
+
+    def run(stream: object) -> list[np.ndarray]:
+        setpoints = []
+        while not stream.done and len(setpoints) < 20000:  # type: ignore[attr-defined]
+            setpoints.append(stream.step(q0))  # type: ignore[attr-defined]
+            if stream.fault is None:  # type: ignore[attr-defined]
+                time.sleep(1e-4)  # the planner process takes a while
+        return setpoints
+
+    with skill.controller(objects, scene=inside).stream(1000) as stream:
+        with pytest.warns(PlanFailedWarning, match="the plan would collide"):
+            setpoints = run(stream)
+        assert stream.done and stream.fault is not None and "crate" in stream.fault
+    np.testing.assert_allclose(np.array(setpoints), q0[None].repeat(len(setpoints), 0), atol=1e-12)
+
+
+def test_a_replan_that_would_collide_keeps_the_plan_in_use(skill: Skill, plain: tuple) -> None:
+    # The glass is told to have moved 10 cm, into a crate: the re-plan would take the
+    # gripper into it. The plan in use (checked, clear) is kept, and the controller says so.
+    objects, res = plain
+    moved = objects["glass"] + np.array([0.0, 0.1, 0.0])
+    crate = Scene([Box((0.12, 0.12, 0.12), moved, name="crate")])
+    ctrl = skill.controller(objects, scene=crate)
+    with pytest.warns(CollisionWarning, match="the controller keeps its plan: .*crate"):
+        joints, held = _commands(ctrl, res.joints[0], {"glass": moved}, at=5)
+    assert ctrl.fault is None and ctrl.replans == 0 and ctrl._timed.refused >= 1
+    assert skill.check(joints, crate, gripper=held).min_clearance > 0.0
+    np.testing.assert_allclose(skill.robot.fk(joints[-1]), res.positions[-1], atol=2e-3)

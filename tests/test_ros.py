@@ -130,6 +130,19 @@ def test_pbdkit_ros_run_on_the_sim_arm(skill: Skill, tmp_path: Path, case: str) 
     assert done.stdout.startswith("OK"), done.stdout
 
 
+def test_pbdkit_ros_run_checks_the_scene_before_it_sends_anything(
+    skill: Skill, tmp_path: Path
+) -> None:
+    # Issue 38: `pbdkit ros run --scene` (tests/ros_cases.py, cli_scene).
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    done = run_on_private_graph(
+        "test_ros_run_scene", "cli_scene", str(path), str(tmp_path), timeout=150
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK"), done.stdout
+
+
 def test_record_learn_and_run_the_coaster_over_a_real_graph(tmp_path: Path) -> None:
     # The whole chain on a private graph (tests/ros_cases.py, coaster_round_trip): `pbdkit ros
     # sim --teach` replays five takes (10x real time), `pbdkit ros record --auto` records them,

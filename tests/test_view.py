@@ -464,3 +464,46 @@ def test_online_run_follows_an_object_dragged_while_the_arm_moves(coaster_view: 
     finally:
         app.move_object("coaster", start)
         app.wait_idle(30)
+
+
+def test_the_view_draws_a_scene_avoids_it_and_marks_where_the_arm_comes_near(
+    skill: Skill,
+) -> None:
+    # Issue 38: a box at the mid-carry of the fused plan. The view's fused plan keeps clear of
+    # it (as skill.reproduce with the scene does), the box is drawn, and the mark shows at
+    # the step nearest the box (within the margin), not at the start.
+    pytest.importorskip("viser")
+    from pbdkit.apps._view import ViewApp
+    from pbdkit.apps._view_scene import CONTACT_RGB
+    from pbdkit.apps._view_serve import served
+    from pbdkit.collision import Box, Scene
+
+    objects = typical_placements(skill)
+    res = skill.reproduce(objects)
+    closed = np.flatnonzero(res.gripper[:-1])
+    speed = np.linalg.norm(np.diff(res.positions, axis=0), axis=1)
+    box = Scene([Box((0.06, 0.06, 0.06), res.positions[closed[np.argmax(speed[closed])]], "box")])
+    with served(lambda srv: ViewApp(skill, objects, srv, scene=box), port=free_port()) as view:
+        assert view.wait_idle(60.0)
+        plan = view.plan
+        expected = skill.reproduce(objects, scene=box)
+        np.testing.assert_allclose(plan.result.joints, expected.joints, atol=1e-12)
+        assert plan.result.collisions == [] and "Clearance at least" in view.ui_status.content
+        assert view.scene.avoids and "/scene/box" in view.server.scene._handle_from_node_name
+        view._show_step(int(np.argmin(plan.result.clearance)))
+        assert not view.scene.mark.visible  # kept clear of it by more than the margin
+        # The joint-space controller does not avoid (checked only): it goes through the box,
+        # and the mark shows red where it does, on the arm near the hand.
+        view.ui_controller.value = "joint"
+        view._controller_changed(None)
+        assert view.wait_idle(60.0) and view.plan is not None and view.plan.controller == "joint"
+        plan = view.plan
+        assert plan.result.collisions and "In contact: " in view.ui_status.content
+        near = int(np.argmin(plan.result.clearance))
+        view._show_step(near)
+        assert view.scene.mark.visible and "box" in view.scene.label.text
+        assert tuple(view.scene.mark.color) == CONTACT_RGB
+        hand = skill.robot.fk(plan.result.joints[near])
+        assert np.linalg.norm(np.asarray(view.scene.mark.position) - hand) < 0.25
+        view._show_step(0)
+        assert not view.scene.mark.visible

@@ -542,6 +542,13 @@ def view(
         bool, typer.Option("--no-browser", help="Do not open a browser; print the URL.")
     ] = False,
     seed: Annotated[int, typer.Option(help="With --task: seed of the demonstrations.")] = 0,
+    scene: Annotated[
+        Path | None,
+        typer.Option(
+            help="With --skill: a scene file (YAML, docs: collisions), drawn; the fused plan "
+            "keeps clear of it, and the arm is marked where it comes within 2 cm."
+        ),
+    ] = None,
 ) -> None:
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
@@ -550,8 +557,11 @@ def view(
 
     if (task is None) == (skill_path is None):
         fail("give --task or --skill (one of them)")
-    if task is not None and (robot is not None or obj):
-        fail("--robot and --object apply to --skill; a task has its own arm and objects")
+    if task is not None and (robot is not None or obj or scene is not None):
+        fail(
+            "--robot, --object and --scene apply to --skill; a task has its own arm, objects "
+            "and scene"
+        )
     check_seed(seed)
     check_port(port)  # before the teaching and learning; serve checks again as it binds
     with sigint_deferred():  # a Ctrl+C in these imports ends the command after them
@@ -575,9 +585,15 @@ def view(
         objects = typical_placements(skill)
         objects.update(check_view_objects(parse_objects(obj or []), skill))
         title = f"skill {skill_path.name}"
+        obstacles = None
+        if scene is not None:
+            from ..collision import Scene
+
+            obstacles = Scene.load(scene)
+            skill.check(skill.reproduce(objects).joints[:1], obstacles, objects=objects)
 
         def factory(server: Any) -> ViewApp:
-            return ViewApp(skill, objects, server, urdf=urdf, title=title)
+            return ViewApp(skill, objects, server, urdf=urdf, title=title, scene=obstacles)
 
     else:
         assert task is not None

@@ -72,14 +72,23 @@ def run(
         bool,
         typer.Option(help="An arm without acceleration or jerk limits: a = v/0.25 s, j = a/0.1 s."),
     ] = False,
+    scene: Annotated[
+        Path | None,
+        typer.Option(
+            help="A scene file (YAML, docs: collisions): the plan is checked against it before "
+            "anything is sent, and every plan keeps clear of it."
+        ),
+    ] = None,
 ) -> None:
     """Run a skill on an arm behind a joint_trajectory_controller. Exit codes: 0 ran to its end,
     at rest; 2 usage or refused; 3 stale joint states; 4 no or inactive controller; 5 following
-    error; 130 SIGINT or SIGTERM (brought to rest first)."""
+    error; 6 a plan would collide with --scene (nothing sent, or brought to rest) or could not
+    be made; 130 SIGINT or SIGTERM (brought to rest first)."""
     from ..ros._graph import ros_available
 
     if not ros_available():
         fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
+    from ..collision import Scene
     from ..ros._joints import parse_joint_map
     from ..ros._objects import check_sources
     from ..ros._run import RunFailed, RunSettings, run_skill
@@ -99,6 +108,7 @@ def run(
         gripper_joint=None if gripper_joint is None else parse_gripper_joint(gripper_joint),
         gripper_seconds=gripper_seconds,
         grasped=grasped,
+        scene=None if scene is None else Scene.load(scene),
     )
     if not skill_path.is_file():
         raise FileNotFoundError(2, "No such file", str(skill_path))

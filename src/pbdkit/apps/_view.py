@@ -62,10 +62,12 @@ from ._view_plan import (
     quat_wxyz,
     step_gaussians,
 )
+from ._view_scene import SceneLayer
 
 if TYPE_CHECKING:
     import viser
 
+    from ..collision import Scene
     from ..sim._task_skill import TaskSkill
     from ..skill._skill import Skill
     from ._view_urdf import UrdfArm
@@ -149,6 +151,9 @@ class ViewApp:
         (:func:`coarse_skill`; fewer if a preview would take more than
         :data:`PREVIEW_BUDGET`, :meth:`calibrate_preview`); the full plan follows its release.
         None: full plans only.
+    scene : Scene, optional
+        Obstacles, drawn and kept clear of by the fused controller (a task's own scene is
+        checked without it): :class:`pbdkit.apps._view_scene.SceneLayer`.
     """
 
     def __init__(
@@ -161,6 +166,7 @@ class ViewApp:
         urdf: Path | str | None = None,
         title: str = "pbdkit view",
         preview_steps: int | None = PREVIEW_STEPS,
+        scene: Scene | None = None,
     ) -> None:
         self.skill = skill
         #: Steps of a preview plan (None, or a skill of no more steps: no previews).
@@ -204,6 +210,7 @@ class ViewApp:
         self._draw_world: SimDrawing | None = None
         self._urdf_arm: UrdfArm | None = None
         self._build_scene(urdf)
+        self.scene = SceneLayer(server, scene, None if task_skill is None else task_skill.task)
         self._build_panel(title)
         self.planner: LatestWins[tuple[dict[str, Float], str, bool]] = LatestWins(
             self._replan, on_error=self._report_error
@@ -530,7 +537,9 @@ class ViewApp:
         skill, use = self._skill_for(controller)
         if preview:
             skill = self.preview_skill(skill)
-        plan = make_plan(skill, objects, controller, use, preview=preview)
+        scene = self.scene.scene_for(objects)
+        avoid = self.scene.avoids and use is None and not skill.oriented
+        plan = make_plan(skill, objects, controller, use, preview=preview, scene=scene, avoid=avoid)
         if not preview and self.preview_seconds is None:
             self.calibrate_preview(plan, use)
         elif preview:
@@ -589,7 +598,7 @@ class ViewApp:
             text += f" Outside the demonstrated range: {', '.join(outside)} (extrapolating)."
         if plan.messages:
             text += " " + plan.messages[0].split(".")[0] + "."
-        self.ui_status.content = text
+        self.ui_status.content = text + self.scene.summary(plan)
 
     def _outside_range(self, objects: Mapping[str, Float]) -> list[str]:
         if self.ts is None:
@@ -636,6 +645,7 @@ class ViewApp:
                 node.scale = np.asarray(axes)
                 node.opacity = 0.75 if name == driving else 0.25
                 node.visible = plan.result.used is None or name in plan.result.used
+            self.scene.show(plan, step)
             share = plan.result.influence[driving][step]
             when = plan.times[step]
             self.ui_driving.value = f"{driving} ({100 * share:.0f} %) at {when:.2f} s"

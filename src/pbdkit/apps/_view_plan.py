@@ -29,9 +29,11 @@ from .._rotations import exp_map, quaternion_from_matrix
 from .._validation import short
 from ..data._placement import position_of, rotation_of
 from ..reproduction._constraints import JOINT
+from ..reproduction._probabilistic_ik import CollisionWarning
 from ..reproduction._setup import ReachWarning
 
 if TYPE_CHECKING:
+    from ..collision import Scene
     from ..reproduction._constraints import Constraints
     from ..reproduction._result import ReproductionResult
     from ..robots._protocols import PoseKinematicModel
@@ -214,9 +216,12 @@ def make_plan(
     use: list[str] | None,
     *,
     preview: bool = False,
+    scene: Scene | None = None,
+    avoid: bool = False,
 ) -> Plan:
     """Reproduce ``skill`` for ``objects`` with ``use`` and collect what the page draws
-    (``preview``: ``skill`` is a :func:`coarse_skill`, and the plan says so).
+    (``preview``: ``skill`` is a :func:`coarse_skill`, and the plan says so); with a
+    ``scene``, checked against it and, with ``avoid``, kept clear of it.
 
     Raises
     ------
@@ -228,7 +233,8 @@ def make_plan(
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        res = skill.reproduce(told, use=use, on_unreachable="warn")
+        warnings.simplefilter("always", CollisionWarning)
+        res = skill.reproduce(told, use=use, on_unreachable="warn", scene=scene, avoid=avoid)
     seconds = time.perf_counter() - start
     try:
         times = skill.times(res)

@@ -12,7 +12,8 @@ around it along one direction, as one smooth bump:
 - **the bump**: at step k the point is asked to lie a * w_k further along e than on the path
   where the encounter was first met (ref_k), w_k being 1 over the encounter's steps and falling
   as a raised cosine over :data:`TAPER` of the path's steps on either side; a, the amplitude,
-  grows by the pass's shortfall until the margin holds (:meth:`Avoidance.update`).
+  grows by the pass's shortfall, and the bump widens to the steps it still meets the body at,
+  until the margin holds (:meth:`Avoidance.update`).
 
 At every step k of a bump, one Gaussian on the posture theta_k, linearized at the last pass's
 posture theta'_k::
@@ -109,6 +110,7 @@ class Avoidance:
         self.margin = float(margin)
         self.n = int(checker._consts.shape[0])
         self.encounters: list[_Encounter] = []
+        self.first = 0  # the skill's step of the path's first sample
         self._terms: dict[int, tuple[Float, Float]] = {}
 
     @property
@@ -120,12 +122,16 @@ class Avoidance:
         """(Lambda_c (n, n), its information (n,)) of step j, None where nothing acts."""
         return self._terms.get(j)
 
-    def update(self, joints: Float, gripper: Float | None) -> int:
-        """Meet the path ``joints`` (the steps 0 .. T - 1 of a pass): grow the amplitude of
-        every encounter it still comes within the margin at, start an encounter where it meets
-        a body none covers, and linearize every bump at this path; returns the number of
-        steps within the margin."""
+    def update(self, joints: Float, gripper: Float | None, *, first: int = 0) -> int:
+        """Meet the path ``joints`` (the steps ``first`` .. T - 1 of a pass: from the start,
+        or from a state along the way): grow the amplitude of every encounter it still comes
+        within the margin at, start an encounter where it meets a body none covers, and
+        linearize every bump at this path; returns the number of (step, pair)s within the
+        margin. The encounters' steps are the skill's (``first`` + the path's sample)."""
         del gripper  # the checker's grasps are planned (plan_grasps) for this path
+        if first != self.first and self.encounters:
+            raise ValueError("an avoidance's passes start at one step")
+        self.first = first
         checker = self.checker
         frames = _chain_frames(joints, checker._consts, checker._revolute)
         near: dict[str, list[tuple[int, Any]]] = {}
@@ -136,7 +142,7 @@ class Avoidance:
                     if moves[0] == moves[1]:
                         continue  # both move (the arm with itself): checked, not avoided
                     static = prox.bodies[1] if moves[0] else prox.bodies[0]
-                    near.setdefault(static, []).append((j, prox))
+                    near.setdefault(static, []).append((first + j, prox))
         caught = 0
         for body, hits in near.items():
             caught += len(hits)
@@ -168,7 +174,8 @@ class Avoidance:
     ) -> _Encounter:
         """A new encounter with ``body`` from its pairs within the margin (step, Proximity):
         the point and direction where it came nearest, the amplitude its shortfall."""
-        j, prox = min(hits, key=lambda hit: hit[1].distance)
+        step, prox = min(hits, key=lambda hit: hit[1].distance)
+        j = step - self.first  # the path's sample
         moving = 0 if prox.joints[0] > 0 else 1
         joint = int(prox.joints[moving])
         rots, origins = frames
@@ -192,8 +199,9 @@ class Avoidance:
         """The direction the moving body of ``prox`` (caught nearest at step j) is moved
         along: away from the other body (the contact normal's sense) without the component
         along the path (the moving point's motion through step j), so that an obstacle met
-        head-on is passed, not backed away from; where that leaves less than
-        :data:`ESCAPE_MIN`, up (the base frame's z) without it."""
+        head-on is passed, not backed away from: up (the base frame's z) without it, unless
+        the other body is above; where that leaves less than :data:`ESCAPE_MIN`, the contact
+        normal without it."""
         moving = 0 if prox.joints[0] > 0 else 1
         away = -np.asarray(prox.normal) if moving == 0 else np.asarray(prox.normal)
         lo, hi = max(j - 1, 0), min(j + 1, joints.shape[0] - 1)
@@ -203,7 +211,9 @@ class Avoidance:
         if speed < 1e-12:
             return np.asarray(away / np.linalg.norm(away))
         along = motion / speed
-        for candidate in (np.array([0.0, 0.0, 1.0]), away):
+        up = np.array([0.0, 0.0, 1.0])
+        # Up, unless the other body is above (up would go into it).
+        for candidate in (up, away) if float(up.dot(away)) > -0.5 else (away,):
             side = candidate - candidate.dot(along) * along
             size = float(np.linalg.norm(side))
             if size >= ESCAPE_MIN:
@@ -225,27 +235,29 @@ class Avoidance:
         return jac
 
     def _linearize(self, joints: Float, frames: tuple[Float, Float]) -> None:
-        """Every encounter's Gaussians over its bump, at the path ``joints``, summed per step."""
+        """Every encounter's Gaussians over its bump, at the path ``joints``, summed per step
+        (the skill's steps; the path's sample k is step ``first`` + k)."""
         self._terms.clear()
         rots, origins = frames
-        last = joints.shape[0] - 1
+        first, last = self.first, self.first + joints.shape[0] - 1
         for enc in self.encounters:
-            for k in range(max(0, enc.lo - enc.taper), min(last, enc.hi + enc.taper) + 1):
-                w = enc.weight(k)
+            for step in range(max(first, enc.lo - enc.taper), min(last, enc.hi + enc.taper) + 1):
+                k = step - first
+                w = enc.weight(step)
                 point = rots[k, enc.joint].dot(enc.local) + origins[k, enc.joint]
                 row = enc.escape.dot(self._point_rows(k, point, enc.joint, frames))
                 push = enc.ref[k] + enc.amplitude * w - float(enc.escape.dot(point))
                 rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
                 lam = rho * np.outer(row, row)
                 info = rho * row * (row.dot(joints[k]) + push)
-                if k in self._terms:
-                    old = self._terms[k]
+                if step in self._terms:
+                    old = self._terms[step]
                     lam, info = old[0] + lam, old[1] + info
-                self._terms[k] = (lam, info)
+                self._terms[step] = (lam, info)
 
     def slower(self, n_samples: int, n_lead: int) -> Float | None:
         """The factor on each step's nominal duration (n_samples - 1,) of a pass's timing, its
-        first ``n_lead`` samples a lead-in (step 0 of the path is sample ``n_lead``):
+        first ``n_lead`` samples a lead-in (step :attr:`first` is sample ``n_lead``):
         :data:`SLOWER` where the clearance acts, 1 elsewhere; None where it acts nowhere. A
         pass bends the path around an obstacle, sharper than the skill's own path: at the
         demonstrations' pace a drive following its samples would leave it by tenths of a
@@ -254,7 +266,7 @@ class Avoidance:
             return None
         steps = sorted(self._terms)
         factors = np.ones(n_samples - 1)
-        lo = max(0, n_lead + steps[0])
-        hi = min(n_samples - 1, n_lead + steps[-1])
+        lo = max(0, n_lead + steps[0] - self.first)
+        hi = min(n_samples - 1, n_lead + steps[-1] - self.first)
         factors[lo:hi] = SLOWER
         return factors

@@ -47,6 +47,7 @@ from ._planner import (
     ProcessPlanner,
 )
 from ._plans import _Handover, _Plan, _Timed
+from ._probabilistic_ik import CollisionWarning, SceneRun
 from ._setup import RunOptions, _check_reach, check_objects, setup_run
 from ._stream import CommandStream
 from ._table_ii import make_step
@@ -158,6 +159,10 @@ class Controller:
         plan is ready the commands continue the current motion, and it takes over at a
         hand-over time predicted from the planner's latency, from the state the commands are
         in then. Call :meth:`close` (or let the controller be collected) to end the process.
+    scene : SceneRun, optional
+        With motion limits: every plan is checked against this scene and, with its ``avoid``,
+        keeps its margin (:doc:`/collisions`); a plan that would still collide is not
+        followed: the arm is brought to rest and :attr:`fault` says why.
 
     Attributes
     ----------
@@ -189,10 +194,16 @@ class Controller:
         limits: MotionLimits | None = None,
         replan_distance: float = REPLAN_DISTANCE,
         planner: PlannerKind = "inline",
+        scene: SceneRun | None = None,
     ) -> None:
         if planner not in PLANNERS:
             raise ValueError(f"planner must be one of {PLANNERS}, got {short(planner)}")
         timed = check_timing(limits, dt)
+        if scene is not None and not timed:
+            raise ValueError(
+                "a controller keeps clear of a scene with motion limits (its plans): pass "
+                "the robot's limits, or check the commands with skill.check"
+            )
         if timed:
             step_limit = None  # the trajectory generator bounds the speed
         run = setup_run(
@@ -226,7 +237,7 @@ class Controller:
             distance = float(replan_distance)
             if not (distance >= 0):
                 raise ValueError(f"replan_distance must be >= 0 (m), got {short(replan_distance)}")
-            self._timed = _Timed(limits, distance, robot, run, self.dt)
+            self._timed = _Timed(limits, distance, robot, run, self.dt, scene)
             if planner != "inline":
                 self._use_planner(planner)
             plan = self._timed.plan_limits
@@ -544,6 +555,14 @@ class Controller:
             st.want = True  # made for a state given up (a push since)
             return
         if reply.error is not None:
+            if reply.collides and st.plan is not None and st.active and not st.braking:
+                # A re-plan (an object moved) that would collide: the plan in use was checked
+                # and is kept; said, not followed (docs: "Collisions").
+                st.refused += 1
+                warnings.warn(
+                    f"the controller keeps its plan: {reply.error}", CollisionWarning, stacklevel=4
+                )
+                return
             self._fault(st, now, reply.error)
             return
         for category, message in reply.notes:  # said where the plan was made: said here too

@@ -52,6 +52,7 @@ from ..motion._limits import MotionLimits
 from ..motion._motion import Motion, _ruckig
 from ..motion._otg import BOUNDS_TOL, follow
 from ..robots._protocols import KinematicModel
+from ._probabilistic_ik import SceneRun, with_scene
 from ._result import ReproductionResult
 from ._setup import RunSetup
 from ._timing import timed_path
@@ -84,18 +85,24 @@ def one_line(err: BaseException) -> str:
     return f"{type(err).__name__}: {text[0] if text else ''}".rstrip(": ")
 
 
+class PlanCollides(ValueError):
+    """A plan that would collide with the controller's scene (it is not followed)."""
+
+
 @dataclass(frozen=True)
 class PlanSetup:
     """What every plan of a controller is made with, sent once to a planner process: the
     robot, the run set-up (its objects and start replaced per request), the motion limits the
     path is timed within and the (safety-scaled) ones the motion follows it within, and the
-    seconds per step."""
+    seconds per step; with a ``scene``, every plan is checked against it and keeps clear of
+    it (:func:`~pbdkit.reproduction._probabilistic_ik.with_scene`)."""
 
     robot: KinematicModel
     run: RunSetup
     limits: MotionLimits
     plan_limits: MotionLimits
     dt: float
+    scene: SceneRun | None = None
 
 
 @dataclass(frozen=True)
@@ -126,6 +133,7 @@ class PlanReply:
     error: str | None
     seconds: float
     notes: tuple[tuple[str, str], ...] = ()
+    collides: bool = False  # the error: the plan would collide with the scene
 
 
 #: A plan whose motion would leave the joint limits is timed again with the steps around where
@@ -160,7 +168,10 @@ def make_plan(setup: PlanSetup, request: PlanRequest) -> PlanReply:
             res, motion = _plan_within_bounds(setup, run, request, (lower, upper))
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as err:
             took = time.perf_counter() - start
-            return PlanReply(request.generation, request.t0, None, None, one_line(err), took)
+            collides = isinstance(err, PlanCollides)
+            return PlanReply(
+                request.generation, request.t0, None, None, one_line(err), took, (), collides
+            )
     took = time.perf_counter() - start
     notes = tuple(dict.fromkeys((w.category.__name__, str(w.message)) for w in seen))
     return PlanReply(request.generation, request.t0, res, motion, None, took, notes)
@@ -177,15 +188,7 @@ def _plan_within_bounds(
     bounds = (run.lower, run.upper)
     slower: Float | None = None
     for attempt in range(SLOWER_TRIES + 1):
-        res = timed_path(
-            setup.robot,
-            run,
-            setup.limits,
-            setup.dt,
-            phase=request.phase,
-            velocity=v if moving else None,
-            slower=slower,
-        )
+        res = _scene_path(setup, run, request.phase, v if moving else None, slower)
         assert res.times is not None
         velocities, accelerations = _at_rest_on_limits(res, bounds, moving)
         t = request.t0 + res.times
@@ -209,6 +212,26 @@ def _plan_within_bounds(
         slower = np.ones(steps.shape[0]) if slower is None else slower
         slower = np.where(steps, slower * SLOWER, slower)
     return res, motion
+
+
+def _scene_path(
+    setup: PlanSetup, run: RunSetup, phase: float, velocity: Float | None, slower: Float | None
+) -> ReproductionResult:
+    """The plan's reproduction (:func:`~pbdkit.reproduction._timing.timed_path`) and, with a
+    scene, kept clear of it; a plan that would still collide is refused (ValueError: the
+    controller brings the arm to rest and says why)."""
+
+    def remake(again: RunSetup) -> ReproductionResult:
+        robot, limits, dt = setup.robot, setup.limits, setup.dt
+        return timed_path(robot, again, limits, dt, phase=phase, velocity=velocity, slower=slower)
+
+    res = remake(run)
+    if setup.scene is None:
+        return res
+    res = with_scene(setup.robot, run, res, setup.scene, remake, warn=False)
+    if res.infeasible is not None:
+        raise PlanCollides(f"the plan would collide: {res.infeasible}")
+    return res
 
 
 def _at_rest_on_limits(

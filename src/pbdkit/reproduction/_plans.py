@@ -15,6 +15,7 @@ from ..motion._limits import LIMIT_SAFETY, MotionLimits
 from ..motion._motion import Motion
 from ..robots._protocols import KinematicModel
 from ._planner import InlinePlanner, Planner, PlanReply, PlanRequest, PlanSetup
+from ._probabilistic_ik import SceneRun
 from ._result import ReproductionResult
 from ._setup import RunSetup
 
@@ -86,10 +87,11 @@ class _Timed:
         robot: KinematicModel,
         run: RunSetup,
         dt: float,
+        scene: SceneRun | None = None,
     ) -> None:
         self.limits = limits
         self.plan_limits = limits.scaled(LIMIT_SAFETY)
-        self.setup = PlanSetup(robot, run, limits, self.plan_limits, dt)
+        self.setup = PlanSetup(robot, run, limits, self.plan_limits, dt, scene)
         self.velocity = np.where(
             np.isfinite(self.plan_limits.velocity), self.plan_limits.velocity, np.inf
         )
@@ -112,6 +114,7 @@ class _Timed:
         self.moved = False
         self.replans = 0
         self.joins = 0  # late plans joined (:data:`~._controller.LATE_JOINS`)
+        self.refused = 0  # re-plans that would collide, not followed (the plan in use kept)
         self.q_measured: Float | None = None
         self.done = False
         self.fault: str | None = None

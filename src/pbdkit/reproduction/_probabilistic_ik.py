@@ -32,10 +32,12 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from numpy.typing import NDArray
 
 from .._validation import check_positive_float
 from ..collision import CollisionChecker, CollisionReport, Scene
@@ -49,7 +51,11 @@ from ._steps import CLEARANCE
 from ._table_ii import _path_result, _table_ii
 from ._timing import check_timing, timed_path
 
-__all__ = ["CollisionWarning", "solve"]
+__all__ = ["CollisionWarning", "SceneRun", "solve", "with_scene"]
+
+#: Makes a run again with a run set-up (its avoidance set): from the start, or from a state
+#: along the way.
+Remake = Callable[[RunSetup], ReproductionResult]
 
 #: A task constraint is tight where its standard deviation, in its loosest direction, is under
 #: this (m): there the clearance does not get to move the hand (:func:`_leaves_tight`).
@@ -137,7 +143,11 @@ def solve(
     res = _run(robot, run, limits, dt, timed)
     if scene is None:
         return res
-    return _with_scene(robot, run, res, scene, avoid, margin, (limits, dt, timed))
+
+    def remake(again: RunSetup) -> ReproductionResult:
+        return _run(robot, again, limits, dt, timed)
+
+    return with_scene(robot, run, res, SceneRun(scene, avoid, margin), remake)
 
 
 def _run(
@@ -150,26 +160,32 @@ def _run(
     return _path_result(robot, run, run.constraints.t.copy(), path)
 
 
+def _path_steps(res: ReproductionResult) -> tuple[NDArray[np.bool_], int]:
+    """The samples of a run that are its path (not its lead-in), and the skill's step its
+    first one is at (0 from the start; floor(phase) for a plan along the way)."""
+    own = ~res.lead_in if res.lead_in is not None else np.ones(len(res.t), dtype=bool)
+    return own, int(np.floor(res.t[own][0] + 1e-9))
+
+
 def _avoid_passes(
-    robot: KinematicModel,
     run: RunSetup,
     res: ReproductionResult,
     checker: CollisionChecker,
     margin: float,
-    timing: tuple[MotionLimits | None, float | None, bool],
+    remake: Remake,
 ) -> tuple[ReproductionResult, CollisionReport]:
-    """The passes of :mod:`._avoid`: Table II again with the pairs each pass catches, until
-    the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the largest smallest
-    clearance) and its check."""
+    """The passes of :mod:`._avoid`: Table II again (``remake``) with the encounters each
+    pass meets, until the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the
+    largest smallest clearance) and its check."""
     avoidance = Avoidance(checker, margin)
     run = dataclasses.replace(run, avoid=avoidance)
     best: tuple[ReproductionResult, CollisionReport] | None = None
     for _ in range(MAX_PASSES):
-        own = ~res.lead_in if res.lead_in is not None else np.ones(len(res.t), dtype=bool)
+        own, first = _path_steps(res)
         signal = None if res.gripper_signal is None else res.gripper_signal[own]
         checker.plan_grasps(res.joints[own], signal)
-        avoidance.update(res.joints[own], signal)
-        res = _run(robot, run, *timing)
+        avoidance.update(res.joints[own], signal, first=first)
+        res = remake(run)
         report = checker.check(res.joints, res.gripper_signal)
         kept = _scene_min(report)
         if best is None or kept > _scene_min(best[1]):
@@ -187,15 +203,15 @@ def _leaves_tight(
     the first (sample, constraint, the avoided run's hand error there in m) whose error grows
     by more than :data:`CONFLICT` where the constraint's standard deviation (its loosest
     direction) is under :data:`TIGHT`; None where the clearance and the skill agree."""
-    own = np.flatnonzero(~avoided.lead_in) if avoided.lead_in is not None else None
+    own = np.flatnonzero(_path_steps(avoided)[0])
+    steps = np.floor(avoided.t[own] + 1e-9).astype(int)
     for name in run.tasks:
-        cov = run.constraints.task_cov[name][:, :3, :3]
+        cov = run.constraints.task_cov[name][steps, :3, :3]
         loosest = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
-        grown = avoided.task_errors[name] - plain.task_errors[name]
-        path = grown if own is None else grown[own]
-        bad = np.flatnonzero((loosest < TIGHT) & (path > CONFLICT))
+        grown = (avoided.task_errors[name] - plain.task_errors[name])[own]
+        bad = np.flatnonzero((loosest < TIGHT) & (grown > CONFLICT))
         if bad.size:
-            sample = int(bad[0] if own is None else own[bad[0]])
+            sample = int(own[bad[0]])
             return (sample, name, float(avoided.task_errors[name][sample]))
     return None
 
@@ -206,18 +222,33 @@ def _scene_min(report: CollisionReport) -> float:
     return float(outside.min()) if outside is not None and outside.size else float("inf")
 
 
-def _with_scene(
+@dataclass(frozen=True)
+class SceneRun:
+    """What a run is checked against and how: the scene, whether the fused controller keeps
+    clear of it (``avoid``) and by how much (``margin``, m)."""
+
+    scene: Scene
+    avoid: bool = True
+    margin: float = DEFAULT_MARGIN
+
+
+def with_scene(
     robot: KinematicModel,
     run: RunSetup,
     res: ReproductionResult,
-    scene: Scene,
-    avoid: bool,
-    margin: float,
-    timing: tuple[MotionLimits | None, float | None, bool],
+    sr: SceneRun,
+    remake: Remake,
+    *,
+    warn: bool = True,
 ) -> ReproductionResult:
-    """The run checked against ``scene`` and, with ``avoid`` and a fused controller where it
-    comes within ``margin``, run again with the clearance constraint (:mod:`._avoid`)."""
-    margin = check_positive_float(margin, "margin")
+    """The run ``res`` (of ``run``) checked against the scene and, with ``avoid`` and a fused
+    controller where it comes within the margin, made again with the clearance constraint
+    (:mod:`._avoid`): ``remake(run with its avoidance)`` makes it again, from the start or from
+    a state along the way (an online controller's plan). ``warn``: a
+    :class:`CollisionWarning` where it still collides (``res.infeasible`` says so either
+    way)."""
+    scene, avoid = sr.scene, sr.avoid
+    margin = check_positive_float(sr.margin, "margin")
     checker = CollisionChecker(robot, scene, run.objects)
     report = checker.check(res.joints, res.gripper_signal)
     fused = avoid and JOINT in run.used and bool(run.tasks) and not run.constraints.oriented
@@ -230,7 +261,7 @@ def _with_scene(
     if fused:
         outside = report.scene_clearance
         if outside is not None and outside.size and float(outside.min()) < margin:
-            avoided, avoided_report = _avoid_passes(robot, run, res, checker, margin, timing)
+            avoided, avoided_report = _avoid_passes(run, res, checker, margin, remake)
             # Where keeping the margin would leave a tight constraint of the skill, the plain
             # run stays, its contacts reported: the skill is not given up silently.
             left = _leaves_tight(run, res, avoided)
@@ -255,7 +286,8 @@ def _with_scene(
                 f"; keeping clear would take the hand {left[2] * 1e3:.0f} mm from the "
                 f"{left[1]} constraint at sample {left[0]}, where it is tight"
             )
-        warnings.warn(CollisionWarning(infeasible), stacklevel=4)
+        if warn:
+            warnings.warn(CollisionWarning(infeasible), stacklevel=4)
     return dataclasses.replace(
         res, clearance=report.clearance, collisions=report.collisions, infeasible=infeasible
     )

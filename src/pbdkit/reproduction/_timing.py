@@ -119,8 +119,10 @@ def timed_path(
     nominal = np.full(joints.shape[0] - 1, float(dt))
     if n_lead:
         nominal[:n_lead] = lead_dt
-    if slower is None and run.avoid is not None:  # where the clearance bent the path
-        slower = run.avoid.slower(joints.shape[0], n_lead)
+    if run.avoid is not None:  # where the clearance bent the path
+        bent = run.avoid.slower(joints.shape[0], n_lead)
+        if bent is not None:
+            slower = bent if slower is None else slower * bent
     if slower is not None:
         nominal = nominal * slower
     h = retime(joints, nominal, plan, start_velocity=v0)

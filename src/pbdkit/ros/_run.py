@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,6 +42,7 @@ EXIT_CODES = {
     "stale": 3,  # joint states older than --stale
     "no_controller": 4,  # no subscriber, or no motion within --timeout
     "following": 5,  # a following error over --max-following-error
+    "plan": 6,  # a plan would collide (--scene) or could not be made: nothing sent, or at rest
     "signal": 130,  # SIGINT or SIGTERM, after bringing the arm to rest
 }
 #: The JTC's quintics between exact states of a jerk-limited motion overshoot its jerk (1.40x at
@@ -80,6 +82,7 @@ class RunSettings:
     gripper_joint: tuple[str, float, float] | None = None  # NAME, OPEN, CLOSED positions
     gripper_seconds: float = 0.3  # each gripper message's one point, this far ahead
     grasped: str | None = None  # its source is ignored once the gripper closes
+    scene: Any = None  # a pbdkit.Scene: every plan checked against it and kept clear of it
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.speed <= 1.0:
@@ -148,6 +151,7 @@ def run_skill(
         acceleration_limit=limits.acceleration,
         jerk_limit=limits.jerk,
         planner="inline" if settings.dry_run else "process",
+        scene=settings.scene,
     )
     try:
         count = listener.count  # the posture to start from: a state that came after that
@@ -159,9 +163,38 @@ def run_skill(
             spin(0.01)
         assert listener.q is not None
         q0 = listener.q.copy()
+        if settings.scene is not None:
+            _check_scene(skill, dict(sources.values), q0, limits, settings.scene, log)
         return _loop(ctrl, q0, listener, sources, runner, gripper, settings, log, stop, spin)
     finally:
         ctrl.close()
+
+
+def _check_scene(
+    skill: Any,
+    objects: dict[str, Any],
+    q0: Float,
+    limits: MotionLimits,
+    scene: Any,
+    log: Callable[[str], None],
+) -> None:
+    """``--scene``: the run's first plan, from the arm's posture, checked against the scene
+    (and kept clear of it) before anything is sent; RunFailed (exit 6) where it would
+    collide."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # said in the error
+        res = skill.reproduce(
+            objects,
+            q0=q0,
+            velocity_limit=limits.velocity,
+            acceleration_limit=limits.acceleration,
+            jerk_limit=limits.jerk,
+            on_unreachable="warn",
+            scene=scene,
+        )
+    if res.infeasible is not None:
+        raise RunFailed("plan", f"--scene: the plan would collide, nothing sent: {res.infeasible}")
+    log(f"scene: the plan keeps {1e3 * float(np.min(res.clearance)):.1f} mm clear")
 
 
 def _wait_for_graph(
@@ -274,6 +307,8 @@ def _loop(
         if ctrl.done:
             end = st.motion.at(st.motion.end)[0]
             if float(np.abs(q - end).max()) < 1e-3 and float(np.abs(listener.v).max()) < 1e-3:
+                if ctrl.fault is not None:  # a plan refused (a collision) or not made
+                    raise RunFailed("plan", f"brought to rest: {ctrl.fault}")
                 log(f"done: at rest after {now:.2f} s, {ctrl.replans} re-plan(s)")
                 return EXIT_CODES["done"]
         elif now >= st.cycle * ctrl.dt:

@@ -287,7 +287,7 @@ def evaluate(
         the Dask cluster at ``scheduler``. The results are those of the serial run.
     avoid_scene : bool
         The fused controller avoids the task's whole scene, not only ``"obstacle"``'s box
-        (offline only; :attr:`TrialConditions.avoid_scene`).
+        (:attr:`TrialConditions.avoid_scene`).
 
     Returns
     -------

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from ..collision import Scene
 from ..motion._limits import MotionLimits
+from ..reproduction._controller import PlanFailedWarning
 from ..reproduction._probabilistic_ik import CollisionWarning
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import ReachWarning
@@ -84,6 +85,8 @@ class OnlineControllerRun:
     velocity_limit: Float
     warnings: list[str] = field(default_factory=list)
     force_window: tuple[float, float] | None = None
+    collisions: dict[str, Any] = field(default_factory=dict)
+    fault: str | None = None
 
     @property
     def execution(self) -> ExecutionResult:
@@ -98,6 +101,9 @@ class OnlineControllerRun:
         that re-targeted the previous step) and, with vision, ``tracking`` (frames per status
         of the :class:`pbdkit.vision.TrackFilter`, per object)."""
         out = run_summary(self.execution, self.velocity_limit, self.force_window)
+        out.update(self.collisions)
+        if self.fault is not None:
+            out["fault"] = self.fault
         out["phase_held_steps"] = self.online.held_steps
         if self.online.tracking is not None:
             out["tracking"] = self.online.tracking["frames"]
@@ -213,6 +219,7 @@ def run_online(
     fps: float = 15.0,
     sim_objects: dict[str, Float] | None = None,
     disturbance: Disturbance | None = None,
+    avoid: Scene | None = None,
 ) -> OnlineControllerRun:
     """Run one controller online (in the physics loop) from ``objects``, in a fresh simulation.
 
@@ -220,15 +227,20 @@ def run_online(
     (what the cameras saw before the run, or the truth) and is then told new positions at
     15 Hz: the tracker's (filtered, :class:`pbdkit.sim._online.VisionObserver`) with a
     ``tracker``, else the true ones (:class:`pbdkit.sim._online.TruthObserver`). Arguments as
-    :func:`run_controller`.
+    :func:`run_controller`; with ``avoid``, every plan of the fused controller keeps clear of
+    it, and one that would not is not followed (the arm brakes to rest: the run's
+    ``"fault"``).
     """
     skill, use, told, world = _prepare_run(ts, objects, controller, sim_objects)
     names = skill.object_names
     observer: Observer = TruthObserver(names) if tracker is None else VisionObserver(tracker, names)
+    scene = avoid if avoid is not None and _avoids(skill, use) else None
+    boxes = [disturbance.box] if isinstance(disturbance, PlaceObstacle) else []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReachWarning)
-        ctrl = skill.controller(told, use=use, on_unreachable="warn")
-        sim = Simulation.from_task(ts.task, world)
+        warnings.simplefilter("always", PlanFailedWarning)
+        ctrl = skill.controller(told, use=use, on_unreachable="warn", scene=scene)
+        sim = Simulation.from_task(ts.task, world, obstacles=boxes)
         try:
             run = execute_online(
                 sim, ctrl, observer=observer, disturbance=disturbance, camera=camera, fps=fps
@@ -242,4 +254,6 @@ def run_online(
         velocity_limit=_velocity_limit(skill),
         warnings=[str(w.message) for w in caught],
         force_window=None if disturbance is None else disturbance.force_window(),
+        collisions=run_collisions(skill.robot, ts.task, world, run.execution, disturbance),
+        fault=ctrl.fault,
     )

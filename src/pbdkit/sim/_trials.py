@@ -75,7 +75,7 @@ class TrialConditions:
         the cameras, if any), of mean 3-D length ``noise_mm`` (:func:`run_trial`); >= 0.
     avoid_scene : bool
         The fused controllers avoid the task's whole scene (:attr:`pbdkit.sim.TaskSpec.scene`),
-        not only ``--perturb obstacle``'s box; offline only. Every run is checked against the
+        not only ``--perturb obstacle``'s box (offline and online). Every run is checked against the
         scene either way (:mod:`pbdkit.sim._obstacle`).
 
     Raises
@@ -101,11 +101,6 @@ class TrialConditions:
         object.__setattr__(self, "seed", check_int(self.seed, "seed", minimum=0))
         noise = check_positive_float(self.noise_mm, "noise_mm", allow_zero=True)
         object.__setattr__(self, "noise_mm", noise)
-        if self.online and (self.avoid_scene or self.perturb == "obstacle"):
-            raise ValueError(
-                "avoidance runs offline for now: the online controller does not keep a "
-                "clearance yet; drop --online, or --avoid-scene and --perturb obstacle"
-            )
 
     @property
     def vision(self) -> bool:
@@ -223,18 +218,20 @@ def run_trial_controller(
             disturbance=None,
         )
     act = trial_disturbance(ts, conditions, truth, index=index)
+    avoid = avoided_scene(ts.task, truth, act, whole=conditions.avoid_scene)
     if conditions.online:
         summary = run_online(
-            ts, seen.told, controller, tracker=tracker, sim_objects=truth, disturbance=act
-        ).as_dict()
-    else:
-        summary = run_controller(
             ts,
             seen.told,
             controller,
+            tracker=tracker,
             sim_objects=truth,
             disturbance=act,
-            avoid=avoided_scene(ts.task, truth, act, whole=conditions.avoid_scene),
+            avoid=avoid,
+        ).as_dict()
+    else:
+        summary = run_controller(
+            ts, seen.told, controller, sim_objects=truth, disturbance=act, avoid=avoid
         ).as_dict()
     return ControllerOutcome(controller=controller, summary=summary, disturbance=act.as_dict())
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..motion._limits import LimitSpec, MotionLimits, defaults_where_declared
 
-__all__ = ["run_limits"]
+__all__ = ["run_limits", "skill_limits"]
 
 
 def run_limits(
@@ -45,3 +45,11 @@ def run_limits(
     if not limits.any:
         return dt, None
     return dt, defaults_where_declared(limits, robot.joint_names, velocity, acceleration, jerk)
+
+
+def skill_limits(
+    skill: Any, velocity: LimitSpec, acceleration: LimitSpec, jerk: LimitSpec
+) -> tuple[float, MotionLimits | None]:
+    """:func:`run_limits` of a skill (its robot, joints and step duration): the step duration
+    and the limits its reproduction or controller runs within (None: none apply)."""
+    return run_limits(skill.robot, skill.n_joints, skill.step_seconds, velocity, acceleration, jerk)

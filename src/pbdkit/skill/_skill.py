@@ -45,12 +45,12 @@ from ..prob._gmr import CovarianceMode
 from ..reproduction._avoid import DEFAULT_MARGIN
 from ..reproduction._constraints import JOINT, Constraints
 from ..reproduction._controller import Controller
-from ..reproduction._probabilistic_ik import solve
+from ..reproduction._probabilistic_ik import SceneRun, solve
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import RunOptions, reach_from_samples, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
 from ._calibration import check_calibration, step_factors
-from ._run_limits import run_limits
+from ._run_limits import skill_limits
 from ._skill_file import (
     FORMAT_NAME,
     MAX_DURATION,
@@ -596,7 +596,7 @@ class Skill:
             line_search=line_search,
             newton=newton,
         )
-        dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
+        dt, limits = skill_limits(self, velocity_limit, acceleration_limit, jerk_limit)
         return solve(
             self.robot,
             self.constraints(covariance),
@@ -624,15 +624,6 @@ class Skill:
         (T,), closed where True or > 0.5, tells the grasps (:doc:`/collisions`)."""
         return CollisionChecker(self.robot, scene, objects).check(joints, gripper)
 
-    def _motion_limits(
-        self, velocity: LimitSpec, acceleration: LimitSpec, jerk: LimitSpec
-    ) -> tuple[float, MotionLimits | None]:
-        """The step duration and the limits a reproduction or controller runs within (None:
-        none apply)."""
-        return run_limits(
-            self.robot, self.n_joints, self.step_seconds, velocity, acceleration, jerk
-        )
-
     def motion_limits(
         self,
         velocity_limit: LimitSpec = "robot",
@@ -644,7 +635,7 @@ class Skill:
         acceleration or jerk limit gets defaults derived from its velocity limits, with a
         :class:`~pbdkit.motion._limits.DefaultLimitsWarning`); None where none apply. E.g. to
         check a trajectory bag: ``write_trajectory_bag(..., limits=skill.motion_limits())``."""
-        return self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)[1]
+        return skill_limits(self, velocity_limit, acceleration_limit, jerk_limit)[1]
 
     @property
     def step_seconds(self) -> float:
@@ -670,6 +661,9 @@ class Skill:
         newton: bool = True,
         max_lag: float = 3.0,
         planner: Literal["inline", "process"] = "inline",
+        scene: Scene | None = None,
+        avoid: bool = True,
+        margin: float = DEFAULT_MARGIN,
     ) -> Controller:
         """One closed-loop run of the skill, step by step from the measured joint angles.
 
@@ -699,6 +693,9 @@ class Skill:
             waits for them, 25-150 ms; a simulation's run depends only on its inputs) or
             "process" (a separate process; a real arm's loop calling ``ctrl.step`` itself never
             waits): :doc:`/reproduction`, "Plans off the control loop".
+        scene, avoid, margin
+            As :meth:`reproduce`, for every plan (with limits): one that would still collide
+            is not followed, the arm brakes to rest and ``ctrl.fault`` says why.
 
         Returns
         -------
@@ -713,7 +710,7 @@ class Skill:
             line_search=line_search,
             newton=newton,
         )
-        dt, limits = self._motion_limits(velocity_limit, acceleration_limit, jerk_limit)
+        dt, limits = skill_limits(self, velocity_limit, acceleration_limit, jerk_limit)
         step_limit = None
         if limits is None:
             step_limit = step_limit_from_velocity(velocity_limit, self.robot, dt)
@@ -728,6 +725,7 @@ class Skill:
             max_lag=max_lag,
             limits=limits,
             planner=planner,
+            scene=None if scene is None else SceneRun(scene, avoid, margin),
         )
 
     # ------------------------------------------------------------------ I/O
