@@ -37,9 +37,12 @@ def _scene() -> Scene:
     )
 
 
-def _brute_force(robot: Robot, scene: Scene, joints: np.ndarray) -> np.ndarray:
+def _brute_force(
+    robot: Robot, scene: Scene, joints: np.ndarray, *, self_pairs: bool = True
+) -> np.ndarray:
     """The clearance through pinocchio: geometry placed by pin.updateGeometryPlacements, every
-    pair measured (no bound, no culling), the same pairs the checker means."""
+    pair measured (no bound, no culling), the same pairs the checker means (without the arm's
+    pairs with itself: the scene clearance)."""
     cm = robot.collision_model
     assert cm is not None
     model, geom = cm.model, cm.geometry.copy()
@@ -47,7 +50,7 @@ def _brute_force(robot: Robot, scene: Scene, joints: np.ndarray) -> np.ndarray:
     for shape in scene.shapes:
         placement = pin.SE3(shape.pose[:3, :3].copy(), shape.pose[:3, 3].copy())
         geom.addGeometryObject(pin.GeometryObject(str(shape.name), 0, placement, shape.geometry()))
-    pairs = [tuple(p) for p in cm.self_pairs]
+    pairs = [tuple(p) for p in cm.self_pairs] if self_pairs else []
     for a in range(n_arm):
         if geom.geometryObjects[a].parentJoint == 0:
             continue
@@ -76,6 +79,26 @@ def test_the_clearance_is_pinocchios_over_every_pair(make: object) -> None:
     colliding = np.flatnonzero(expected < 0.0)
     assert colliding.size > 10
     assert {c[0] for c in report.collisions} == set(colliding.tolist())
+
+
+@pytest.mark.parametrize("margin", [0.0, 0.05])
+def test_the_scene_clearance_is_exact_under_the_margin_and_a_bound_above(margin: float) -> None:
+    # Against pinocchio over the scene's pairs alone (the arm's pairs with itself left out):
+    # equal where under the margin or where the scene is the nearest, never above elsewhere.
+    robot = katana()
+    rng = np.random.default_rng(11)
+    joints = rng.uniform(robot.lower, robot.upper, (300, robot.n_joints))
+    scene = _scene()
+    report = CollisionChecker(robot, scene).check(joints, margin=margin)
+    both = _brute_force(robot, scene, joints)
+    alone = _brute_force(robot, scene, joints, self_pairs=False)
+    assert report.scene_clearance is not None
+    # GJK's tolerance: coal's cached pair solver and pinocchio's differ by up to ~1e-6 m.
+    np.testing.assert_allclose(report.clearance, both, atol=1e-5)
+    exact = (alone < margin) | np.isclose(alone, both, atol=1e-9)
+    assert exact.sum() > 20 and (~exact).sum() > 20  # both cases are met
+    np.testing.assert_allclose(report.scene_clearance[exact], alone[exact], atol=1e-5)
+    assert np.all(report.scene_clearance <= alone + 1e-5)
 
 
 def test_a_collision_names_its_step_and_bodies_sorted() -> None:
@@ -360,3 +383,48 @@ def test_a_replan_that_would_collide_keeps_the_plan_in_use(skill: Skill, plain: 
     assert ctrl.fault is None and ctrl.replans == 0 and ctrl._timed.refused >= 1
     assert skill.check(joints, crate, gripper=held).min_clearance > 0.0
     np.testing.assert_allclose(skill.robot.fk(joints[-1]), res.positions[-1], atol=2e-3)
+
+
+def test_the_lower_bounds_never_exceed_coal_and_are_tight_for_spheres_and_capsules() -> None:
+    # Random poses of boxes, cylinders and spheres: every positive bound is at most coal's
+    # distance, and a pair in contact has a bound of at most 0 (the checker measures every
+    # such pair: a penetration's depth is coal's); for a sphere against a primitive, and for
+    # two cylinders' capsules along one line, it is the distance itself where they are apart.
+    import coal
+
+    from pbdkit.collision._bounds import ShapeTable, lower_bounds
+
+    rng = np.random.default_rng(5)
+    geoms = [coal.Box(0.1, 0.2, 0.05), coal.Cylinder(0.03, 0.3), coal.Cylinder(0.05, 0.2)]
+    geoms += [coal.Sphere(0.04), coal.Cylinder(0.02, 0.4)]
+    table = ShapeTable(geoms)
+    pairs = np.array([(i, j) for i in range(5) for j in range(i + 1, 5)])
+    m = 400
+    rot = np.stack([[_random_rotation(rng) for _ in geoms] for _ in range(m)])
+    pos = rng.uniform(-0.3, 0.3, (m, len(geoms), 3))
+    bounds = lower_bounds(table, pairs, rot, pos)
+    exact = table.exact(pairs)
+    request, result = coal.DistanceRequest(), coal.DistanceResult()
+    for t in range(m):
+        for k, (a, b) in enumerate(pairs):
+            result.clear()
+            d = coal.distance(
+                geoms[a], coal.Transform3s(rot[t, a], pos[t, a]),
+                geoms[b], coal.Transform3s(rot[t, b], pos[t, b]), request, result,
+            )  # fmt: skip
+            assert bounds[t, k] <= max(d, 0.0) + 1e-7, (t, a, b, bounds[t, k], d)
+            if exact[k] and bounds[t, k] > 0.0:
+                assert bounds[t, k] == pytest.approx(d, abs=1e-6)
+    assert exact.tolist() == [a == 3 or b == 3 for a, b in pairs]
+    # Two parallel cylinders side by side along x: the capsules' bound is their distance.
+    side = np.broadcast_to(np.eye(3), (1, 5, 3, 3)).copy()
+    apart = np.zeros((1, 5, 3))
+    apart[0, 2] = (0.2, 0.0, 0.0)
+    (k,) = np.flatnonzero((pairs[:, 0] == 1) & (pairs[:, 1] == 2))
+    assert lower_bounds(table, pairs, side, apart)[0, k] == pytest.approx(0.2 - 0.03 - 0.05)
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q

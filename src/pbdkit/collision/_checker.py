@@ -24,6 +24,7 @@ only on the pairs whose bound is below the smallest distance found so far (or th
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -65,7 +66,8 @@ class CollisionReport:
         link names, shape names, object names), the list sorted; empty when the run is free.
     scene_clearance : ndarray, shape (T,), or None
         The same as ``clearance`` without the arm's pairs with itself: what avoidance keeps
-        clear (inf at a step with nothing to check).
+        clear (inf at a step with nothing to check). Exact where under the ``margin`` of
+        :meth:`CollisionChecker.check` and where it is the clearance; a lower bound elsewhere.
     """
 
     clearance: Float
@@ -263,14 +265,21 @@ class CollisionChecker:
                 pairs.append((min(b, carried), max(b, carried)))
         return np.array(sorted(set(pairs)), dtype=np.intp).reshape(-1, 2)
 
+    def _functor(self, a: int, b: int) -> Any:
+        """coal's cached pair solver of bodies a and b (a third of coal.distance's cost)."""
+        import coal
+
+        functor = self._functors[(a, b)] = coal.ComputeDistance(self._geoms[a], self._geoms[b])
+        return functor
+
     def _distance(self, a: int, b: int, rot: Float, pos: Float) -> tuple[float, Any]:
         """coal's signed distance of bodies a and b at one posture's rot (B, 3, 3), pos (B, 3),
         and its result (nearest points and normal; valid until the next call)."""
         import coal
 
         functor = self._functors.get((a, b))
-        if functor is None:  # coal's cached pair solver: a third of coal.distance's cost
-            functor = self._functors[(a, b)] = coal.ComputeDistance(self._geoms[a], self._geoms[b])
+        if functor is None:
+            functor = self._functor(a, b)
         result = self._result
         result.clear()
         d = functor(
@@ -282,32 +291,84 @@ class CollisionChecker:
         return float(d), result
 
     def _scan(
-        self, pairs: NDArray[np.intp], rot: Float, pos: Float, below: float
-    ) -> tuple[Float, list[list[tuple[int, int, float]]]]:
-        """Per posture of rot (M, B, 3, 3), pos (M, B, 3): the smallest distance over
-        ``pairs`` (M,), and the pairs closer than ``below`` with their distances."""
+        self,
+        pairs: NDArray[np.intp],
+        rot: Float,
+        pos: Float,
+        moves: NDArray[np.bool_],
+        below: float,
+        margin: float,
+    ) -> tuple[Float, Float, list[list[tuple[int, int]]]]:
+        """Per posture of rot (M, B, 3, 3), pos (M, B, 3) (the bodies that ``moves`` (B,) with
+        the arm, the others the same at every posture): the smallest distance over
+        ``pairs`` (M,); the smallest over the pairs with the scene (M,; exact where under
+        ``margin`` or where it is the smallest, a lower bound elsewhere; inf without such
+        pairs); and the pairs closer than ``below``.
+
+        Branch and bound: the pairs in the order of their lower bounds
+        (:func:`~pbdkit.collision._bounds.lower_bounds`), measured by coal while a bound is
+        under what is known (about one measurement per posture)."""
         m = rot.shape[0]
         best = np.full(m, np.inf)
-        close: list[list[tuple[int, int, float]]] = [[] for _ in range(m)]
+        scene = np.full(m, np.inf)
+        close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
         if not len(pairs):
-            return best, close
+            return best, scene, close
         bounds = lower_bounds(self._table, pairs, rot, pos)
-        first = np.argmin(bounds, axis=1)
+        order = np.argsort(bounds, axis=1)
+        ordered = np.take_along_axis(bounds, order, axis=1).tolist()
+        order_l = order.tolist()
+        own = ((pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)).tolist()
+        exact = self._table.exact(pairs).tolist()
+        firsts, seconds = pairs[:, 0].tolist(), pairs[:, 1].tolist()
+        has_scene = not all(own)
+        # coal's transforms: a static body's once for the run, a moving one's once a posture.
+        import coal
+
+        transform, request, result = coal.Transform3s, self._request, self._result
+        static = {int(i): transform(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)}
+        functors = self._functors
         for t in range(m):
-            row, rot_t, pos_t = bounds[t], rot[t], pos[t]
-            k0 = int(first[t])
-            d0 = self._distance(int(pairs[k0, 0]), int(pairs[k0, 1]), rot_t, pos_t)[0]
-            found = [(k0, d0)]
-            low = d0
-            for k in np.flatnonzero(row < max(d0, below)):
-                if k == k0:
+            low = scene_low = skipped = math.inf
+            rot_t, pos_t, found = rot[t], pos[t], close[t]
+            placed = dict(static)
+            for bound, k in zip(ordered[t], order_l[t], strict=True):
+                scene_pair = not own[k]
+                wanted = bound < low or bound < below
+                if scene_pair and bound < margin and bound < scene_low:
+                    wanted = True
+                if not wanted:
+                    if bound >= margin or bound >= scene_low:
+                        if has_scene:  # the scene's pairs left: bounds at least this
+                            skipped = min(skipped, bound)
+                        break
+                    if scene_pair:
+                        skipped = min(skipped, bound)
                     continue
-                d = self._distance(int(pairs[k, 0]), int(pairs[k, 1]), rot_t, pos_t)[0]
-                found.append((int(k), d))
+                fa, fb = firsts[k], seconds[k]
+                if exact[k] and bound > 0.0:  # a sphere's: its bound is its distance
+                    low = min(low, bound)
+                    if scene_pair:
+                        scene_low = min(scene_low, bound)
+                    continue
+                ta = placed.get(fa)
+                if ta is None:
+                    ta = placed[fa] = transform(rot_t[fa], pos_t[fa])
+                tb = placed.get(fb)
+                if tb is None:
+                    tb = placed[fb] = transform(rot_t[fb], pos_t[fb])
+                functor = functors.get((fa, fb))
+                if functor is None:
+                    functor = self._functor(fa, fb)
+                result.clear()
+                d = float(functor(ta, tb, request, result))
                 low = min(low, d)
-            best[t] = low
-            close[t] = [(int(pairs[k, 0]), int(pairs[k, 1]), d) for k, d in found if d < below]
-        return best, close
+                if scene_pair:
+                    scene_low = min(scene_low, d)
+                if d < below:
+                    found.append((fa, fb))
+            best[t], scene[t] = low, min(scene_low, skipped)
+        return best, scene, close
 
     # ------------------------------------------------------------------ grasps
 
@@ -410,11 +471,13 @@ class CollisionChecker:
         gripper: npt.ArrayLike | None = None,
         *,
         contact: float = 0.0,
+        margin: float = 0.0,
     ) -> CollisionReport:
         """Clearance and collisions along a joint trajectory (T, n) (see
         :class:`CollisionReport`); ``gripper`` (T,) is the gripper signal, for the grasps;
         ``contact``: a pair closer than this (m) is a collision (0: penetrating only; a
-        measured run that stops at a contact touches at about 1 mm)."""
+        measured run that stops at a contact touches at about 1 mm); ``margin``: the scene
+        clearance is exact where under it (m), a lower bound above."""
         q = np.atleast_2d(self.robot.check_joints(joints, "joints"))
         rots, origins, hands = self._plan(q, gripper)
         clearance = np.empty(q.shape[0])
@@ -422,13 +485,13 @@ class CollisionChecker:
         collisions: set[tuple[int, str, str]] = set()
         for lo, hi, state in self._segments(q.shape[0], hands):
             pairs = self._state_pairs(state)
-            arm = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
             rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
-            own, close_own = self._scan(pairs[arm], rot, pos, float(contact))
-            outside[lo:hi], close = self._scan(pairs[~arm], rot, pos, float(contact))
-            clearance[lo:hi] = np.minimum(own, outside[lo:hi])
+            moves = self._joints >= 0
+            moves[list(state.carried)] = True
+            low, scene, close = self._scan(pairs, rot, pos, moves, float(contact), float(margin))
+            clearance[lo:hi], outside[lo:hi] = low, scene
             for t, found in enumerate(close):
-                for a, b, _ in [*found, *close_own[t]]:
+                for a, b in found:
                     first, second = sorted((self.names[a], self.names[b]))
                     collisions.add((lo + t, first, second))
         return CollisionReport(clearance, sorted(collisions), outside)

@@ -186,7 +186,7 @@ def _avoid_passes(
         checker.plan_grasps(res.joints[own], signal)
         avoidance.update(res.joints[own], signal, first=first)
         res = remake(run)
-        report = checker.check(res.joints, res.gripper_signal)
+        report = checker.check(res.joints, res.gripper_signal, margin=margin)
         kept = _scene_min(report)
         if best is None or kept > _scene_min(best[1]):
             best = (res, report)
@@ -250,7 +250,7 @@ def with_scene(
     scene, avoid = sr.scene, sr.avoid
     margin = check_positive_float(sr.margin, "margin")
     checker = CollisionChecker(robot, scene, run.objects)
-    report = checker.check(res.joints, res.gripper_signal)
+    report = checker.check(res.joints, res.gripper_signal, margin=margin)
     fused = avoid and JOINT in run.used and bool(run.tasks) and not run.constraints.oriented
     if avoid and not fused:
         raise ValueError(
