@@ -4,6 +4,7 @@ the allowed contacts, and the bad inputs."""
 
 from __future__ import annotations
 
+import itertools
 import re
 import time
 from pathlib import Path
@@ -13,6 +14,7 @@ import pinocchio as pin
 import pytest
 
 from pbdkit.collision import Box, CollisionChecker, Cylinder, Scene, Sphere
+from pbdkit.collision._checker import CHUNK
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
@@ -99,6 +101,35 @@ def test_the_scene_clearance_is_exact_under_the_margin_and_a_bound_above(margin:
     assert exact.sum() > 20 and (~exact).sum() > 20  # both cases are met
     np.testing.assert_allclose(report.scene_clearance[exact], alone[exact], atol=1e-5)
     assert np.all(report.scene_clearance <= alone + 1e-5)
+
+
+@pytest.mark.parametrize("make", [katana, panda], ids=["katana", "panda"])
+def test_a_smooth_path_is_checked_as_pinocchio_checks_every_pair(make: object) -> None:
+    # Along a smooth path the check leaves out, stretch by stretch, the pairs whose swept
+    # spheres keep them apart (CHUNK postures): the clearance is still every pair's minimum,
+    # the scene clearance exact under the margin and a bound above.
+    robot = make()  # type: ignore[operator]
+    rng = np.random.default_rng(3)
+    corners = rng.uniform(robot.lower, robot.upper, (4, robot.n_joints))
+    joints = np.concatenate([np.linspace(a, b, 300) for a, b in itertools.pairwise(corners)])
+    scene = _scene()
+    checker = CollisionChecker(robot, scene)
+    report = checker.check(joints, margin=0.03)
+    np.testing.assert_allclose(report.clearance, _brute_force(robot, scene, joints), atol=1e-5)
+    alone = _brute_force(robot, scene, joints, self_pairs=False)
+    assert report.scene_clearance is not None
+    under = alone < 0.03
+    np.testing.assert_allclose(report.scene_clearance[under], alone[under], atol=1e-5)
+    assert np.all(report.scene_clearance <= alone + 1e-5)
+    # Pairs were left out: a stretch of CHUNK postures of a smooth path keeps some pairs
+    # apart (what the check above did, stretch by stretch).
+    stretch = joints[:CHUNK]
+    rots, origins = checker._frames(stretch)
+    rot, pos = checker._poses(rots, origins, {}, {})
+    state = checker._segments(len(stretch), checker.hand_frames(stretch))[0][2]
+    pairs = checker._state_pairs(state)
+    kept, _ = checker._chunk_pairs(pairs, rot, pos, 0.03)
+    assert 0 < kept.sum() < len(pairs)
 
 
 def test_a_collision_names_its_step_and_bodies_sorted() -> None:

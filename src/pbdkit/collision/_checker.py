@@ -51,6 +51,14 @@ SUPPORT_GAP = 0.005
 
 _STATIC = -1  # the joint of a body that does not move with the arm
 
+#: The check looks at the postures in stretches of this many, each leaving out the pairs its
+#: swept spheres keep apart (:meth:`CollisionChecker._chunk_pairs`).
+CHUNK = 64
+#: ... when there are more pairs than this (fewer: the stretches cost more than they save).
+CHUNK_PAIRS = 50
+#: Pairs whose centres' distance bounds each posture's smallest distance from above.
+PROBES = 4
+
 
 @dataclass(frozen=True, eq=False)
 class CollisionReport:
@@ -314,11 +322,70 @@ class CollisionChecker:
         close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
         if not len(pairs):
             return best, scene, close
+        import coal
+
+        static = {int(i): coal.Transform3s(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)}
+        own = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
+        stretch = CHUNK if len(pairs) > CHUNK_PAIRS else m  # few pairs: all at once
+        for lo in range(0, m, stretch):
+            hi = min(m, lo + stretch)
+            kept, apart = self._chunk_pairs(pairs, rot[lo:hi], pos[lo:hi], max(below, margin))
+            out = self._scan_pairs(
+                pairs[kept], own[kept], rot[lo:hi], pos[lo:hi], static, below, margin
+            )
+            best[lo:hi], scene[lo:hi], close[lo:hi] = out
+            left = ~kept & ~own
+            if left.any():  # the scene's pairs left out: at least their swept spheres apart
+                scene[lo:hi] = np.minimum(scene[lo:hi], float(apart[left].min()))
+        return best, scene, close
+
+    def _chunk_pairs(
+        self, pairs: NDArray[np.intp], rot: Float, pos: Float, floor: float
+    ) -> tuple[NDArray[np.bool_], Float]:
+        """The pairs (P,) a stretch of postures must look at, and their swept spheres'
+        distance (P,; a lower bound over the stretch): a
+        pair whose bodies' swept spheres (each bounding sphere over the stretch) are farther
+        apart than the largest of ``floor`` and an upper bound on every posture's smallest
+        distance (the centres' distance of a few primitive pairs: a primitive holds its
+        centre) is nearest nowhere, closer than ``floor`` nowhere."""
+        table = self._table
+        centres = pos + np.einsum("mbij,bj->mbi", rot, table.centre)  # (M, B, 3)
+        middle = 0.5 * (centres.max(axis=0) + centres.min(axis=0))  # (B, 3)
+        swept = np.linalg.norm(centres - middle, axis=2).max(axis=0) + table.radius
+        a, b = pairs[:, 0], pairs[:, 1]
+        apart = np.linalg.norm(middle[a] - middle[b], axis=1) - swept[a] - swept[b]
+        solid = np.flatnonzero((table.kind[a] != 0) & (table.kind[b] != 0))
+        if not solid.size:
+            return np.ones(len(pairs), dtype=bool), apart
+        first = np.linalg.norm(centres[0, a[solid]] - centres[0, b[solid]], axis=1)
+        probes = solid[np.argsort(first)[:PROBES]]
+        upper = np.linalg.norm(centres[:, a[probes]] - centres[:, b[probes]], axis=2)
+        ceiling = max(float(upper.min(axis=1).max()), floor)
+        return apart <= ceiling, apart
+
+    def _scan_pairs(
+        self,
+        pairs: NDArray[np.intp],
+        own_pairs: NDArray[np.bool_],
+        rot: Float,
+        pos: Float,
+        static: dict[int, Any],
+        below: float,
+        margin: float,
+    ) -> tuple[Float, Float, list[list[tuple[int, int]]]]:
+        """:meth:`_scan` over ``pairs`` (the arm's own where ``own_pairs``) for one stretch,
+        with coal's transforms of the static bodies."""
+        m = rot.shape[0]
+        best = np.full(m, np.inf)
+        scene = np.full(m, np.inf)
+        close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
+        if not len(pairs):
+            return best, scene, close
         bounds = lower_bounds(self._table, pairs, rot, pos)
         order = np.argsort(bounds, axis=1)
         ordered = np.take_along_axis(bounds, order, axis=1).tolist()
         order_l = order.tolist()
-        own = ((pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)).tolist()
+        own = own_pairs.tolist()
         exact = self._table.exact(pairs).tolist()
         firsts, seconds = pairs[:, 0].tolist(), pairs[:, 1].tolist()
         has_scene = not all(own)
@@ -326,7 +393,6 @@ class CollisionChecker:
         import coal
 
         transform, request, result = coal.Transform3s, self._request, self._result
-        static = {int(i): transform(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)}
         functors = self._functors
         for t in range(m):
             low = scene_low = skipped = math.inf
