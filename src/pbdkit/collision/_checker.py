@@ -316,19 +316,17 @@ class CollisionChecker:
         Branch and bound: the pairs in the order of their lower bounds
         (:func:`~pbdkit.collision._bounds.lower_bounds`), measured by coal while a bound is
         under what is known (about one measurement per posture)."""
-        m = rot.shape[0]
-        best = np.full(m, np.inf)
-        scene = np.full(m, np.inf)
-        close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
-        if not len(pairs):
-            return best, scene, close
         import coal
 
         static = {int(i): coal.Transform3s(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)}
         own = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
-        stretch = CHUNK if len(pairs) > CHUNK_PAIRS else m  # few pairs: all at once
-        for lo in range(0, m, stretch):
-            hi = min(m, lo + stretch)
+        if len(pairs) <= CHUNK_PAIRS:  # few pairs: all postures at once, every pair
+            return self._scan_pairs(pairs, own, rot, pos, static, below, margin)
+        m = rot.shape[0]
+        best, scene = np.empty(m), np.empty(m)
+        close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
+        for lo in range(0, m, CHUNK):
+            hi = min(m, lo + CHUNK)
             kept, apart = self._chunk_pairs(pairs, rot[lo:hi], pos[lo:hi], max(below, margin))
             out = self._scan_pairs(
                 pairs[kept], own[kept], rot[lo:hi], pos[lo:hi], static, below, margin
@@ -379,8 +377,6 @@ class CollisionChecker:
         best = np.full(m, np.inf)
         scene = np.full(m, np.inf)
         close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
-        if not len(pairs):
-            return best, scene, close
         bounds = lower_bounds(self._table, pairs, rot, pos)
         order = np.argsort(bounds, axis=1)
         ordered = np.take_along_axis(bounds, order, axis=1).tolist()

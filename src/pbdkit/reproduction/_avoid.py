@@ -135,7 +135,7 @@ class Avoidance:
         checker = self.checker
         frames = _chain_frames(joints, checker._consts, checker._revolute)
         near: dict[str, list[tuple[int, Any]]] = {}
-        for lo, hi, state in checker._segments(joints.shape[0], checker.hand_frames(joints)):
+        for lo, hi, state in checker._segments(joints.shape[0], checker._hands(*frames)):
             for j in range(lo, hi):
                 for prox in checker.near(joints[j], self.margin, state.carried, state.released):
                     moves = [prox.joints[0] > 0, prox.joints[1] > 0]
