@@ -246,6 +246,8 @@ def test_view_command_refuses_bad_input_in_one_line(skill: Skill, tmp_path: Path
     skill.save(path)
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a skill")
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("shapes:\n  - {type: cone, radius: 0.1, pose: [0, 0, 0]}\n")
     with socket.socket() as s:
         s.bind((HOST, 0))
         s.listen()
@@ -257,6 +259,8 @@ def test_view_command_refuses_bad_input_in_one_line(skill: Skill, tmp_path: Path
             (["view", "--skill", str(bad), "--port", str(free_port())], "bad.npz"),
             (["view", "--skill", str(tmp_path / "none.npz")], "none.npz"),
             (["view", "--skill", str(path), "--object", "mug=0,0,0"], "not objects of"),
+            (["view", "--skill", str(path), "--scene", str(scene)], "scene.yaml"),
+            (["view", "--task", "coaster", "--scene", str(scene)], "apply to --skill"),
         ]
         for args, words in cases:
             out = _pbdkit(*args)
