@@ -16,9 +16,18 @@ import pytest
 from pbdkit.collision import Box, CollisionChecker, Cylinder, Scene, Sphere
 from pbdkit.collision._checker import CHUNK
 from pbdkit.data._demonstration import Demonstration
+from pbdkit.datasets import reach_grasp_return
 from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
-from pbdkit.reproduction._avoid import SIGMA, TAPER, TAPER_DECADES, TAPER_MIN, Avoidance
+from pbdkit.reproduction._avoid import (
+    SIGMA,
+    TAPER,
+    TAPER_DECADES,
+    TAPER_MIN,
+    TOLERANCE,
+    Avoidance,
+    _meetings,
+)
 from pbdkit.reproduction._controller import PlanFailedWarning
 from pbdkit.reproduction._probabilistic_ik import CollisionWarning
 from pbdkit.reproduction._result import ReproductionResult
@@ -128,7 +137,7 @@ def test_a_smooth_path_is_checked_as_pinocchio_checks_every_pair(make: object) -
     rot, pos = checker._poses(rots, origins, {}, {})
     state = checker._segments(len(stretch), checker.hand_frames(stretch))[0][2]
     pairs = checker._state_pairs(state)
-    kept, _ = checker._chunk_pairs(pairs, rot, pos, 0.03)
+    kept, _ = checker._chunk_pairs(pairs, checker._table.centres(rot, pos), 0.03)
     assert 0 < kept.sum() < len(pairs)
 
 
@@ -316,6 +325,119 @@ def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: 
     assert enc.weight(enc.hi + taper) == 0.0 and avoid.terms(enc.hi + taper + 1) is None
 
 
+def test_the_passes_look_only_where_the_check_finds_the_scene_near(
+    skill: Skill, plain: tuple
+) -> None:
+    # A pass asks for nearest points only at the samples where the path's check found the
+    # scene within the margin: the encounters and their Gaussians are those of a look at
+    # every sample.
+    objects, res = plain
+    box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
+    checker = CollisionChecker(skill.robot, box, objects)
+    own = ~res.lead_in
+    joints, signal = res.joints[own], res.gripper_signal[own]
+    report = checker.check(joints, signal, margin=0.02)
+    assert report.scene_clearance is not None
+    near = np.flatnonzero(report.scene_clearance < 0.02)
+    assert 0 < near.size < joints.shape[0] // 2
+    out = []
+    for where in (None, near):
+        checker.plan_grasps(joints, signal)
+        avoid = Avoidance(checker, margin=0.02)
+        caught = avoid.update(joints, signal, near=where)
+        out.append((caught, avoid))
+    assert out[0][0] == out[1][0] > 0
+    every, some = out[0][1], out[1][1]
+    assert len(every.encounters) == len(some.encounters) == 1
+    a, b = every.encounters[0], some.encounters[0]
+    assert (a.lo, a.hi, a.amplitude, a.moving) == (b.lo, b.hi, b.amplitude, b.moving)
+    assert a.others.keys() == b.others.keys()
+    assert every.precisions.keys() == some.precisions.keys()
+    for step, (lam, info) in every._terms.items():
+        np.testing.assert_array_equal(lam, some._terms[step][0])
+        np.testing.assert_array_equal(info, some._terms[step][1])
+
+
+def test_a_body_met_twice_is_bent_around_twice() -> None:
+    # Hits on one body, 300 steps apart (on the way there and back), are two meetings; hits
+    # closer than the gap are one.
+    hits = {"box": [(510, "d"), (100, "a"), (101, "b"), (130, "c"), (511, "e")], "wall": [(7, "w")]}
+    groups = _meetings(hits, gap=80)  # type: ignore[arg-type]
+    assert [(body, [s for s, _ in g]) for body, g in groups] == [
+        ("box", [100, 101, 130]),
+        ("box", [510, 511]),
+        ("wall", [7]),
+    ]
+    assert [len(g) for _, g in _meetings(hits, gap=500)] == [5, 1]  # type: ignore[arg-type]
+
+
+def test_a_seven_joint_arm_bends_around_a_box_on_its_way_down() -> None:
+    # The Panda reaches down to a box: a 5 cm box in its way, beside the path, is met by the
+    # hand, the fingers and the wrist at once. Each is moved along the encounter's direction
+    # (one point alone lets the redundant arm swing another link in: 16 mm, under the
+    # margin), and the run keeps the margin where the plain run goes 35 mm into the box.
+    robot = panda()
+    home = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
+    data = reach_grasp_return(robot, (0.5, 0.0, 0.1), home, n_demos=5, seed=0)
+    skill = Skill.learn(data.demos, robot, n_components=8, n_steps=300)
+    told = {"box": np.asarray(data.boxes, dtype=np.float64).mean(axis=0)}
+    plain = skill.reproduce(told)
+    own = np.flatnonzero(~plain.lead_in)
+    closes = np.flatnonzero(plain.gripper & ~plain.lead_in)[0]
+    centre = plain.positions[(own[0] + closes) // 2] - np.array([0.10, 0.0, 0.0])
+    scene = Scene(
+        [Box((0.05, 0.05, 0.05), centre, name="obstacle")],
+        objects={"box": Box((0.04, 0.04, 0.04), (0.0, 0.0, -0.02))},
+    )
+    through = skill.reproduce(told, scene=scene, avoid=False)
+    assert through.clearance is not None and through.clearance.min() < -0.02
+    assert any("obstacle" in c for c in through.collisions)
+    around = skill.reproduce(told, scene=scene, margin=0.02)
+    assert around.infeasible is None and not around.collisions
+    assert around.clearance is not None and around.clearance.min() >= 0.02 - TOLERANCE
+    # The grasp is kept: the hand meets the box where the plain run does.
+    grasp = np.flatnonzero(around.gripper & ~around.lead_in)[0]
+    assert np.linalg.norm(around.positions[grasp] - plain.positions[closes]) < 0.005
+
+
+def test_capsule_bounds_bracket_coals_cylinder_distance() -> None:
+    # Two cylinders at random poses: the capsules' distance <= coal's <= the distance of the
+    # two side points, and equal to coal's where the axes' closest points are inside both.
+    import coal
+    from scipy.spatial.transform import Rotation
+
+    from pbdkit.collision._bounds import ShapeTable, _capsules
+
+    rng = np.random.default_rng(11)
+    inside_seen = 0
+    request = coal.DistanceRequest()
+    for _ in range(400):
+        ra, rb = rng.uniform(0.01, 0.08, 2)
+        ha, hb = rng.uniform(0.02, 0.2, 2)
+        shapes = [coal.Cylinder(ra, 2 * ha), coal.Cylinder(rb, 2 * hb)]
+        table = ShapeTable(shapes)
+        rot = Rotation.random(2, random_state=int(rng.integers(2**31))).as_matrix()
+        pos = rng.uniform(-0.2, 0.2, (2, 3))
+        d = coal.distance(
+            shapes[0],
+            coal.Transform3s(rot[0], pos[0]),
+            shapes[1],
+            coal.Transform3s(rot[1], pos[1]),
+            request,
+            coal.DistanceResult(),
+        )
+        low, inside, high = _capsules(
+            table, np.array([0]), np.array([1]), rot[:1], rot[1:], pos[:1], pos[1:]
+        )
+        assert low[0] <= d + 1e-6
+        if d > 0:
+            assert high[0] >= d - 1e-6
+        if inside[0]:
+            inside_seen += 1
+            assert low[0] == pytest.approx(d, abs=1e-6)
+    assert inside_seen > 20
+
+
 def test_a_result_with_a_scene_round_trips(skill: Skill, plain: tuple, tmp_path: Path) -> None:
     objects, res = plain
     box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
@@ -433,7 +555,7 @@ def test_the_lower_bounds_never_exceed_coal_and_are_tight_for_spheres_and_capsul
     m = 400
     rot = np.stack([[_random_rotation(rng) for _ in geoms] for _ in range(m)])
     pos = rng.uniform(-0.3, 0.3, (m, len(geoms), 3))
-    bounds = lower_bounds(table, pairs, rot, pos)
+    bounds = lower_bounds(table, pairs, rot, pos).lower
     exact = table.exact(pairs)
     request, result = coal.DistanceRequest(), coal.DistanceResult()
     for t in range(m):
@@ -452,7 +574,7 @@ def test_the_lower_bounds_never_exceed_coal_and_are_tight_for_spheres_and_capsul
     apart = np.zeros((1, 5, 3))
     apart[0, 2] = (0.2, 0.0, 0.0)
     (k,) = np.flatnonzero((pairs[:, 0] == 1) & (pairs[:, 1] == 2))
-    assert lower_bounds(table, pairs, side, apart)[0, k] == pytest.approx(0.2 - 0.03 - 0.05)
+    assert lower_bounds(table, pairs, side, apart).lower[0, k] == pytest.approx(0.2 - 0.03 - 0.05)
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -16,12 +16,12 @@ box is 2 cm from the arm: the second form is what makes the test worth having.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ShapeTable", "lower_bounds"]
+__all__ = ["Bounds", "ShapeTable", "lower_bounds"]
 
 Float = NDArray[np.float64]
 
@@ -57,6 +57,14 @@ class ShapeTable:
         # A sphere's bounding sphere is itself: its bound against a primitive is the distance.
         self.round = (self.kind == _SPHERE) & np.all(np.abs(self.centre) < 1e-12, axis=1)
 
+    def centres(self, rot: Float, pos: Float) -> Float:
+        """The bounding spheres' centres (M, B, 3) of bodies at rotations ``rot`` (M, B, 3, 3)
+        and positions ``pos`` (M, B, 3)."""
+        off = np.flatnonzero(np.any(self.centre != 0.0, axis=1))
+        out = pos.copy()
+        out[:, off] += np.einsum("mbij,bj->mbi", rot[:, off], self.centre[off])
+        return out
+
     def exact(self, pairs: NDArray[np.intp]) -> NDArray[np.bool_]:
         """The pairs (P,) whose positive lower bound is their distance: a sphere and a box, a
         cylinder or a sphere."""
@@ -77,50 +85,113 @@ def _point_to_shape(local: Float, kind: int, extent: Float) -> Float:
     return np.asarray(np.maximum(np.linalg.norm(local, axis=1) - extent[:, 0], 0.0))
 
 
-def lower_bounds(table: ShapeTable, pairs: NDArray[np.intp], rot: Float, pos: Float) -> Float:
+class Bounds(NamedTuple):
+    """What :func:`lower_bounds` finds: the bounds (M, P), where (M, P) a bound is the
+    distance itself (a round sphere and a primitive apart, or two cylinders whose capsules'
+    closest points lie inside both axes), and per posture (M,) the ceiling under which the
+    bounds were refined (inf: all were)."""
+
+    lower: Float
+    exact: NDArray[np.bool_]
+    ceiling: Float
+
+
+def lower_bounds(
+    table: ShapeTable,
+    pairs: NDArray[np.intp],
+    rot: Float,
+    pos: Float,
+    centres: Float | None = None,
+    floor: float | None = None,
+) -> Bounds:
     """Lower bounds (M, P) on the distances of ``pairs`` (P, 2) at M postures whose bodies are
-    at rotations ``rot`` (M, B, 3, 3) and positions ``pos`` (M, B, 3)."""
+    at rotations ``rot`` (M, B, 3, 3) and positions ``pos`` (M, B, 3) (``centres``: their
+    :meth:`ShapeTable.centres`, if known).
+
+    With a ``floor`` (m), a posture's spheres' bound is refined (the point and capsule forms)
+    only where it is under the larger of the floor and an upper bound on that posture's
+    smallest distance (two primitives are no farther apart than their centres, less a round
+    sphere's radius): a pair left at its spheres' bound there is at least that far, and a
+    search for the smallest distance, or for the pairs under the floor, never needs it."""
     m = rot.shape[0]
-    centres = pos + np.einsum("mbij,bj->mbi", rot, table.centre)  # (M, B, 3)
+    if centres is None:
+        centres = table.centres(rot, pos)
     a, b = pairs[:, 0], pairs[:, 1]
     gap = np.linalg.norm(centres[:, a] - centres[:, b], axis=2)
     bound = gap - table.radius[a] - table.radius[b]
-    for near, far in ((a, b), (b, a)):
-        for kind in (_BOX, _CYLINDER, _SPHERE):
-            sel = np.flatnonzero(table.kind[far] == kind)
-            if not sel.size:
-                continue
-            fb, nb = far[sel], near[sel]
-            d = centres[:, nb] - pos[:, fb]  # (M, S, 3)
-            local = np.einsum("msji,msj->msi", rot[:, fb], d).reshape(-1, 3)
-            extent = np.broadcast_to(table.extent[fb], (m, sel.size, 3)).reshape(-1, 3)
-            dist = _point_to_shape(local, kind, extent).reshape(m, sel.size)
-            bound[:, sel] = np.maximum(bound[:, sel], dist - table.radius[nb])
+    exact = np.broadcast_to(table.exact(pairs), bound.shape).copy()
+    live: NDArray[np.bool_] | None = None
+    ceiling = np.full(m, np.inf)
     both = np.flatnonzero((table.kind[a] == _CYLINDER) & (table.kind[b] == _CYLINDER))
     if both.size:  # two cylinders: their capsules' distance (a link's sphere is loose)
-        caps = _capsules(table, a[both], b[both], rot, pos)
-        bound[:, both] = np.maximum(bound[:, both], caps)
-    return np.asarray(bound)
+        steps, cols = np.repeat(np.arange(m), both.size), np.tile(both, m)
+        ia, ib = a[cols], b[cols]
+        caps, inside, apart = _capsules(
+            table, ia, ib, rot[steps, ia], rot[steps, ib], pos[steps, ia], pos[steps, ib]
+        )
+        bound[:, both] = np.maximum(bound[:, both], caps.reshape(m, both.size))
+        exact[:, both] |= inside.reshape(m, both.size)
+        ceiling = apart.reshape(m, both.size).min(axis=1)
+    if floor is not None:
+        solid = np.flatnonzero((table.kind[a] != _OTHER) & (table.kind[b] != _OTHER))
+        if solid.size:
+            shrink = table.radius * table.round  # a round sphere's surface, not its centre
+            upper = (gap[:, solid] - shrink[a[solid]] - shrink[b[solid]]).min(axis=1)
+            ceiling = np.maximum(np.minimum(upper, ceiling), floor)
+            live = bound < ceiling[:, None]
+        else:
+            ceiling = np.full(m, np.inf)
+    else:
+        ceiling = np.full(m, np.inf)
+    for near, far in ((a, b), (b, a)):
+        for kind in (_BOX, _CYLINDER, _SPHERE):
+            # A round sphere's point bound is the spheres' bound: left out.
+            sel = np.flatnonzero((table.kind[far] == kind) & ~table.round[far])
+            if not sel.size:
+                continue
+            if live is None:
+                steps, cols = np.repeat(np.arange(m), sel.size), np.tile(sel, m)
+            else:
+                steps, at = np.nonzero(live[:, sel])
+                cols = sel[at]
+            if not steps.size:
+                continue
+            fb, nb = far[cols], near[cols]
+            d = centres[steps, nb] - pos[steps, fb]  # (N, 3)
+            local = np.einsum("nji,nj->ni", rot[steps, fb], d)
+            dist = _point_to_shape(local, kind, table.extent[fb]) - table.radius[nb]
+            bound[steps, cols] = np.maximum(bound[steps, cols], dist)
+    return Bounds(np.asarray(bound), exact, ceiling)
 
 
 def _capsules(
-    table: ShapeTable, a: NDArray[np.intp], b: NDArray[np.intp], rot: Float, pos: Float
-) -> Float:
-    """Distances (M, S) between the capsules around cylinders a and b (S,) (each capsule holds
-    its cylinder: a lower bound on theirs): the closest points of the axes' segments
-    (Ericson, Real-Time Collision Detection, 5.1.9), less both radii."""
+    table: ShapeTable,
+    a: NDArray[np.intp],
+    b: NDArray[np.intp],
+    rot_a: Float,
+    rot_b: Float,
+    pos_a: Float,
+    pos_b: Float,
+) -> tuple[Float, NDArray[np.bool_], Float]:
+    """Distances (N,) between the capsules around cylinders a and b (N,), posed at ``rot_a``,
+    ``rot_b`` (N, 3, 3) and ``pos_a``, ``pos_b`` (N, 3) (each capsule holds its cylinder: a
+    lower bound on theirs): the closest points of the axes' segments (Ericson, Real-Time
+    Collision Detection, 5.1.9), less both radii; where that is the cylinders' distance
+    (N,; the closest points inside both segments, apart); and an upper bound on it (N,): the
+    distance of two points of the cylinders' sides, each the closest point of its axis moved
+    by its radius towards the other's, square to its axis."""
     half_a, half_b = table.extent[a, 1], table.extent[b, 1]
-    axis_a, axis_b = rot[:, a][..., 2], rot[:, b][..., 2]  # (M, S, 3)
-    start_a = pos[:, a] - axis_a * half_a[:, None]
-    start_b = pos[:, b] - axis_b * half_b[:, None]
+    axis_a, axis_b = rot_a[..., 2], rot_b[..., 2]  # (N, 3)
+    start_a = pos_a - axis_a * half_a[:, None]
+    start_b = pos_b - axis_b * half_b[:, None]
     d1 = 2.0 * axis_a * half_a[:, None]
     d2 = 2.0 * axis_b * half_b[:, None]
     r = start_a - start_b
-    aa = np.einsum("msi,msi->ms", d1, d1)
-    ee = np.einsum("msi,msi->ms", d2, d2)
-    ff = np.einsum("msi,msi->ms", d2, r)
-    cc = np.einsum("msi,msi->ms", d1, r)
-    bb = np.einsum("msi,msi->ms", d1, d2)
+    aa = np.einsum("ni,ni->n", d1, d1)
+    ee = np.einsum("ni,ni->n", d2, d2)
+    ff = np.einsum("ni,ni->n", d2, r)
+    cc = np.einsum("ni,ni->n", d1, r)
+    bb = np.einsum("ni,ni->n", d1, d2)
     denom = aa * ee - bb * bb
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-12 * aa * ee, np.clip((bb * ff - cc * ee) / denom, 0.0, 1.0), 0.0)
@@ -129,6 +200,23 @@ def _capsules(
         s = np.where(
             low, np.clip(-cc / aa, 0.0, 1.0), np.where(high, np.clip((bb - cc) / aa, 0.0, 1.0), s)
         )
+    # Closest points inside both segments (not parallel): the capsules' nearest points lie on
+    # the cylinders' sides, and a positive distance is the cylinders' own.
+    inside = (
+        (denom > 1e-9 * aa * ee) & (s > 1e-9) & (s < 1.0 - 1e-9) & (t > 1e-9) & (t < 1.0 - 1e-9)
+    )
     t = np.clip(t, 0.0, 1.0)
     gap = start_a + d1 * s[..., None] - (start_b + d2 * t[..., None])
-    return np.asarray(np.linalg.norm(gap, axis=2) - table.extent[a, 0] - table.extent[b, 0])
+    dist = np.linalg.norm(gap, axis=1) - table.extent[a, 0] - table.extent[b, 0]
+    side_a = _square(-gap, axis_a) * table.extent[a, 0][:, None]
+    side_b = _square(gap, axis_b) * table.extent[b, 0][:, None]
+    upper = np.linalg.norm(gap + side_a - side_b, axis=1)
+    return np.asarray(dist), np.asarray(inside & (dist > 0.0)), np.asarray(upper)
+
+
+def _square(v: Float, axis: Float) -> Float:
+    """Unit vectors (N, 3) along v (N, 3) without its part along the unit ``axis`` (N, 3)
+    (zero where that leaves nothing)."""
+    w = v - np.einsum("ni,ni->n", v, axis)[:, None] * axis
+    norm = np.linalg.norm(w, axis=1)
+    return np.asarray(np.where(norm[:, None] > 1e-12, w / np.maximum(norm, 1e-12)[:, None], 0.0))

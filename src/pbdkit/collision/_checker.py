@@ -17,8 +17,12 @@ each other (a glass stands on the table).
 the tip, within :data:`GRASP_REACH`, is grasped; where it opens, the object stays where the
 hand left it.
 
-**Cost.** Each pair first gets a lower bound from bounding spheres (vectorized); coal's GJK runs
-only on the pairs whose bound is below the smallest distance found so far (or the margin).
+**Cost.** Each pair first gets a lower bound (vectorized, :mod:`._bounds`): bounding spheres,
+refined (a point against a primitive, two cylinders' capsules) only under an upper bound on the
+posture's smallest distance; a sphere against a primitive, and two cylinders whose capsules'
+closest points lie inside both axes, get their distance there. coal's GJK runs only on the pairs
+whose bound is below the smallest distance found so far (or the margin), its transforms set in
+place.
 """
 
 from __future__ import annotations
@@ -197,6 +201,8 @@ class CollisionChecker:
         self._request = coal.DistanceRequest()  # signed distances (coal's default)
         self._result = coal.DistanceResult()
         self._functors: dict[tuple[int, int], Any] = {}
+        # One coal transform per body, set in place at each posture (a third of a new one's cost).
+        self._transforms = [coal.Transform3s() for _ in names]
         self._grasps: list[_Grasp] = []
         self._pair_cache: dict[int | None, NDArray[np.intp]] = {}
 
@@ -241,12 +247,18 @@ class CollisionChecker:
             local[body] = offset
         for body, pose in released.items():
             local[body] = pose
-        m = rots.shape[0]
-        rot = np.broadcast_to(local[:, :3, :3], (m, *local[:, :3, :3].shape)).copy()
-        pos = np.broadcast_to(local[:, :3, 3], (m, *local[:, :3, 3].shape)).copy()
-        moving = np.flatnonzero(joint >= 0)
+        m, n_bodies = rots.shape[0], len(joint)
+        rot, pos = np.empty((m, n_bodies, 3, 3)), np.empty((m, n_bodies, 3))
+        moving, still = np.flatnonzero(joint >= 0), np.flatnonzero(joint < 0)
+        rot[:, still], pos[:, still] = local[still, :3, :3], local[still, :3, 3]
         jr, jp = rots[:, joint[moving]], origins[:, joint[moving]]
-        rot[:, moving] = jr @ local[moving, :3, :3]
+        rot[:, moving] = jr
+        # A body turned in its joint's frame turns with it; a round sphere needs no turning.
+        turned = ~self._table.round[moving] & np.any(
+            np.abs(local[moving, :3, :3] - np.eye(3)) > 0.0, axis=(1, 2)
+        )
+        if turned.any():
+            rot[:, moving[turned]] = jr[:, turned] @ local[moving[turned], :3, :3]
         pos[:, moving] = jp + np.einsum("mbij,bj->mbi", jr, local[moving, :3, 3])
         return rot, pos
 
@@ -301,14 +313,14 @@ class CollisionChecker:
     def _scan(
         self,
         pairs: NDArray[np.intp],
-        rot: Float,
-        pos: Float,
-        moves: NDArray[np.bool_],
+        rots: Float,
+        origins: Float,
+        state: _State,
         below: float,
         margin: float,
     ) -> tuple[Float, Float, list[list[tuple[int, int]]]]:
-        """Per posture of rot (M, B, 3, 3), pos (M, B, 3) (the bodies that ``moves`` (B,) with
-        the arm, the others the same at every posture): the smallest distance over
+        """Per posture of joint frames rots (M, n + 1, 3, 3), origins (M, n + 1, 3), with what
+        ``state`` says is carried and released (:meth:`_poses`): the smallest distance over
         ``pairs`` (M,); the smallest over the pairs with the scene (M,; exact where under
         ``margin`` or where it is the smallest, a lower bound elsewhere; inf without such
         pairs); and the pairs closer than ``below``.
@@ -318,19 +330,30 @@ class CollisionChecker:
         under what is known (about one measurement per posture)."""
         import coal
 
-        static = {int(i): coal.Transform3s(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)}
+        moves = self._joints >= 0
+        moves[list(state.carried)] = True
         own = (pairs[:, 0] < self._n_arm) & (pairs[:, 1] < self._n_arm)
-        if len(pairs) <= CHUNK_PAIRS:  # few pairs: all postures at once, every pair
-            return self._scan_pairs(pairs, own, rot, pos, static, below, margin)
-        m = rot.shape[0]
+        m = rots.shape[0]
+        # Few pairs: all postures at once, every pair; more: stretches (small arrays, warm).
+        step = m if len(pairs) <= CHUNK_PAIRS else CHUNK
         best, scene = np.empty(m), np.empty(m)
         close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
-        for lo in range(0, m, CHUNK):
-            hi = min(m, lo + CHUNK)
-            kept, apart = self._chunk_pairs(pairs, rot[lo:hi], pos[lo:hi], max(below, margin))
-            out = self._scan_pairs(
-                pairs[kept], own[kept], rot[lo:hi], pos[lo:hi], static, below, margin
-            )
+        static: dict[int, Any] = {}
+        for lo in range(0, m, step):
+            hi = min(m, lo + step)
+            rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
+            if not static:
+                static = {
+                    int(i): coal.Transform3s(rot[0, i], pos[0, i]) for i in np.flatnonzero(~moves)
+                }
+            if step == m:
+                best[:], scene[:], close[:] = self._scan_pairs(
+                    pairs, own, rot, pos, static, below, margin
+                )
+                break
+            centres = self._table.centres(rot, pos)
+            kept, apart = self._chunk_pairs(pairs, centres, max(below, margin))
+            out = self._scan_pairs(pairs[kept], own[kept], rot, pos, static, below, margin, centres)
             best[lo:hi], scene[lo:hi], close[lo:hi] = out
             left = ~kept & ~own
             if left.any():  # the scene's pairs left out: at least their swept spheres apart
@@ -338,16 +361,16 @@ class CollisionChecker:
         return best, scene, close
 
     def _chunk_pairs(
-        self, pairs: NDArray[np.intp], rot: Float, pos: Float, floor: float
+        self, pairs: NDArray[np.intp], centres: Float, floor: float
     ) -> tuple[NDArray[np.bool_], Float]:
-        """The pairs (P,) a stretch of postures must look at, and their swept spheres'
+        """The pairs (P,) a stretch of postures (its bounding spheres' ``centres`` (M, B, 3))
+        must look at, and their swept spheres'
         distance (P,; a lower bound over the stretch): a
         pair whose bodies' swept spheres (each bounding sphere over the stretch) are farther
         apart than the largest of ``floor`` and an upper bound on every posture's smallest
         distance (the centres' distance of a few primitive pairs: a primitive holds its
         centre) is nearest nowhere, closer than ``floor`` nowhere."""
         table = self._table
-        centres = pos + np.einsum("mbij,bj->mbi", rot, table.centre)  # (M, B, 3)
         middle = 0.5 * (centres.max(axis=0) + centres.min(axis=0))  # (B, 3)
         swept = np.linalg.norm(centres - middle, axis=2).max(axis=0) + table.radius
         a, b = pairs[:, 0], pairs[:, 1]
@@ -370,31 +393,35 @@ class CollisionChecker:
         static: dict[int, Any],
         below: float,
         margin: float,
+        centres: Float | None = None,
     ) -> tuple[Float, Float, list[list[tuple[int, int]]]]:
         """:meth:`_scan` over ``pairs`` (the arm's own where ``own_pairs``) for one stretch,
-        with coal's transforms of the static bodies."""
+        with coal's transforms of the static bodies (and the bounding spheres' centres, if
+        known)."""
         m = rot.shape[0]
         best = np.full(m, np.inf)
         scene = np.full(m, np.inf)
         close: list[list[tuple[int, int]]] = [[] for _ in range(m)]
-        bounds = lower_bounds(self._table, pairs, rot, pos)
-        order = np.argsort(bounds, axis=1)
-        ordered = np.take_along_axis(bounds, order, axis=1).tolist()
+        found_bounds = lower_bounds(self._table, pairs, rot, pos, centres, max(below, margin))
+        order = np.argsort(found_bounds.lower, axis=1)
+        sorted_bounds = np.take_along_axis(found_bounds.lower, order, axis=1)
+        # Past the ceiling the search stops at the first pair: the lists end there.
+        width = 1 + int(np.max((sorted_bounds <= found_bounds.ceiling[:, None]).sum(axis=1)))
+        order = order[:, :width]
+        ordered = sorted_bounds[:, :width].tolist()
+        exact = np.take_along_axis(found_bounds.exact, order, axis=1).tolist()
         order_l = order.tolist()
         own = own_pairs.tolist()
-        exact = self._table.exact(pairs).tolist()
         firsts, seconds = pairs[:, 0].tolist(), pairs[:, 1].tolist()
         has_scene = not all(own)
         # coal's transforms: a static body's once for the run, a moving one's once a posture.
-        import coal
-
-        transform, request, result = coal.Transform3s, self._request, self._result
+        request, result, transforms = self._request, self._result, self._transforms
+        stamp = [-1] * len(transforms)  # the posture each moving body's transform was set at
         functors = self._functors
         for t in range(m):
             low = scene_low = skipped = math.inf
             rot_t, pos_t, found = rot[t], pos[t], close[t]
-            placed = dict(static)
-            for bound, k in zip(ordered[t], order_l[t], strict=True):
+            for bound, k, known in zip(ordered[t], order_l[t], exact[t], strict=True):
                 scene_pair = not own[k]
                 wanted = bound < low or bound < below
                 if scene_pair and bound < margin and bound < scene_low:
@@ -408,17 +435,25 @@ class CollisionChecker:
                         skipped = min(skipped, bound)
                     continue
                 fa, fb = firsts[k], seconds[k]
-                if exact[k] and bound > 0.0:  # a sphere's: its bound is its distance
+                if known and bound > 0.0:  # its bound is its distance
                     low = min(low, bound)
                     if scene_pair:
                         scene_low = min(scene_low, bound)
                     continue
-                ta = placed.get(fa)
+                ta = static.get(fa)
                 if ta is None:
-                    ta = placed[fa] = transform(rot_t[fa], pos_t[fa])
-                tb = placed.get(fb)
+                    ta = transforms[fa]
+                    if stamp[fa] != t:
+                        ta.setRotation(rot_t[fa])
+                        ta.setTranslation(pos_t[fa])
+                        stamp[fa] = t
+                tb = static.get(fb)
                 if tb is None:
-                    tb = placed[fb] = transform(rot_t[fb], pos_t[fb])
+                    tb = transforms[fb]
+                    if stamp[fb] != t:
+                        tb.setRotation(rot_t[fb])
+                        tb.setTranslation(pos_t[fb])
+                        stamp[fb] = t
                 functor = functors.get((fa, fb))
                 if functor is None:
                     functor = self._functor(fa, fb)
@@ -547,10 +582,9 @@ class CollisionChecker:
         collisions: set[tuple[int, str, str]] = set()
         for lo, hi, state in self._segments(q.shape[0], hands):
             pairs = self._state_pairs(state)
-            rot, pos = self._poses(rots[lo:hi], origins[lo:hi], state.carried, state.released)
-            moves = self._joints >= 0
-            moves[list(state.carried)] = True
-            low, scene, close = self._scan(pairs, rot, pos, moves, float(contact), float(margin))
+            low, scene, close = self._scan(
+                pairs, rots[lo:hi], origins[lo:hi], state, float(contact), float(margin)
+            )
             clearance[lo:hi], outside[lo:hi] = low, scene
             for t, found in enumerate(close):
                 for a, b in found:
@@ -592,7 +626,7 @@ class CollisionChecker:
             return []
         rots, origins = self._frames(q[None])
         rot, pos = self._poses(rots, origins, state.carried, state.released)
-        bounds = lower_bounds(self._table, pairs, rot, pos)[0]
+        bounds = lower_bounds(self._table, pairs, rot, pos).lower[0]
         joint = self._joints.copy()
         for body in state.carried:
             joint[body] = self._hand_joint

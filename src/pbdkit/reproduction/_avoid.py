@@ -2,21 +2,24 @@
 
 A reproduction that comes within the margin m of something in the scene is made again, in
 passes. Each meeting of the path with a static body (an **encounter**: the steps where any of
-the arm's bodies, or what the hand carries, comes within the margin of it) bends the path
-around it along one direction, as one smooth bump:
+the arm's bodies, or what the hand carries, comes within the margin of it; a body met again
+more than two tapers later is met anew, as on the way there and back) bends the path around it
+along one direction, as one smooth bump:
 
-- **the point**: where the moving body came nearest, fixed in the frame of the joint it moves
-  with; **the direction** e: the contact normal there without its component along the path
-  (an obstacle met head-on is passed, not backed away from), or up where that leaves little
-  (:meth:`Avoidance._escape`);
-- **the bump**: at step k the point is asked to lie a * w_k further along e than on the path
-  where the encounter was first met (ref_k), w_k being 1 over the encounter's steps and falling
+- **the points**: where each moving body that came within the margin came nearest, fixed in
+  the frame of the joint it moves with (the nearest one's first, the others as they are met:
+  with one point, a redundant arm swings another link in); **the direction** e: up without its
+  component along the path (an obstacle met head-on is passed, not backed away from), or the
+  contact normal without it where that leaves little (:meth:`Avoidance._escape`);
+- **the bump**: at step k each point is asked to lie a * w_k further along e than on the path
+  where the encounter was first met (ref_k; a point added later, where it lay less the bump
+  the path already had), w_k being 1 over the encounter's steps and falling
   as a raised cosine over :data:`TAPER` of the path's steps on either side; a, the amplitude,
   grows by the pass's shortfall, and the bump widens to the steps it still meets the body at,
   until the margin holds (:meth:`Avoidance.update`).
 
-At every step k of a bump, one Gaussian on the posture theta_k, linearized at the last pass's
-posture theta'_k::
+At every step k of a bump, one Gaussian per point on the posture theta_k, linearized at the
+last pass's posture theta'_k::
 
     r = e^T J_p(theta'_k)                   (1, n): the point's motion along e per joint
     r theta_k ~ N(r theta'_k + ref_k + a w_k - e^T p(theta'_k), SIGMA^2 / rho_k)
@@ -34,7 +37,7 @@ samples that were clear of it. Where the clearance acts, the fused step's trust 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -75,8 +78,9 @@ SLOWER = 3.0
 @dataclass
 class _Encounter:
     """The path meeting one static body: the steps it is within the margin (lo .. hi), the
-    moving point (fixed in the frame of chain joint ``joint``), the direction e it is moved
-    along, the bump's amplitude, and e . p on the path where it was first met (per step)."""
+    nearest moving body's point (fixed in the frame of chain joint ``joint``; the body
+    ``moving``), the direction e the points are moved along, the bump's amplitude, e . p on the
+    path where it was first met (per step), and the other moving bodies' points."""
 
     body: str
     lo: int
@@ -87,6 +91,10 @@ class _Encounter:
     amplitude: float
     ref: Float
     taper: int
+    #: The other moving bodies met within the margin (body -> (joint, point, ref)): each
+    #: point is moved along e by the same bump (a 7-joint arm would swing another link in).
+    others: dict[str, tuple[int, Float, Float]] = field(default_factory=dict)
+    moving: str = ""
 
     def weight(self, k: int) -> float:
         """w_k: 1 over lo .. hi, a raised cosine to 0 over ``taper`` steps on either side."""
@@ -94,6 +102,24 @@ class _Encounter:
         if gap <= 0:
             return 1.0
         return 0.5 * (1.0 + math.cos(math.pi * min(gap, self.taper) / self.taper))
+
+
+def _meetings(
+    meets: dict[str, list[tuple[int, Any]]], gap: int
+) -> list[tuple[str, list[tuple[int, Any]]]]:
+    """Each body's (step, Proximity)s cut where more than ``gap`` steps pass without one:
+    a path that meets a body twice (on the way there and back) bends twice."""
+    out: list[tuple[str, list[tuple[int, Any]]]] = []
+    for body, hits in meets.items():
+        hits = sorted(hits, key=lambda hit: hit[0])
+        group = [hits[0]]
+        for hit in hits[1:]:
+            if hit[0] - group[-1][0] > gap:
+                out.append((body, group))
+                group = []
+            group.append(hit)
+        out.append((body, group))
+    return out
 
 
 class Avoidance:
@@ -122,39 +148,85 @@ class Avoidance:
         """(Lambda_c (n, n), its information (n,)) of step j, None where nothing acts."""
         return self._terms.get(j)
 
-    def update(self, joints: Float, gripper: Float | None, *, first: int = 0) -> int:
+    def update(
+        self,
+        joints: Float,
+        gripper: Float | None,
+        *,
+        first: int = 0,
+        near: NDArray[np.intp] | None = None,
+    ) -> int:
         """Meet the path ``joints`` (the steps ``first`` .. T - 1 of a pass: from the start,
         or from a state along the way): grow the amplitude of every encounter it still comes
         within the margin at, start an encounter where it meets a body none covers, and
         linearize every bump at this path; returns the number of (step, pair)s within the
-        margin. The encounters' steps are the skill's (``first`` + the path's sample)."""
+        margin. The encounters' steps are the skill's (``first`` + the path's sample).
+        ``near``: the path's samples that may be within the margin (a check's, where its
+        scene clearance is under it); None: every sample is looked at."""
         del gripper  # the checker's grasps are planned (plan_grasps) for this path
         if first != self.first and self.encounters:
             raise ValueError("an avoidance's passes start at one step")
         self.first = first
         checker = self.checker
         frames = _chain_frames(joints, checker._consts, checker._revolute)
-        near: dict[str, list[tuple[int, Any]]] = {}
+        meets: dict[str, list[tuple[int, Any]]] = {}
+        look = None if near is None else set(near.tolist())
         for lo, hi, state in checker._segments(joints.shape[0], checker._hands(*frames)):
             for j in range(lo, hi):
+                if look is not None and j not in look:
+                    continue
                 for prox in checker.near(joints[j], self.margin, state.carried, state.released):
                     moves = [prox.joints[0] > 0, prox.joints[1] > 0]
                     if moves[0] == moves[1]:
                         continue  # both move (the arm with itself): checked, not avoided
                     static = prox.bodies[1] if moves[0] else prox.bodies[0]
-                    near.setdefault(static, []).append((first + j, prox))
-        caught = 0
-        for body, hits in near.items():
-            caught += len(hits)
+                    meets.setdefault(static, []).append((first + j, prox))
+        caught = sum(len(hits) for hits in meets.values())
+        taper = max(TAPER_MIN, round(TAPER * (first + joints.shape[0])))
+        for body, hits in _meetings(meets, 2 * taper):
             steps = [j for j, _ in hits]
             enc = self._covering(body, min(steps), max(steps))
             if enc is None:
-                self.encounters.append(self._start(body, hits, joints, frames))
+                enc = self._start(body, hits, joints, frames)
+                self.encounters.append(enc)
+                self._join(enc, hits, frames, bumped=False)
                 continue
             enc.lo, enc.hi = min(enc.lo, *steps), max(enc.hi, *steps)
+            self._join(enc, hits, frames, bumped=True)
             enc.amplitude += max(self._shortfall(prox) for _, prox in hits)
         self._linearize(joints, frames)
         return caught
+
+    def _join(
+        self,
+        enc: _Encounter,
+        hits: list[tuple[int, Any]],
+        frames: tuple[Float, Float],
+        *,
+        bumped: bool,
+    ) -> None:
+        """Add to ``enc`` every moving body of ``hits`` it does not move yet: its point where
+        it came nearest, and e . p along the path without the bump it already has
+        (``bumped``)."""
+        rots, origins = frames
+        nearest: dict[str, tuple[int, Any]] = {}
+        for step, prox in hits:
+            moving = 0 if prox.joints[0] > 0 else 1
+            name = prox.bodies[moving]
+            if name == enc.moving or name in enc.others:
+                continue
+            if name not in nearest or prox.distance < nearest[name][1].distance:
+                nearest[name] = (step, prox)
+        for name, (step, prox) in nearest.items():
+            moving = 0 if prox.joints[0] > 0 else 1
+            joint, j = int(prox.joints[moving]), step - self.first
+            local = rots[j, joint].T.dot(prox.points[moving] - origins[j, joint])
+            points = np.einsum("kab,b->ka", rots[:, joint], local) + origins[:, joint]
+            ref = points.dot(enc.escape)
+            if bumped:
+                steps = self.first + np.arange(len(ref))
+                ref = ref - enc.amplitude * np.array([enc.weight(int(k)) for k in steps])
+            enc.others[name] = (joint, local, ref)
 
     def _covering(self, body: str, lo: int, hi: int) -> _Encounter | None:
         """The encounter with ``body`` whose bump reaches steps lo .. hi, if any."""
@@ -192,6 +264,7 @@ class Avoidance:
             amplitude=max(self._shortfall(p) for _, p in hits),
             ref=points.dot(escape),
             taper=max(TAPER_MIN, round(TAPER * joints.shape[0])),
+            moving=prox.bodies[moving],
         )
         return enc
 
@@ -244,16 +317,17 @@ class Avoidance:
             for step in range(max(first, enc.lo - enc.taper), min(last, enc.hi + enc.taper) + 1):
                 k = step - first
                 w = enc.weight(step)
-                point = rots[k, enc.joint].dot(enc.local) + origins[k, enc.joint]
-                row = enc.escape.dot(self._point_rows(k, point, enc.joint, frames))
-                push = enc.ref[k] + enc.amplitude * w - float(enc.escape.dot(point))
                 rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
-                lam = rho * np.outer(row, row)
-                info = rho * row * (row.dot(joints[k]) + push)
-                if step in self._terms:
-                    old = self._terms[step]
-                    lam, info = old[0] + lam, old[1] + info
-                self._terms[step] = (lam, info)
+                for joint, local, ref in [(enc.joint, enc.local, enc.ref), *enc.others.values()]:
+                    point = rots[k, joint].dot(local) + origins[k, joint]
+                    row = enc.escape.dot(self._point_rows(k, point, joint, frames))
+                    push = ref[k] + enc.amplitude * w - float(enc.escape.dot(point))
+                    lam = rho * np.outer(row, row)
+                    info = rho * row * (row.dot(joints[k]) + push)
+                    if step in self._terms:
+                        old = self._terms[step]
+                        lam, info = old[0] + lam, old[1] + info
+                    self._terms[step] = (lam, info)
 
     def slower(self, n_samples: int, n_lead: int) -> Float | None:
         """The factor on each step's nominal duration (n_samples - 1,) of a pass's timing, its

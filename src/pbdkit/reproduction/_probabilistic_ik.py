@@ -171,12 +171,13 @@ def _avoid_passes(
     run: RunSetup,
     res: ReproductionResult,
     checker: CollisionChecker,
+    report: CollisionReport,
     margin: float,
     remake: Remake,
 ) -> tuple[ReproductionResult, CollisionReport]:
     """The passes of :mod:`._avoid`: Table II again (``remake``) with the encounters each
     pass meets, until the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the
-    largest smallest clearance) and its check."""
+    largest smallest clearance) and its check (``report``: the check of ``res``)."""
     avoidance = Avoidance(checker, margin)
     run = dataclasses.replace(run, avoid=avoidance)
     best: tuple[ReproductionResult, CollisionReport] | None = None
@@ -184,7 +185,10 @@ def _avoid_passes(
         own, first = _path_steps(res)
         signal = None if res.gripper_signal is None else res.gripper_signal[own]
         checker.plan_grasps(res.joints[own], signal)
-        avoidance.update(res.joints[own], signal, first=first)
+        # The pass meets the scene only where its check found it within the margin.
+        outside = report.scene_clearance
+        near = None if outside is None else np.flatnonzero(outside[own] < margin)
+        avoidance.update(res.joints[own], signal, first=first, near=near)
         res = remake(run)
         report = checker.check(res.joints, res.gripper_signal, margin=margin)
         kept = _scene_min(report)
@@ -261,7 +265,7 @@ def with_scene(
     if fused:
         outside = report.scene_clearance
         if outside is not None and outside.size and float(outside.min()) < margin:
-            avoided, avoided_report = _avoid_passes(run, res, checker, margin, remake)
+            avoided, avoided_report = _avoid_passes(run, res, checker, report, margin, remake)
             # Where keeping the margin would leave a tight constraint of the skill, the plain
             # run stays, its contacts reported: the skill is not given up silently.
             left = _leaves_tight(run, res, avoided)
