@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
 import tracemalloc
 import zipfile
 from pathlib import Path
@@ -55,6 +57,26 @@ def test_demonstration_fields_are_validated_read_only_copies() -> None:
     pos[0] = 99.0
     assert d.joints[0, 0] != 99.0 and d.objects["glass"][0] == pytest.approx(0.4)
     assert "T=20" in repr(d)
+
+
+def test_a_demonstration_pickles_and_copies_as_its_arrays() -> None:
+    # A skill keeps its demonstrations and travels to Dask workers (a read-only mapping does
+    # not pickle by itself).
+    rng = np.random.default_rng(5)
+    pose = np.eye(4)
+    pose[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    pose[:3, 3] = [0.4, 0.1, 0.2]
+    d = random_demo(rng)
+    d = Demonstration(d.t, d.joints, {**d.objects, "mug": pose}, d.gripper)
+    for back in (pickle.loads(pickle.dumps(d)), copy.deepcopy(d)):
+        assert back is not d and back.object_names == ("glass", "coaster", "mug")
+        for field in ("t", "joints", "gripper"):
+            np.testing.assert_array_equal(getattr(back, field), getattr(d, field))
+            assert not getattr(back, field).flags.writeable
+        for k in d.objects:
+            np.testing.assert_array_equal(back.objects[k], d.objects[k])
+        with pytest.raises(TypeError):
+            back.objects["cup"] = np.zeros(3)  # type: ignore[index]
 
 
 @pytest.mark.parametrize(

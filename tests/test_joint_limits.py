@@ -331,7 +331,7 @@ def saved_skill(custom_katana: Robot, tmp_path_factory: pytest.TempPathFactory) 
 def test_a_saved_and_loaded_skill_keeps_the_limits(saved_skill: Path, custom_katana: Robot) -> None:
     np.testing.assert_array_equal(custom_katana.velocity_limit, [0.8, INF, 1.19, 1.19, 1.19])
     with np.load(saved_skill, allow_pickle=False) as data:
-        assert int(data["version"]) == 1
+        assert int(data["version"]) == 3  # learned: it keeps its demonstrations
         for name in LIMITS:
             stored = data[f"robot_{name}"]
             assert stored.dtype == np.float64 and stored.shape == (5,)

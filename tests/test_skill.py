@@ -424,7 +424,8 @@ def test_save_load_reproduces_bit_identical_results(
         for k in a.influence:
             np.testing.assert_array_equal(a.influence[k], b.influence[k])
     with np.load(path, allow_pickle=False) as data:
-        assert str(data["format"]) == "pbdkit-skill" and int(data["version"]) == 1
+        # Version 3: a learned skill keeps its demonstrations (tests/test_skill_store.py).
+        assert str(data["format"]) == "pbdkit-skill" and int(data["version"]) == 3
 
 
 def test_save_load_with_a_robot_without_urdf(

@@ -42,7 +42,9 @@ __all__ = [
     "Demonstration",
     "LimitWarning",
     "check_demonstrations",
+    "demonstration_arrays",
     "demonstration_from_csv",
+    "demonstrations_from_arrays",
     "load_demonstrations",
     "save_demonstrations",
 ]
@@ -166,6 +168,10 @@ class Demonstration:
         object.__setattr__(self, "joints", joints_)
         object.__setattr__(self, "objects", MappingProxyType(objects_))
         object.__setattr__(self, "gripper", gripper_)
+
+    def __reduce__(self) -> tuple[type[Demonstration], tuple[Any, ...]]:
+        # Pickled (a skill sent to a worker) as its arrays: a read-only mapping does not pickle.
+        return (type(self), (self.t, self.joints, dict(self.objects), self.gripper))
 
     @property
     def n_steps(self) -> int:
@@ -308,14 +314,33 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
         (:data:`pbdkit._io.MAX_NPZ_BYTES` of arrays, 1 GiB: e.g. 200 demonstrations of 10**5
         samples of a 7-joint arm with a gripper): nothing is written.
     """
+    arrays = demonstration_arrays(demos)
+    posed = "demo_0_rotations" in arrays
+    header = {
+        "format": np.array(FORMAT_NAME),
+        # Positions only: version 1, as before poses (older readers still load the file).
+        "version": np.array(FORMAT_VERSION if posed else 1, dtype=np.int64),
+    }
+    # Refused before anything is written if load_demonstrations could not read it back.
+    save_npz_atomic(path, {**header, **arrays}, what="demos")
+
+
+def demonstration_arrays(demos: Sequence[Demonstration], prefix: str = "") -> dict[str, Any]:
+    """The arrays of demonstrations in a file, by key (:func:`save_demonstrations`; a
+    version-3 skill file holds them under the prefix ``"demos_"``): ``n_demos``,
+    ``object_names``, ``has_gripper`` and ``demo_{i}_*``, each key after ``prefix``; the
+    ``demo_{i}_rotations`` when some object is a pose (version 2 of a demonstrations file).
+
+    Raises
+    ------
+    ValueError
+        Invalid demonstrations (:func:`check_demonstrations`, at least one).
+    """
     items = check_demonstrations(demos, min_demos=1)
     names = list(items[0].object_names)
     has_gripper = items[0].gripper is not None
     posed = bool(names) and any(is_pose(items[0].objects[n]) for n in names)
     arrays: dict[str, Any] = {
-        "format": np.array(FORMAT_NAME),
-        # Positions only: version 1, as before poses (older readers still load the file).
-        "version": np.array(FORMAT_VERSION if posed else 1, dtype=np.int64),
         "n_demos": np.array(len(items), dtype=np.int64),
         "object_names": np.array(names, dtype=np.str_) if names else np.zeros(0, dtype="<U1"),
         "has_gripper": np.array(has_gripper),
@@ -335,8 +360,7 @@ def save_demonstrations(demos: Sequence[Demonstration], path: str | os.PathLike[
             )
         if d.gripper is not None:
             arrays[f"demo_{i}_gripper"] = d.gripper
-    # Refused before anything is written if load_demonstrations could not read it back.
-    save_npz_atomic(path, arrays, what="demos")
+    return {prefix + k: v for k, v in arrays.items()}
 
 
 def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
@@ -366,7 +390,7 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
     with open_npz(p, what=FORMAT_NAME + " file") as data:
         version = check_format(data, p, FORMAT_NAME, READABLE_VERSIONS)
         try:
-            demos = _demonstrations_from_arrays(data, posed=version >= 2)
+            demos = demonstrations_from_arrays(data, posed=version >= 2)
         except KeyError as exc:
             raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
         except (TypeError, ValueError) as exc:
@@ -374,31 +398,36 @@ def load_demonstrations(path: str | os.PathLike[str]) -> list[Demonstration]:
     return demos
 
 
-_HEADER_KEYS = frozenset({"format", "version", "n_demos", "object_names", "has_gripper"})
+_HEADER_KEYS = ("n_demos", "object_names", "has_gripper")
 
 
-def _demonstrations_from_arrays(
-    data: Mapping[str, NDArray[Any]], *, posed: bool = False
+def demonstrations_from_arrays(
+    data: Mapping[str, NDArray[Any]], *, posed: bool = False, prefix: str = ""
 ) -> list[Demonstration]:
     """The demonstrations of a file, checked against its header keys (n_demos, ...).
 
     ``data`` may load each array when it is asked for (:class:`pbdkit._io.NpzArchive`): the
-    keys are checked against the header before any demonstration's array is read.
+    keys are checked against the header before any demonstration's array is read. With a
+    ``prefix`` (:func:`demonstration_arrays`), the keys that start with it are the
+    demonstrations' (every message names the key as stored); without, every key but
+    ``format`` and ``version`` is.
     """
-    n_arr = np.asarray(data["n_demos"])
+    n_arr = np.asarray(data[prefix + "n_demos"])
     n_demos = int(n_arr) if n_arr.shape == () and n_arr.dtype.kind in "iu" else -1
     if n_demos < 1:
         value = n_arr.tolist() if n_arr.size < 10 else f"an array of shape {n_arr.shape}"
-        raise ValueError(f"n_demos must be an integer >= 1, got {value}")
-    names_arr = np.asarray(data["object_names"])
+        raise ValueError(f"{prefix}n_demos must be an integer >= 1, got {value}")
+    names_arr = np.asarray(data[prefix + "object_names"])
     if names_arr.ndim != 1 or (names_arr.size and names_arr.dtype.kind != "U"):
-        raise ValueError(f"object_names must be a 1-D array of strings, got {short(names_arr)}")
+        raise ValueError(
+            f"{prefix}object_names must be a 1-D array of strings, got {short(names_arr)}"
+        )
     names = [str(s) for s in names_arr]
     if len(set(names)) != len(names):
-        raise ValueError(f"object_names must be distinct, got {names}")
-    grip_arr = np.asarray(data["has_gripper"])
+        raise ValueError(f"{prefix}object_names must be distinct, got {names}")
+    grip_arr = np.asarray(data[prefix + "has_gripper"])
     if grip_arr.shape != () or grip_arr.dtype.kind != "b":
-        raise ValueError(f"has_gripper must be a boolean, got {short(grip_arr)}")
+        raise ValueError(f"{prefix}has_gripper must be a boolean, got {short(grip_arr)}")
     has_gripper = bool(grip_arr)
     fields: tuple[str, ...] = ("t", "joints", "objects")
     if posed:
@@ -409,28 +438,39 @@ def _demonstrations_from_arrays(
     # n_demos it declares.
     for i in range(n_demos):
         for f in fields:
-            if f"demo_{i}_{f}" not in data:
-                raise ValueError(f"missing key 'demo_{i}_{f}' (n_demos is {n_demos})")
+            if f"{prefix}demo_{i}_{f}" not in data:
+                raise ValueError(f"missing key '{prefix}demo_{i}_{f}' (n_demos is {n_demos})")
+    header = {"format", "version"} if not prefix else set()
+    header.update(prefix + k for k in _HEADER_KEYS)
     extra = sorted(
-        (k for k in data if k not in _HEADER_KEYS and not _described(k, n_demos, fields)),
-        key=_demo_key_order,
+        (
+            k
+            for k in data
+            if k.startswith(prefix)
+            and k not in header
+            and not _described(k[len(prefix) :], n_demos, fields)
+        ),
+        key=lambda k: _demo_key_order(k[len(prefix) :]),
     )
     if extra:
         shown = ", ".join(repr(k) for k in extra[:4]) + (", ..." if len(extra) > 4 else "")
         raise ValueError(
-            f"n_demos is {n_demos} but the file holds {shown}, which it does not describe"
+            f"{prefix}n_demos is {n_demos} but the file holds {shown}, which it does not describe"
         )
     demos: list[Demonstration] = []
     for i in range(n_demos):
-        pos = np.asarray(data[f"demo_{i}_objects"], dtype=np.float64)
+        pos = np.asarray(data[f"{prefix}demo_{i}_objects"], dtype=np.float64)
         if pos.shape != (len(names), 3):
-            raise ValueError(f"demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}")
+            raise ValueError(
+                f"{prefix}demo_{i}_objects must have shape ({len(names)}, 3), got {pos.shape}"
+            )
         placements: dict[str, Any] = {n: pos[k] for k, n in enumerate(names)}
         if posed:
-            rot = np.asarray(data[f"demo_{i}_rotations"], dtype=np.float64)
+            rot = np.asarray(data[f"{prefix}demo_{i}_rotations"], dtype=np.float64)
             if rot.shape != (len(names), 3, 3):
                 raise ValueError(
-                    f"demo_{i}_rotations must have shape ({len(names)}, 3, 3), got {rot.shape}"
+                    f"{prefix}demo_{i}_rotations must have shape ({len(names)}, 3, 3), "
+                    f"got {rot.shape}"
                 )
             for k, n in enumerate(names):
                 if not np.all(np.isnan(rot[k])):  # all NaN: a position-only object
@@ -439,17 +479,17 @@ def _demonstrations_from_arrays(
                     placements[n] = pose
         try:
             demo = Demonstration(
-                t=data[f"demo_{i}_t"],
-                joints=data[f"demo_{i}_joints"],
+                t=data[f"{prefix}demo_{i}_t"],
+                joints=data[f"{prefix}demo_{i}_joints"],
                 objects=placements,
-                gripper=data[f"demo_{i}_gripper"] if has_gripper else None,
+                gripper=data[f"{prefix}demo_{i}_gripper"] if has_gripper else None,
             )
         except ValueError as exc:
-            raise ValueError(f"demo_{i}: {exc}") from exc
+            raise ValueError(f"{prefix}demo_{i}: {exc}") from exc
         if demos and demo.n_joints != demos[0].n_joints:
             raise ValueError(
-                f"demo_{i}_joints has {demo.n_joints} joints, expected {demos[0].n_joints} "
-                "like demo_0_joints"
+                f"{prefix}demo_{i}_joints has {demo.n_joints} joints, expected {demos[0].n_joints} "
+                f"like {prefix}demo_0_joints"
             )
         demos.append(demo)
     return demos

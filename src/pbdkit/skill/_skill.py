@@ -13,6 +13,9 @@ Learning (:meth:`Skill.learn`):
    (:meth:`Skill.constraints`); they do not depend on the new object placements, so they are
    computed once per skill and covariance mode and cached.
 
+Steps 1 and 2 are :func:`pbdkit.skill._encoding.encode`'s; the skill keeps what it learned from
+(:mod:`pbdkit.skill._provenance`).
+
 Reproduction (:meth:`Skill.reproduce`) runs :func:`pbdkit.reproduction._probabilistic_ik.solve`,
 online control (:meth:`Skill.controller`) a :class:`pbdkit.Controller`. The skill file
 (:meth:`Skill.save`, :meth:`Skill.load`) is :mod:`pbdkit.skill._skill_file`'s. The math and the
@@ -23,10 +26,9 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Literal, cast
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -34,22 +36,29 @@ from numpy.typing import NDArray
 
 from .._defaults import MAX_COMPONENTS
 from .._io import open_npz, save_npz_atomic
-from .._validation import check_int, short
+from .._validation import short
 from ..collision import CollisionChecker, CollisionReport, Scene
 from ..data._align import align as align_demos
 from ..data._demonstration import Demonstration, check_demonstrations
-from ..data._placement import is_pose
 from ..motion._limits import LimitSpec, MotionLimits
-from ..prob import GMM, ModelSelection, SelectionWarning
+from ..prob import GMM, ModelSelection
 from ..prob._gmr import CovarianceMode
 from ..reproduction._avoid import DEFAULT_MARGIN
 from ..reproduction._constraints import JOINT, Constraints
 from ..reproduction._controller import Controller
 from ..reproduction._probabilistic_ik import SceneRun, solve
 from ..reproduction._result import ReproductionResult
-from ..reproduction._setup import RunOptions, reach_from_samples, step_limit_from_velocity
+from ..reproduction._setup import RunOptions, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
-from ._calibration import check_calibration, step_factors
+from ._calibration import check_calibration
+from ._encoding import encode
+from ._provenance import (
+    LearnOptions,
+    check_learn_options,
+    check_learned_from,
+    learned_from,
+    resolve_task_objects,
+)
 from ._run_limits import skill_limits
 from ._skill_file import (
     FORMAT_NAME,
@@ -60,16 +69,7 @@ from ._skill_file import (
     skill_arrays,
     skill_duration_problem,
 )
-from ._spaces import (
-    MAX_STEPS,
-    Alignment,
-    aligned_demonstrations,
-    mean_relative_rotation,
-    space_data,
-    space_floors,
-    variability_floor,
-    warn_outside_limits,
-)
+from ._spaces import Alignment, space_data, warn_outside_limits
 
 __all__ = ["DEFAULT_ALIGN", "Skill"]
 
@@ -82,7 +82,9 @@ Float = NDArray[np.float64]
 class Skill:
     """A skill learned from demonstrations: one GMM per constraint space.
 
-    Build it with :meth:`learn` or :meth:`load`.
+    Build it with :meth:`learn` or :meth:`load`. Built by hand, it takes what it was learned
+    from as all or none of ``demonstrations``, ``learn_options`` and ``n_samples`` (checked
+    against the skill as :meth:`load` checks a file's).
 
     Attributes
     ----------
@@ -108,6 +110,19 @@ class Skill:
     duration : float
         Mean duration of the demonstrations (s): a reproduction's steps span this time when it
         is executed (:meth:`times`). NaN when unknown.
+    demonstrations_ : list of Demonstration or None
+        The demonstrations the skill was learned from, as :meth:`learn` was given them (before
+        any alignment or resampling); None for a skill built by hand or loaded from a skill
+        file of version 1 or 2 (``update`` and ``suggest`` need them).
+    learn_options_ : dict or None
+        :meth:`learn`'s options as resolved (``n_steps``, ``n_components``, ``max_components``,
+        ``reg_covar``, ``random_state``, ``fit_samples``, ``bic_samples_per_sequence``,
+        ``task_objects``, ``orientation``, ``align``, ``calibrate``):
+        ``Skill.learn(skill.demonstrations_, skill.robot, **skill.learn_options_)`` learns the
+        same skill again, bit for bit. None with ``demonstrations_``.
+    n_samples_ : dict str -> int, or None
+        The number of data points each space's GMM was fitted on (every demonstration at the
+        ``fit_samples`` steps kept). None with ``demonstrations_``.
     """
 
     def __init__(
@@ -123,6 +138,9 @@ class Skill:
         rotation_base: Mapping[str, npt.ArrayLike] | None = None,
         aligned: Alignment | None = None,
         calibration: Mapping[str, npt.ArrayLike] | None = None,
+        demonstrations: Sequence[Demonstration] | None = None,
+        learn_options: Mapping[str, object] | None = None,
+        n_samples: Mapping[str, int] | None = None,
     ) -> None:
         self.rotation_base: dict[str, Float] = {
             k: np.asarray(v, dtype=np.float64) for k, v in (rotation_base or {}).items()
@@ -152,6 +170,25 @@ class Skill:
         self.calibration_ = check_calibration(
             calibration, [JOINT, *self.object_names], self.n_steps
         )
+        learned = check_learned_from(
+            demonstrations,
+            learn_options,
+            n_samples,
+            n_joints=self.n_joints,
+            has_gripper=self.has_gripper,
+            object_names=self.object_names,
+            oriented=self.rotation_base,
+            n_steps=self.n_steps,
+            k_max=MAX_FILE_COMPONENTS,
+        )
+        self.demonstrations_ = None if learned is None else learned.demonstrations
+        self.learn_options_ = None if learned is None else learned.options
+        self.n_samples_ = None if learned is None else learned.n_samples
+
+    def _learned_from(self, what: str) -> tuple[list[Demonstration], LearnOptions]:
+        """Copies of :attr:`demonstrations_` and :attr:`learn_options_`, for the method
+        ``what`` (``"update"``, ``"suggest"``): ValueError, one line, if the skill has none."""
+        return learned_from(self.demonstrations_, self.learn_options_, what)
 
     @property
     def constraint_names(self) -> list[str]:
@@ -271,9 +308,10 @@ class Skill:
             overrides some of its keys ``"joint"`` (rad^2), ``"gripper"``, ``"task"`` (m^2); a
             float applies to every dimension of every space (the units mix: rad^2 and m^2).
         random_state : int or None
-            Seed passed to the GMMs.
+            Seed passed to the GMMs: None or an integer in [0, 2**32 - 1].
         bic_samples_per_sequence : float
-            ``n_components="bic"`` only: effective number of samples per demonstration.
+            ``n_components="bic"`` only: effective number of samples per demonstration (> 0,
+            checked whatever ``n_components``).
         task_objects : sequence of str, optional
             The names of the objects that get a task-space constraint, among those the
             demonstrations record (default: all). An object that never moves (the basin of the
@@ -314,6 +352,9 @@ class Skill:
         Returns
         -------
         skill : Skill
+            Keeps what it learned from: :attr:`demonstrations_` (``demos``), :attr:`learn_options_`
+            (these options as resolved: ``task_objects`` as the list of names,
+            ``fit_samples`` at most ``n_steps``) and :attr:`n_samples_`.
 
         Warns
         -----
@@ -328,95 +369,45 @@ class Skill:
         n = int(robot.n_joints)
         if items[0].n_joints != n:
             raise ValueError(f"demos have {items[0].n_joints} joints, the robot has {n} joints")
-        n_steps = check_int(n_steps, "n_steps", minimum=2, maximum=MAX_STEPS)
-        # What Skill.load refuses is not learned (MAX_FILE_COMPONENTS).
-        if not isinstance(n_components, str):
-            check_int(n_components, "n_components", minimum=1, maximum=MAX_FILE_COMPONENTS)
-        check_int(max_components, "max_components", minimum=1, maximum=MAX_FILE_COMPONENTS)
+        names = resolve_task_objects(task_objects, items[0].object_names)
+        # Checked and resolved as they are kept (learn_options_); K as Skill.load reads it.
+        options = check_learn_options(
+            {
+                "n_steps": n_steps,
+                "n_components": n_components,
+                "max_components": max_components,
+                "reg_covar": reg_covar,
+                "random_state": random_state,
+                "fit_samples": fit_samples,
+                "bic_samples_per_sequence": bic_samples_per_sequence,
+                "task_objects": names,
+                "orientation": orientation,
+                "align": align,
+                "calibrate": calibrate,
+            },
+            k_max=MAX_FILE_COMPONENTS,
+        )
         with np.errstate(over="ignore"):  # durations near 1e308: inf, refused next
             duration = float(np.mean([d.duration for d in items]))
-        problem = skill_duration_problem(duration, n_steps)
+        problem = skill_duration_problem(duration, options["n_steps"])
         if problem:
             raise ValueError(f"demos: {problem} (are the time stamps t in seconds?)")
         warn_outside_limits(items, robot)
-        items, alignment = aligned_demonstrations(items, robot, align)
-        floors = variability_floor(reg_covar)
-        recorded = list(items[0].object_names)
-        if task_objects is None:
-            names = recorded
-        else:
-            if isinstance(task_objects, str):
-                task_objects = [task_objects]
-            names = list(task_objects)
-            unknown = [k for k in names if k not in recorded]
-            if unknown or len(set(names)) != len(names):
-                raise ValueError(
-                    f"task_objects must be distinct names among the recorded objects {recorded}, "
-                    f"got {names}"
-                )
-        has_gripper = items[0].gripper is not None
-
-        n_fit = n_steps if fit_samples is None else check_int(fit_samples, "fit_samples", minimum=2)
-        steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
-
-        oriented = [k for k in names if orientation and is_pose(items[0].objects[k])]
-        bases: dict[str, Float] = {}
-        if oriented:
-            try:
-                pose_robot = cast(PoseKinematicModel, check_robot(robot, PoseKinematicModel))
-            except ValueError as exc:
-                raise ValueError(
-                    f"the objects {oriented} are poses: learning the hand's orientation needs a "
-                    f"PoseKinematicModel; pass orientation=False to learn positions only ({exc})"
-                ) from exc
-            bases = {
-                k: mean_relative_rotation(items, pose_robot, k, n_steps, steps) for k in oriented
-            }
-        spaces = space_data(items, robot, names, n_steps, steps, rotation_base=bases)
-        data = {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
-        groups = np.repeat(np.arange(len(items)), steps.shape[0])  # the demonstration of a row
-        space_floor = space_floors(floors, n, has_gripper, names, bases)
-        gmms: dict[str, GMM] = {}
-        for k, X in data.items():
-            gmm = GMM(
-                n_components=n_components,
-                max_components=max_components,
-                reg_covar=space_floor[k],
-                random_state=random_state,
-                # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
-                score_dims=list(range(1, n + 1)) if k == JOINT else None,
-                bic_samples_per_sequence=bic_samples_per_sequence,
-                # Calibration widens the joint space only (docs/math.md, "Calibration").
-                loo_residuals=calibrate and k == JOINT,
-            )
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", SelectionWarning)
-                gmms[k] = gmm.fit(X, groups=groups)
-            for w in caught:  # said again with the space it is about
-                text = (
-                    f"space {short(k)}: {w.message}"
-                    if w.category is SelectionWarning
-                    else w.message
-                )
-                warnings.warn(text, w.category, stacklevel=2)
-        calibration = {
-            k: step_factors(g.loo_residuals_, steps, len(items), n_steps)
-            for k, g in gmms.items()
-            if g.loo_residuals_.size
-        }
-        theta = data[JOINT][:, 1 : n + 1]
-        reach = reach_from_samples(robot, theta)
+        code = encode(items, robot, options)
         return cls(
             robot,
-            gmms,
-            n_steps=n_steps,
+            code.gmms,
+            n_steps=options["n_steps"],
             object_names=names,
-            has_gripper=has_gripper,
-            reach=reach,
+            has_gripper=items[0].gripper is not None,
+            reach=code.reach,
             duration=duration,
-            rotation_base=bases,
-            aligned=alignment,
-            calibration=calibration,
+            rotation_base=code.rotation_base,
+            aligned=code.aligned,
+            calibration=code.calibration,
+            demonstrations=items,
+            learn_options=options,
+            n_samples=code.n_samples,
         )
 
     def training_data(self, demos: Sequence[Demonstration]) -> dict[str, Float]:
@@ -738,22 +729,23 @@ class Skill:
         :meth:`load` needs the robot again. Its velocity, acceleration and jerk limits are
         stored too (a value that is not > 0, such as a URDF's 0, is stored as inf: no limit).
 
+        A skill that keeps what it learned from (:attr:`demonstrations_`) is written as version
+        3, with its demonstrations (the arrays of :func:`pbdkit.save_demonstrations`),
+        :attr:`learn_options_` and :attr:`n_samples_`; one that does not as version 2 (oriented
+        constraints) or 1, which older versions of pbdkit read.
+
         Parameters
         ----------
         path : str or path-like
+
+        Raises
+        ------
+        ValueError
+            Arrays of more than :data:`~pbdkit.skill._skill_file.MAX_FILE_BYTES` (64 MiB) in
+            all, which :meth:`load` would refuse (long recordings kept as demonstrations):
+            nothing is written.
         """
-        arrays = skill_arrays(
-            self.robot,
-            self.gmms,
-            n_steps=self.n_steps,
-            object_names=self.object_names,
-            has_gripper=self.has_gripper,
-            reach=self.reach,
-            duration=self.duration,
-            rotation_base=self.rotation_base,
-            aligned=self.aligned_,
-            calibration=self.calibration_,
-        )
+        arrays = skill_arrays(self)
         save_npz_atomic(path, arrays, what="skill", max_bytes=MAX_FILE_BYTES)
 
     @classmethod
@@ -775,7 +767,9 @@ class Skill:
         Returns
         -------
         skill : Skill
-            Reproduces bit-identical results to the skill that was saved.
+            Reproduces bit-identical results to the skill that was saved. Of a version-3 file,
+            with its :attr:`demonstrations_`, :attr:`learn_options_` and :attr:`n_samples_`
+            as saved; of version 1 or 2, with None for each.
 
         Raises
         ------
@@ -784,7 +778,10 @@ class Skill:
         ValueError
             A corrupt or foreign file, another format version, a key the format does not have,
             arrays of more than :data:`~pbdkit.skill._skill_file.MAX_FILE_BYTES` in all,
-            inconsistent content, or a ``robot`` that lacks a member the skill needs.
+            inconsistent content (of a version-3 file also: demonstrations that
+            :func:`pbdkit.load_demonstrations` would refuse, or that do not fit the skill, and
+            options that :meth:`learn` would refuse; the message names the key), or a
+            ``robot`` that lacks a member the skill needs.
         """
         p = Path(path)
         # Sizes and keys are checked from the archive's headers before any array is loaded.

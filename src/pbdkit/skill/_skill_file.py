@@ -1,6 +1,9 @@
 """The skill file, a ``pbdkit-skill`` ``.npz`` archive: a skill's arrays (:func:`skill_arrays`)
 and the skill they hold (:func:`read_skill`), judged from the archive's headers before an array
-is loaded. Its keys: :doc:`/reproduction`, "File formats".
+is loaded. Version 3 keeps what the skill was learned from (:mod:`pbdkit.skill._provenance`):
+the demonstrations (the arrays of a demonstrations file, their keys after ``demos_``), the
+options of :meth:`pbdkit.Skill.learn` (``learn_*``) and each space's sample count
+(``n_samples``). Its keys: :doc:`/reproduction`, "File formats".
 """
 
 from __future__ import annotations
@@ -8,10 +11,10 @@ from __future__ import annotations
 import functools
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,19 +23,23 @@ from .._defaults import MAX_COMPONENTS
 from .._io import NpzArchive, check_format
 from .._rotations import check_rotation
 from .._validation import short
+from ..data._demonstration import Demonstration, demonstration_arrays, demonstrations_from_arrays
 from ..prob import GMM, ModelSelection
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import KinematicModel, PoseKinematicModel, RobotDescription, check_robot
 from ._calibration import check_calibration
+from ._provenance import LEARN_OPTIONS, LearnedFrom, LearnOptions, check_learned_from
 from ._spaces import MAX_STEPS, Alignment, duration_problem
 
 __all__ = [
+    "DEMOS_PREFIX",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MAX_DURATION",
     "MAX_FILE_BYTES",
     "MAX_FILE_COMPONENTS",
     "READABLE_VERSIONS",
+    "SkillState",
     "StoredSkill",
     "read_skill",
     "skill_arrays",
@@ -45,9 +52,13 @@ Float = NDArray[np.float64]
 #: limits: kilobytes to a few megabytes.
 MAX_FILE_BYTES = 64 * 2**20
 FORMAT_NAME = "pbdkit-skill"
-FORMAT_VERSION = 2
-#: The versions :meth:`pbdkit.Skill.load` reads (1: positions only; 2: oriented constraints too).
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: The versions :meth:`pbdkit.Skill.load` reads (1: positions only; 2: oriented constraints too;
+#: 3: what the skill was learned from too).
+READABLE_VERSIONS = (1, 2, 3)
+#: The prefix of the demonstrations' keys in a version-3 file (``demos_n_demos``,
+#: ``demos_demo_0_t``, ...: :func:`pbdkit.data._demonstration.demonstration_arrays`).
+DEMOS_PREFIX = "demos_"
 #: The longest duration (s) of a skill (:meth:`pbdkit.Skill.learn`, :meth:`pbdkit.Skill.load`,
 #: :class:`pbdkit.Skill`): 317 years, where demonstrations last seconds to minutes, and still
 #: beyond a bag's int32 seconds (2**31 s, which ``pbdkit reproduce --bag`` checks). A file's
@@ -72,26 +83,36 @@ def skill_duration_problem(duration: float, n_steps: int) -> str:
     return duration_problem(duration, n_steps)
 
 
-def skill_arrays(
-    robot: KinematicModel,
-    gmms: Mapping[str, GMM],
-    *,
-    n_steps: int,
-    object_names: Sequence[str],
-    has_gripper: bool,
-    reach: float,
-    duration: float,
-    rotation_base: Mapping[str, Float],
-    aligned: Alignment,
-    calibration: Mapping[str, Float],
-) -> dict[str, Any]:
+class SkillState(Protocol):
+    """What :func:`skill_arrays` reads of a skill (a :class:`pbdkit.Skill`)."""
+
+    robot: KinematicModel
+    gmms: dict[str, GMM]
+    n_steps: int
+    object_names: list[str]
+    has_gripper: bool
+    reach: float
+    duration: float
+    rotation_base: dict[str, Float]
+    aligned_: Alignment
+    calibration_: dict[str, Float]
+    demonstrations_: list[Demonstration] | None
+    learn_options_: LearnOptions | None
+    n_samples_: dict[str, int] | None
+
+
+def skill_arrays(skill: SkillState) -> dict[str, Any]:
     """The arrays of a skill's file, by key (:meth:`pbdkit.Skill.save`).
 
     The robot is stored as its URDF text and tip frame when it is a
     :class:`~pbdkit.robots.RobotDescription` (a :class:`pbdkit.Robot`); otherwise
     :meth:`~pbdkit.Skill.load` needs the robot again. Its velocity, acceleration and jerk limits
-    are stored too (a value that is not > 0, such as a URDF's 0, as inf: no limit).
+    are stored too (a value that is not > 0, such as a URDF's 0, as inf: no limit). A skill that
+    keeps what it was learned from is written as version 3; one that does not as version 2
+    (oriented constraints) or 1, which older versions of pbdkit read.
     """
+    robot, object_names, rotation_base = skill.robot, skill.object_names, skill.rotation_base
+    aligned, calibration = skill.aligned_, skill.calibration_
     n_joints = int(robot.n_joints)
     # The one place a robot is asked what it is: one built from a URDF is rebuilt from it.
     urdf = tip = ""
@@ -110,16 +131,20 @@ def skill_arrays(
             limits[f"robot_{kind}_limit"] = np.where(arr > 0, arr, np.inf)
     arrays: dict[str, Any] = {
         "format": np.array(FORMAT_NAME),
-        # Positions only: version 1, as before orientations (older readers load it).
-        "version": np.array(FORMAT_VERSION if rotation_base else 1, dtype=np.int64),
-        "n_steps": np.array(n_steps, dtype=np.int64),
+        # Without what it was learned from: version 2, or 1 for positions only, as before
+        # (older readers load it).
+        "version": np.array(
+            FORMAT_VERSION if skill.demonstrations_ is not None else 2 if rotation_base else 1,
+            dtype=np.int64,
+        ),
+        "n_steps": np.array(skill.n_steps, dtype=np.int64),
         "n_joints": np.array(n_joints, dtype=np.int64),
         "object_names": np.array(object_names, dtype=np.str_)
         if object_names
         else np.zeros(0, dtype="<U1"),
-        "has_gripper": np.array(has_gripper),
-        "reach": np.array(reach),
-        "duration": np.array(duration),
+        "has_gripper": np.array(skill.has_gripper),
+        "reach": np.array(skill.reach),
+        "duration": np.array(skill.duration),
         "robot_urdf": np.array(urdf if isinstance(urdf, str) else ""),
         "robot_tip": np.array(tip if isinstance(tip, str) else ""),
         **({"robot_srdf": np.array(srdf)} if isinstance(srdf, str) and srdf else {}),
@@ -133,7 +158,7 @@ def skill_arrays(
     }
     for i, k in enumerate([JOINT, *object_names]):
         key = "joint" if k == JOINT else str(i - 1)
-        g = gmms[k]
+        g = skill.gmms[k]
         arrays[f"gmm_{key}_weights"] = g.weights_
         arrays[f"gmm_{key}_means"] = g.means_
         arrays[f"gmm_{key}_covariances"] = g.covariances_
@@ -147,6 +172,40 @@ def skill_arrays(
             arrays[f"rot_base_{key}"] = rotation_base[k]
         if k in calibration and np.any(calibration[k] != 1.0):  # optional: ones without it
             arrays[f"calib_{key}"] = calibration[k]
+    if skill.demonstrations_ is not None:
+        assert skill.learn_options_ is not None and skill.n_samples_ is not None  # all or none
+        arrays.update(demonstration_arrays(skill.demonstrations_, DEMOS_PREFIX))
+        arrays.update(_options_arrays(skill.learn_options_))
+        spaces = [JOINT, *object_names]
+        arrays["n_samples"] = np.array([skill.n_samples_[k] for k in spaces], dtype=np.int64)
+    return arrays
+
+
+def _options_arrays(options: LearnOptions) -> dict[str, Any]:
+    """``learn_*``: the options of :meth:`pbdkit.Skill.learn` as plain arrays (n_steps and
+    task_objects are the skill's ``n_steps`` and ``object_names``); None is no key."""
+    arrays: dict[str, Any] = {
+        "learn_n_components": np.array(options["n_components"])
+        if isinstance(options["n_components"], str)
+        else np.array(options["n_components"], dtype=np.int64),
+        "learn_max_components": np.array(options["max_components"], dtype=np.int64),
+        "learn_bic_samples_per_sequence": np.array(
+            options["bic_samples_per_sequence"], dtype=np.float64
+        ),
+        "learn_orientation": np.array(options["orientation"]),
+        "learn_align": np.array(options["align"]),
+        "learn_calibrate": np.array(options["calibrate"]),
+    }
+    reg = options["reg_covar"]
+    if isinstance(reg, dict):
+        arrays["learn_reg_covar_names"] = np.array(list(reg), dtype=np.str_).reshape(-1)
+        arrays["learn_reg_covar"] = np.array(list(reg.values()), dtype=np.float64).reshape(-1)
+    elif reg is not None:
+        arrays["learn_reg_covar"] = np.array(reg, dtype=np.float64)
+    if options["random_state"] is not None:
+        arrays["learn_random_state"] = np.array(options["random_state"], dtype=np.int64)
+    if options["fit_samples"] is not None:
+        arrays["learn_fit_samples"] = np.array(options["fit_samples"], dtype=np.int64)
     return arrays
 
 
@@ -164,6 +223,9 @@ class StoredSkill:
     rotation_base: dict[str, Float]
     aligned: Alignment
     calibration: dict[str, Float]
+    demonstrations: list[Demonstration] | None
+    learn_options: LearnOptions | None
+    n_samples: dict[str, int] | None
 
 
 def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> StoredSkill:
@@ -177,7 +239,7 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         names = [str(s) for s in np.asarray(data["object_names"]).reshape(-1)]
     except KeyError as exc:
         raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
-    data.check_keys(functools.partial(_is_skill_key, n_objects=len(names)))
+    data.check_keys(functools.partial(_is_skill_key, n_objects=len(names), version=version))
     _check_headers(data, p)
     try:
         n_steps = _stored_int(data["n_steps"])
@@ -265,6 +327,21 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         check_robot(robot, PoseKinematicModel if rotation_base else KinematicModel)
     if int(robot.n_joints) != n_joints:
         raise ValueError(f"robot has {robot.n_joints} joints, the skill in {p} has {n_joints}")
+    learned = None
+    if version >= 3:
+        try:
+            learned = _read_learned(
+                data,
+                n_joints=n_joints,
+                has_gripper=has_gripper,
+                object_names=names,
+                oriented=rotation_base,
+                n_steps=n_steps,
+            )
+        except KeyError as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: missing key {exc}") from exc
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{p} is not a valid {FORMAT_NAME} file: {exc}") from exc
     return StoredSkill(
         robot=robot,
         gmms=gmms,
@@ -276,7 +353,116 @@ def read_skill(data: NpzArchive, p: Path, robot: KinematicModel | None) -> Store
         rotation_base=rotation_base,
         aligned=_read_alignment(data, p),
         calibration=calibration,
+        demonstrations=None if learned is None else learned.demonstrations,
+        learn_options=None if learned is None else learned.options,
+        n_samples=None if learned is None else learned.n_samples,
     )
+
+
+def _read_learned(
+    data: NpzArchive,
+    *,
+    n_joints: int,
+    has_gripper: bool,
+    object_names: list[str],
+    oriented: Mapping[str, Float],
+    n_steps: int,
+) -> LearnedFrom:
+    """What a version-3 file's skill was learned from, checked against the skill: the
+    demonstrations as :func:`pbdkit.load_demonstrations` checks them, then as
+    :meth:`pbdkit.Skill.learn` would (:func:`~pbdkit.skill._provenance.check_learned_from`)."""
+    demos = demonstrations_from_arrays(
+        data, posed=f"{DEMOS_PREFIX}demo_0_rotations" in data, prefix=DEMOS_PREFIX
+    )
+    options: dict[str, object] = {"n_steps": n_steps, "task_objects": list(object_names)}
+    for name in LEARN_OPTIONS:
+        key = f"learn_{name}"
+        if name in options:
+            continue
+        if name in _OPTIONAL and key not in data:
+            options[name] = None
+        elif name == "reg_covar" and "learn_reg_covar_names" in data:
+            options[name] = _reg_covar_mapping(data)
+        else:
+            options[name] = _stored_scalar(data, key, _OPTION_KINDS.get(name, "iu"))
+    counts = np.asarray(data["n_samples"])
+    spaces = [JOINT, *object_names]
+    if counts.shape != (len(spaces),) or counts.dtype.kind not in "iu":
+        raise ValueError(
+            f"n_samples must hold {len(spaces)} integers (one per space, {spaces}), "
+            f"got {_shown(counts)}"
+        )
+    learned = check_learned_from(
+        demos,
+        options,
+        {k: int(c) for k, c in zip(spaces, counts, strict=True)},
+        n_joints=n_joints,
+        has_gripper=has_gripper,
+        object_names=object_names,
+        oriented=oriented,
+        n_steps=n_steps,
+        k_max=MAX_FILE_COMPONENTS,
+        key=_learned_key,
+    )
+    assert learned is not None  # all three given
+    return learned
+
+
+#: The options a file may leave out: None.
+_OPTIONAL = frozenset({"reg_covar", "random_state", "fit_samples"})
+#: The dtype kinds of each option's 0-d array (the others: integers).
+_OPTION_KINDS = {
+    "n_components": "iuU",
+    "reg_covar": "f",
+    "bic_samples_per_sequence": "f",
+    "orientation": "b",
+    "align": "bU",
+    "calibrate": "b",
+}
+#: The keys that hold what :func:`~pbdkit.skill._provenance.check_learned_from` names.
+_LEARNED_KEYS = {
+    "demonstrations": f"{DEMOS_PREFIX}n_demos",
+    "demonstrations.joints": f"{DEMOS_PREFIX}demo_0_joints",
+    "demonstrations.gripper": f"{DEMOS_PREFIX}has_gripper",
+    "demonstrations.object_names": f"{DEMOS_PREFIX}object_names",
+    "demonstrations.poses": f"{DEMOS_PREFIX}demo_0_rotations",
+    "n_samples": "n_samples",
+    "n_steps": "n_steps",
+    "task_objects": "object_names",
+}
+
+
+def _learned_key(name: str) -> str:
+    """The key of a version-3 file that holds ``name`` (an option: ``learn_{name}``)."""
+    return _LEARNED_KEYS.get(name, f"learn_{name}")
+
+
+def _stored_scalar(data: NpzArchive, key: str, kinds: str) -> object:
+    """The value of a 0-d array of one of the dtype ``kinds`` (``"iu"``, ``"f"``, ``"b"``,
+    ``"U"``), as a Python int, float, bool or str."""
+    arr = np.asarray(data[key])
+    if arr.shape != () or arr.dtype.kind not in kinds:
+        names = {"i": "an integer", "u": "", "f": "a float", "b": "a boolean", "U": "a string"}
+        wanted = " or ".join(names[k] for k in kinds if names[k])
+        raise ValueError(f"{key} must hold {wanted}, got {_shown(arr)} of dtype {arr.dtype}")
+    value: object = arr.item()
+    return value
+
+
+def _reg_covar_mapping(data: NpzArchive) -> dict[str, float]:
+    """``reg_covar`` as a dict: ``learn_reg_covar_names`` (k,) and ``learn_reg_covar`` (k,)."""
+    names = np.asarray(data["learn_reg_covar_names"])
+    values = np.asarray(data["learn_reg_covar"])
+    if names.ndim != 1 or (names.size and names.dtype.kind != "U"):
+        raise ValueError(f"learn_reg_covar_names must be strings (k,), got {_shown(names)}")
+    if values.shape != names.shape or values.dtype.kind != "f":
+        raise ValueError(
+            f"learn_reg_covar must be floats of the shape of learn_reg_covar_names "
+            f"{names.shape}, got {_shown(values)} of dtype {values.dtype}"
+        )
+    if len(set(names.tolist())) != names.size:
+        raise ValueError(f"learn_reg_covar_names must be distinct, got {names.tolist()}")
+    return {str(k): float(v) for k, v in zip(names, values, strict=True)}
 
 
 def _check_headers(data: NpzArchive, p: Path) -> None:
@@ -340,6 +526,15 @@ _BASE_KEYS = frozenset(
         "aligned_spreads",
     }
 )
+# Version 3: what the skill was learned from.
+_LEARNED_BASE_KEYS = frozenset(
+    {"n_samples", "learn_reg_covar_names"}
+    | {f"learn_{k}" for k in LEARN_OPTIONS if k not in ("n_steps", "task_objects")}
+    | {f"{DEMOS_PREFIX}{k}" for k in ("n_demos", "object_names", "has_gripper")}
+)
+_DEMOS_KEY = re.compile(
+    re.escape(DEMOS_PREFIX) + r"demo_(0|[1-9][0-9]{0,8})_(?:t|joints|objects|rotations|gripper)"
+)
 # gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.
 _SPACE_KEY = re.compile(
     r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
@@ -349,9 +544,12 @@ _SPACE_KEY = re.compile(
 )
 
 
-def _is_skill_key(key: str, n_objects: int) -> bool:
-    """Whether :meth:`pbdkit.Skill.save` writes ``key`` for a skill of ``n_objects`` objects."""
+def _is_skill_key(key: str, n_objects: int, version: int) -> bool:
+    """Whether :meth:`pbdkit.Skill.save` writes ``key`` for a skill of ``n_objects`` objects in
+    a file of ``version`` (the demonstrations' indices are judged by their own reader)."""
     if key in _BASE_KEYS:
+        return True
+    if version >= 3 and (key in _LEARNED_BASE_KEYS or _DEMOS_KEY.fullmatch(key)):
         return True
     match = _SPACE_KEY.fullmatch(key)
     if match is None:
