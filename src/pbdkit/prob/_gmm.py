@@ -292,7 +292,11 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         _, labels = np.unique(g, return_inverse=True)
         return np.asarray(labels, dtype=np.intp).reshape(-1)
 
-    def _initial_resp(self, x: Float, k: int) -> Float:
+    def _initial_resp(self, x: Float, k: int, center: Float | None = None) -> Float:
+        warm: GMM | None = getattr(self, "_warm", None)
+        if warm is not None and center is not None and warm.n_components_ == k:
+            # A warm start (pbdkit.Skill.update): the responsibilities of an earlier fit.
+            return warm.predict_proba(x + center)
         if self.init == "time" and self.time_dim is not None:
             return _time_bins_resp(x, k, self.time_dim)
         from sklearn.cluster import KMeans
@@ -369,7 +373,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
 
         def fit_k(k: int) -> _Fit:
             if k not in fits:
-                fits[k] = _em(x, self._initial_resp(x, k), floor, max_iter, sweep_tol)
+                fits[k] = _em(x, self._initial_resp(x, k, center), floor, max_iter, sweep_tol)
             return fits[k]
 
         n_eff = float("nan")

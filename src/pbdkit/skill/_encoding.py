@@ -10,7 +10,7 @@ the joint space's GMR covariance is calibrated from its left-out demonstrations.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -35,9 +35,16 @@ from ._spaces import (
     variability_floor,
 )
 
-__all__ = ["Encoding", "encode"]
+__all__ = ["RESELECT_GROWTH", "RESELECT_SURPRISE", "Encoding", "encode"]
 
 Float = NDArray[np.float64]
+
+#: An update (:func:`encode` with ``warm``) chooses a space's K again once the demonstrations
+#: have grown to this many times the number it was chosen with ...
+RESELECT_GROWTH = 2.0
+#: ... or when a new demonstration's left-out error at that K is more than this many times the
+#: largest of the others' (the K does not hold for it).
+RESELECT_SURPRISE = 2.0
 
 
 @dataclass(frozen=True)
@@ -51,15 +58,29 @@ class Encoding:
     calibration: dict[str, Float]
     reach: float
     n_samples: dict[str, int]
+    reselected: tuple[str, ...] = ()
 
 
 def encode(
-    items: Sequence[Demonstration], robot: KinematicModel, options: LearnOptions
+    items: Sequence[Demonstration],
+    robot: KinematicModel,
+    options: LearnOptions,
+    *,
+    warm: Mapping[str, GMM] | None = None,
+    n_old: int = 0,
+    old_bases: Mapping[str, Float] | None = None,
 ) -> Encoding:
     """Table I for demonstrations checked against ``robot`` and options as resolved.
 
     Warns as :meth:`pbdkit.Skill.learn` (a space's :class:`~pbdkit.prob.SelectionWarning` says
     which space), at its caller.
+
+    An update (:meth:`pbdkit.Skill.update`) gives the skill's GMMs as ``warm``, learned from
+    the first ``n_old`` of ``items``, and its orientation bases (``old_bases``, kept): each
+    space's EM starts from the old GMM's responsibilities, its K kept, unless K is to be chosen
+    (``"auto"``) and the data warrant choosing it again (:data:`RESELECT_GROWTH`,
+    :data:`RESELECT_SURPRISE`): then that space is fitted as :meth:`~pbdkit.Skill.learn` fits
+    it (``reselected`` names it).
     """
     n = int(robot.n_joints)
     n_steps = options["n_steps"]
@@ -80,13 +101,26 @@ def encode(
                 f"the objects {oriented} are poses: learning the hand's orientation needs a "
                 f"PoseKinematicModel; pass orientation=False to learn positions only ({exc})"
             ) from exc
-        bases = {k: mean_relative_rotation(items, pose_robot, k, n_steps, steps) for k in oriented}
+        if old_bases is None:
+            bases = {
+                k: mean_relative_rotation(items, pose_robot, k, n_steps, steps) for k in oriented
+            }
+        else:
+            bases = {k: np.asarray(old_bases[k], dtype=np.float64) for k in oriented}
     spaces = space_data(items, robot, names, n_steps, steps, rotation_base=bases)
     data = {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
     groups = np.repeat(np.arange(len(items)), steps.shape[0])  # the demonstration of a row
     space_floor = space_floors(floors, n, has_gripper, names, bases)
     gmms: dict[str, GMM] = {}
+    reselected: list[str] = []
     for k, X in data.items():
+        old = None if warm is None else warm.get(k)
+        if old is not None:
+            kept = _warm_fit(old, X, groups, n_old, options, space_floor[k], k == JOINT, n)
+            if kept is not None:
+                gmms[k] = kept
+                continue
+            reselected.append(k)
         gmm = GMM(
             n_components=options["n_components"],
             max_components=options["max_components"],
@@ -116,4 +150,45 @@ def encode(
         calibration=calibration,
         reach=reach_from_samples(robot, data[JOINT][:, 1 : n + 1]),
         n_samples={k: int(X.shape[0]) for k, X in data.items()},
+        reselected=tuple(reselected),
     )
+
+
+def _warm_fit(
+    old: GMM,
+    X: Float,
+    groups: NDArray[np.intp],
+    n_old: int,
+    options: LearnOptions,
+    floor: Float,
+    joint: bool,
+    n: int,
+) -> GMM | None:
+    """One space's GMM refitted from ``old``'s responsibilities, its K kept; None where K is
+    chosen (``"auto"``) and the data warrant choosing it again."""
+    chosen = isinstance(options["n_components"], str)
+    selection = old.selection_
+    if chosen and selection.method != "cv":
+        return None  # "bic": chosen again every time
+    if chosen and len(set(groups.tolist())) >= RESELECT_GROWTH * max(selection.n_folds, 1):
+        return None
+    gmm = GMM(
+        n_components=old.n_components_,
+        max_components=options["max_components"],
+        reg_covar=floor,
+        random_state=options["random_state"],
+        score_dims=list(range(1, n + 1)) if joint else None,
+        loo_residuals=options["calibrate"] and joint,
+    )
+    gmm._warm = old  # EM starts where the old fit ended (GMM._initial_resp)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SelectionWarning)
+        gmm.fit(X, groups=groups)
+    if chosen:
+        errors = gmm.selection_.fold_scores
+        if errors.size and n_old < errors.shape[1]:
+            worst_old = float(errors[0, :n_old].max())
+            if float(errors[0, n_old:].max()) > RESELECT_SURPRISE * worst_old:
+                return None
+        gmm.selection_ = selection  # K as it was chosen
+    return gmm

@@ -50,6 +50,7 @@ from ..reproduction._probabilistic_ik import SceneRun, solve
 from ..reproduction._result import ReproductionResult
 from ..reproduction._setup import RunOptions, step_limit_from_velocity
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
+from ._active import ActiveMixin
 from ._calibration import check_calibration
 from ._encoding import encode
 from ._provenance import (
@@ -79,7 +80,7 @@ DEFAULT_ALIGN: bool | Literal["auto"] = True
 Float = NDArray[np.float64]
 
 
-class Skill:
+class Skill(ActiveMixin):
     """A skill learned from demonstrations: one GMM per constraint space.
 
     Build it with :meth:`learn` or :meth:`load`. Built by hand, it takes what it was learned
@@ -214,19 +215,15 @@ class Skill:
 
     @property
     def selection_(self) -> dict[str, ModelSelection]:
-        """How K was chosen in each space: the K tried, their scores, the best and the kept K.
-
-        For a skill loaded from a file, the selection recorded when it was learned (method
-        ``"fixed"`` for files written before it was recorded).
-        """
+        """How K was chosen in each space: the K tried, their scores, the best and the kept K
+        (loaded: as recorded when learned; ``"fixed"`` for files written before)."""
         return {k: g.selection_ for k, g in self.gmms.items()}
 
     def times(self, result: ReproductionResult) -> Float:
         """Time stamps in seconds for executing a reproduction.
 
         A reproduction within motion limits (the default) carries its own timing
-        (:attr:`pbdkit.reproduction.ReproductionResult.times`): the steps at the
-        demonstrations'
+        (:attr:`pbdkit.reproduction.ReproductionResult.times`): the steps at the demonstrations'
         pace, :attr:`step_seconds` each, stretched where the arm's limits need more time, after
         the lead-in from ``q0``. Otherwise the steps are spread over :attr:`duration`.
 
