@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -61,3 +64,119 @@ def test_uncertainty_refuses_in_one_line(skill: Skill) -> None:
         skill.uncertainty({"cup": np.zeros(3)})
     with pytest.raises(ValueError, match="parts must be among"):
         skill.uncertainty({"glass": np.zeros(3)}, parts=("placement", "luck"))
+
+
+def _ranges(demos: list[Demonstration], half: float = 0.1) -> dict[str, dict[str, object]]:
+    centre = np.mean([d.objects["glass"] for d in demos], axis=0)
+    step = np.array([half, half, 0.0])
+    lo, hi = centre - step, centre + step
+    return {"glass": {"low": lo, "high": hi, "yaw": None}}
+
+
+def test_suggestions_are_the_least_sure_placements_inside_the_ranges_spread_out(
+    skill: Skill, demos: list[Demonstration]
+) -> None:
+    ranges = _ranges(demos)
+    found = skill.suggest(ranges, n=3)
+    assert len(found) == 3
+    lo, hi = ranges["glass"]["low"], ranges["glass"]["high"]
+    for s in found:
+        glass = s.objects["glass"]
+        assert np.all(glass >= lo - 1e-12) and np.all(glass <= hi + 1e-12)
+    # The first is the least sure of the candidates (its score is the uncertainty there, and
+    # no candidate scores more); each next one counts the ones before as demonstrated.
+    first = found[0]
+    assert first.score == pytest.approx(skill.uncertainty(first.objects).score, rel=1e-12)
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        glass = lo + rng.uniform(0.0, 1.0, 3) * (hi - lo)
+        assert skill.uncertainty({"glass": glass}, parts=("placement",)).score <= first.score + 0.5
+    assert found[0].score >= found[1].score >= found[2].score
+    apart = [np.linalg.norm(a.objects["glass"] - b.objects["glass"]) for a, b in
+             [(found[0], found[1]), (found[0], found[2]), (found[1], found[2])]]  # fmt: skip
+    assert min(apart) > 0.03
+    # Seeded: the same suggestions again.
+    again = skill.suggest(ranges, n=3)
+    for a, b in zip(found, again, strict=True):
+        np.testing.assert_array_equal(a.objects["glass"], b.objects["glass"])
+
+
+def test_nothing_is_suggested_out_of_reach_and_bad_ranges_say_so(skill: Skill) -> None:
+    far = {"glass": {"low": (2.5, 2.5, 0.1), "high": (2.8, 2.8, 0.1), "yaw": None}}
+    assert skill.suggest(far) == []
+    with pytest.raises(ValueError, match=r"not an object of the skill"):
+        skill.suggest({"cup": {"low": (0, 0, 0), "high": (1, 1, 0)}})
+    with pytest.raises(ValueError, match=r"low <= high"):
+        skill.suggest({"glass": {"low": (1, 0, 0), "high": (0, 1, 0)}})
+    with pytest.raises(ValueError, match=r"'low' and 'high'"):
+        skill.suggest({"glass": {"low": (0, 0, 0)}})
+    with pytest.raises(ValueError, match=r"non-empty dict"):
+        skill.suggest({})
+
+
+def test_pbdkit_suggest_prints_and_writes_the_placements(
+    skill: Skill, demos: list[Demonstration], tmp_path: Path
+) -> None:
+    from typer.testing import CliRunner
+
+    from pbdkit.apps._cli import app
+
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    centre = np.mean([d.objects["glass"] for d in demos], axis=0)
+    x0, x1, y0, y1 = centre[0] - 0.1, centre[0] + 0.1, centre[1] - 0.1, centre[1] + 0.1
+    out = tmp_path / "next.json"
+    result = CliRunner().invoke(
+        app,
+        ["suggest", str(path), "--range", f"glass={x0}:{x1},{y0}:{y1}", "--n", "2",
+         "--json", str(out)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    written = json.loads(out.read_text())
+    assert len(written["suggestions"]) == 2
+    glass = np.array(written["suggestions"][0]["objects"]["glass"])
+    expected = skill.suggest(
+        {"glass": {"low": (x0, y0, glass[2]), "high": (x1, y1, glass[2]), "yaw": None}}, n=2
+    )
+    np.testing.assert_allclose(glass, expected[0].objects["glass"], atol=1e-12)
+    assert glass[2] == pytest.approx(np.mean([d.objects["glass"][2] for d in demos]))
+    bad = CliRunner().invoke(app, ["suggest", str(path), "--range", "glass=1:0,0:1"])
+    assert bad.exit_code == 2 and "lo <= hi" in bad.output
+
+
+def test_a_suggesting_teacher_says_where_and_learns_each_take(
+    skill: Skill, demos: list[Demonstration], robot: object, tmp_path: Path
+) -> None:
+    # `pbdkit ros record --suggest SKILL` without the ROS graph: before a take, where to put
+    # the glass; after it, the skill has learned the take and is written back.
+    from synthetic_teacher import synthetic_demos
+
+    from pbdkit.apps._cli_suggest import SuggestingTeacher, default_ranges
+
+    path = tmp_path / "skill.npz"
+    skill.save(path)
+    ranges = default_ranges(skill)
+    places = np.array([d.objects["glass"] for d in demos])
+    low, high = places.min(axis=0), places.max(axis=0)
+    np.testing.assert_allclose(ranges["glass"]["high"][:2] - ranges["glass"]["low"][:2],
+                               2 * np.maximum(high - low, 0.025)[:2])  # fmt: skip
+    teacher = SuggestingTeacher(path)
+    first = teacher.next_text()
+    assert first.startswith("put glass at (") and "uncertainty" in first
+    take = synthetic_demos(robot, np.random.default_rng(11), n_demos=1)[0]  # type: ignore[arg-type]
+    assert "learned from 6 demonstrations" in teacher.took(take)
+    again = Skill.load(path)
+    assert again.demonstrations_ is not None and len(again.demonstrations_) == 6
+    np.testing.assert_array_equal(again.demonstrations_[-1].t, take.t)
+    assert teacher.next_text() != first  # the take counts as demonstrated
+
+
+def test_ros_record_refuses_a_range_without_a_skill_to_suggest(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from pbdkit.apps._cli import app
+
+    out = tmp_path / "demos.npz"
+    result = CliRunner().invoke(app, ["ros", "record", "--out", str(out), "--range", "g=0:1,0:1"])
+    assert result.exit_code == 2 and "--range goes with --suggest SKILL" in result.output
+    assert not out.exists()

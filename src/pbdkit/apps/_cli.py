@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gc
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -19,7 +20,7 @@ from rich.text import Text
 
 from .._defaults import MAX_COMPONENTS, MAX_TRIALS
 from .._io import write_json
-from .._validation import short
+from .._validation import check_int, short
 from ._cli_files import bag_extras, bag_timing, load_demos, timing_text
 from ._cli_options import (
     PERTURBATIONS,
@@ -73,6 +74,15 @@ def _add_ros() -> None:
 
 
 _add_ros()
+
+
+def _add_suggest() -> None:
+    from ._cli_suggest import suggest_command
+
+    app.command("suggest")(suggest_command)
+
+
+_add_suggest()
 
 
 @app.callback()
@@ -480,34 +490,92 @@ def study(
     scheduler: Annotated[
         str | None, typer.Option(help="Run the trials on the Dask cluster at this address.")
     ] = None,
+    active: Annotated[
+        bool,
+        typer.Option(
+            "--active",
+            help="Instead: three teachers from the same 2 demonstrations (where the skill "
+            "suggests, at random, farthest from the demonstrated), the fused success over the "
+            "wide grids after each demonstration (2 seeds, 4 x 4 grids, up to 5 "
+            'demonstrations; --full: 5 seeds, 11 x 11, up to 12); study.json\'s "active".',
+        ),
+    ] = False,
+    seeds: Annotated[
+        int | None,
+        typer.Option(help="With --active: compare the teachers at this many seeds instead."),
+    ] = None,
 ) -> None:
     """Where a skill works: a map of the table per object, a learning curve (2-10
-    demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT."""
+    demonstrations) and the tolerance to tracking noise (0-10 mm), with report.html in OUT;
+    with --active, where to demonstrate next."""
     check_output(out, "--out", folder=True)
     check_seed(seed)
     workers = check_workers(workers, scheduler)
     start_workers_early(workers)
     spec = robot_task(task)
+    if active:
+        _study_active(spec, out, seed, full, workers, scheduler, seeds)
+        return
+    if seeds is not None:
+        fail("--seeds goes with --active")
     from ._study import FULL, SMALL, check_study, run_study
 
     size = FULL if full else SMALL
     check_study(spec, size=size, seed=seed)  # before the progress bar shows
+    result = _with_progress(
+        task,
+        "teaching and learning",
+        lambda tick: run_study(
+            spec, out, size=size, seed=seed, workers=workers, scheduler=scheduler, progress=tick
+        ),
+    )
+    print_study(result, out)
+
+
+def _with_progress(label: str, first: str, run: Callable[[Any], Any]) -> Any:
+    """``run(tick)`` under a progress bar; ``tick(stage, done, total)`` moves it."""
     with progress_bar() as bar:
-        job = bar.add_task(f"{task}: teaching and learning", total=None)
+        job = bar.add_task(f"{label}: {first}", total=None)
 
         def tick(stage: str, done: int, total: int) -> None:
-            bar.update(job, description=f"{task}: {stage}", completed=done, total=total)
+            bar.update(job, description=f"{label}: {stage}", completed=done, total=total)
 
-        result = run_study(
-            spec,
-            out,
-            size=size,
-            seed=seed,
-            workers=workers,
-            scheduler=scheduler,
-            progress=tick,
+        return run(tick)
+
+
+def _study_active(
+    spec: Any,
+    out: Path,
+    seed: int,
+    full: bool,
+    workers: int | None,
+    scheduler: str | None,
+    seeds: int | None,
+) -> None:
+    from dataclasses import replace
+
+    from ._study_active import ACTIVE_FULL, ACTIVE_SMALL, TEACHERS, run_active_study
+
+    size = ACTIVE_FULL if full else ACTIVE_SMALL
+    if seeds is not None:
+        size = replace(size, seeds=check_int(seeds, "--seeds", minimum=1))
+
+    result = _with_progress(
+        spec.name,
+        "teaching",
+        lambda tick: run_active_study(
+            spec, out, size=size, seed=seed, workers=workers, scheduler=scheduler, progress=tick
+        ),
+    )
+    act = result["active"]
+    for kind in TEACHERS:
+        got = act["needed"][kind]
+        rates = ", ".join(f"{100 * v:.0f}" for v in act[kind])
+        console.print(
+            f"{kind}: success {rates} % at {act['n_demos'][0]}..{act['n_demos'][-1]} "
+            f"demonstrations; 95 % with {'-' if got is None else f'{got:g}'}"
         )
-    print_study(result, out)
+    console.print(f"wrote {out / 'study.json'} and {out / 'active.png'}")
 
 
 @app.command()

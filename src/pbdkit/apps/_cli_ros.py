@@ -168,12 +168,38 @@ def record(
     timeout: Annotated[
         float, typer.Option(help="Seconds to wait for joint states and the objects.")
     ] = 5.0,
+    suggest: Annotated[
+        Path | None,
+        typer.Option(
+            help="A skill file (version 3): before each take, print where to put the objects "
+            "(Skill.suggest); after it, update the skill with the take and write it back.",
+        ),
+    ] = None,
+    ranges: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--range",
+            help="With --suggest: NAME=x0:x1,y0:y1[,yaw0:yaw1], where NAME may be put (as for "
+            "pbdkit suggest); default: its demonstrated box widened to twice its half-width "
+            "on each side.",
+        ),
+    ] = None,
 ) -> None:
     """Record demonstrations on a live arm (kinesthetic teaching: putting the arm in its
     hand-guiding mode is yours). A take starts and stops on Enter, or with --takes N --auto on
-    motion; each is appended to --out, which pbdkit learn reads."""
+    motion; each is appended to --out, which pbdkit learn reads. With --suggest, the skill
+    says where each take should put the objects, and learns each take at once."""
     from ..ros._graph import ros_available
+    from ._cli_suggest import SuggestingTeacher, parse_range, ranges_from_options
 
+    if ranges and suggest is None:
+        fail("--range goes with --suggest SKILL")
+    teacher = None
+    if suggest is not None:
+        parsed = [parse_range(r) for r in ranges or []]
+        teacher = SuggestingTeacher(suggest)
+        if parsed:
+            teacher.ranges = ranges_from_options(teacher.skill, parsed)
     if not ros_available():
         fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
     from ..data._demonstration import load_demonstrations, save_demonstrations
@@ -192,7 +218,16 @@ def record(
     )
     objects = parse_objects(obj or [], sources=True)
     check_sources(objects)
+    if teacher is not None:
+        taught = (teacher.skill.demonstrations_ or [])[0]
+        if set(taught.object_names) != set(objects):
+            fail(
+                f"--suggest {suggest}'s demonstrations have objects {list(taught.object_names)}"
+                f"; record them (--object NAME=SOURCE for each)"
+            )
     names = _robot_joint_names(robot, tip)
+    if teacher is not None and teacher.skill.n_joints != len(names):
+        fail(f"--suggest {suggest} is a skill of {teacher.skill.n_joints} joints, not {robot}'s")
     demos = load_demonstrations(out) if out.exists() else []
     if demos and (demos[0].n_joints != len(names) or set(demos[0].object_names) != set(objects)):
         fail(
@@ -203,10 +238,15 @@ def record(
     def save(demo: Any) -> None:
         demos.append(demo)
         save_demonstrations(demos, out)
+        if teacher is not None:
+            _say(teacher.took(demo))
+            _say(teacher.next_text())
 
     pressed = _enter_presses() if not auto else (lambda: False)
 
     def body(node: Any, stop: Any) -> int:
+        if teacher is not None:
+            _say(teacher.next_text())
         sources = ObjectSources(node, objects, log=_say)
         n = record_takes(
             node, names, sources, settings, save=save, toggled=pressed, log=_say, stop=stop

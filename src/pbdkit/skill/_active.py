@@ -1,27 +1,26 @@
 """What a skill does with the demonstrations it keeps (private): learn one more at once, say
-where it is unsure (:doc:`/active`). :class:`pbdkit.Skill` has these methods."""
+where it is unsure and where to demonstrate next (:doc:`/active`). :class:`pbdkit.Skill` has
+these methods."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import Self
 
 import numpy.typing as npt
 
 from ..data._demonstration import Demonstration
+from ._suggest import Suggestion, suggest
 from ._uncertainty import PARTS, Uncertainty, uncertainty
 from ._update import update_skill
-
-if TYPE_CHECKING:
-    from ._skill import Skill
 
 __all__ = ["ActiveMixin"]
 
 
 class ActiveMixin:
-    """:meth:`update` and :meth:`uncertainty` of :class:`pbdkit.Skill`."""
+    """:meth:`update`, :meth:`uncertainty` and :meth:`suggest` of :class:`pbdkit.Skill`."""
 
-    def update(self, new: Demonstration | Sequence[Demonstration]) -> Skill:
+    def update(self, new: Demonstration | Sequence[Demonstration]) -> Self:
         """The skill that has also learned ``new`` (a demonstration or several).
 
         All the demonstrations are encoded again (aligned in time as the skill was learned),
@@ -49,7 +48,7 @@ class ActiveMixin:
             None: a version 1 or 2 file, or built by hand; re-learn it), or ``new`` is empty or
             does not match them.
         """
-        return update_skill(self, new)  # type: ignore[arg-type]
+        return update_skill(self, new)  # type: ignore[no-any-return]
 
     def uncertainty(
         self, objects: Mapping[str, npt.ArrayLike], *, parts: Sequence[str] = PARTS
@@ -77,4 +76,36 @@ class ActiveMixin:
             One line: the skill does not keep its demonstrations, an object is missing, or a
             part is unknown.
         """
-        return uncertainty(self, objects, tuple(parts))  # type: ignore[arg-type]
+        return uncertainty(self, objects, tuple(parts))
+
+    def suggest(
+        self, ranges: Mapping[str, Mapping[str, object]], n: int = 1, *, seed: int = 0
+    ) -> list[Suggestion]:
+        """Where a new demonstration would help the skill most, inside the ranges allowed.
+
+        Parameters
+        ----------
+        ranges : dict str -> dict
+            Per object to place, ``{"low": (3,), "high": (3,), "yaw": (lo, hi) or None}`` in
+            the robot's base frame (m, rad). An object of the skill without a range stays at
+            its first demonstration's place; with a yaw range it is placed as a pose.
+        n : int
+            How many suggestions (1 .. 100): each counts as demonstrated for the next, so they
+            spread out.
+        seed : int
+            Seeds the candidate placements (a scrambled Halton sequence).
+
+        Returns
+        -------
+        list of Suggestion
+            ``objects`` (every object of the skill) and ``score`` (the uncertainty there), the
+            most uncertain first; placements the arm cannot reach are left out, so fewer than
+            ``n`` when the ranges hold fewer.
+
+        Raises
+        ------
+        ValueError
+            One line: the skill does not keep its demonstrations, or a range is malformed or
+            names an object the skill does not have.
+        """
+        return suggest(self, ranges, n, seed=seed)

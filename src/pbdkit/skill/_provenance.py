@@ -257,7 +257,7 @@ def _argument_name(name: str) -> str:
     constructor's arguments."""
     if name.startswith("demonstrations") or name == "n_samples":
         return name.split(".")[0]
-    return f"learn_options[{name!r}]"
+    return f"learn_options['{name}']"
 
 
 def _check_n_samples(
@@ -269,7 +269,9 @@ def _check_n_samples(
         shown = sorted(n_samples) if isinstance(n_samples, Mapping) else short(n_samples)
         raise ValueError(f"{key('n_samples')} must give a count for {spaces}, got {shown}")
     name = key("n_samples")
-    return {k: check_int(n_samples[k], f"{name}[{k!r}]", minimum=1, maximum=most) for k in spaces}
+    return {
+        k: check_int(n_samples[k], f"{name}[{short(k)}]", minimum=1, maximum=most) for k in spaces
+    }
 
 
 def learned_from(

@@ -30,7 +30,7 @@ import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,9 +38,6 @@ from numpy.typing import NDArray
 
 from .._rotations import as_pose
 from .._validation import short
-
-if TYPE_CHECKING:
-    from ._skill import Skill
 
 __all__ = [
     "PARTS",
@@ -99,7 +96,7 @@ class _Model:
     and their spreads, the tightest step of each object's constraint and its standard
     deviation, and the leave-one-out skills (made when first asked)."""
 
-    def __init__(self, skill: Skill) -> None:
+    def __init__(self, skill: Any) -> None:
         demos, options = skill._learned_from("uncertainty")
         self.skill, self.demos, self.options = skill, demos, options
         self.places: dict[str, Float] = {}
@@ -128,9 +125,9 @@ class _Model:
             step = int(np.argmin(loosest))
             self.tight[k], self.sd[k] = step, float(loosest[step])
             self.mean[k] = np.asarray(cons.task_mean[k][step, :3], dtype=np.float64)
-        self._loo: list[Skill] | None = None
+        self._loo: list[Any] | None = None
 
-    def loo(self) -> list[Skill]:
+    def loo(self) -> list[Any]:
         """The skills learned leaving one demonstration out (K kept, EM from the skill's)."""
         if self._loo is None:
             from ._encoding import encode
@@ -164,11 +161,11 @@ class _Model:
         return self._loo
 
 
-def _model(skill: Skill) -> _Model:
+def _model(skill: Any) -> _Model:
     model: _Model | None = getattr(skill, "_uncertainty_model", None)
     if model is None:
         model = _Model(skill)
-        skill._uncertainty_model = model  # type: ignore[attr-defined]
+        skill._uncertainty_model = model
     return model
 
 
@@ -181,12 +178,14 @@ def _hands_at(res: Any, steps: list[int]) -> Float:
 
 
 def uncertainty(
-    skill: Skill, objects: Mapping[str, npt.ArrayLike], parts: tuple[str, ...] = PARTS
+    skill: Any, objects: Mapping[str, npt.ArrayLike], parts: tuple[str, ...] = PARTS
 ) -> Uncertainty:
     """:meth:`pbdkit.Skill.uncertainty` (see there and the module docstring)."""
     unknown = [p for p in parts if p not in PARTS]
     if unknown or SCORE_PART not in parts:
-        raise ValueError(f"parts must be among {list(PARTS)} and hold {SCORE_PART!r}, got {parts}")
+        raise ValueError(
+            f"parts must be among {list(PARTS)} and hold '{SCORE_PART}', got {short(parts)}"
+        )
     model = _model(skill)
     missing = [k for k in skill.object_names if k not in objects]
     if missing:

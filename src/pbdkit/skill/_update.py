@@ -11,7 +11,7 @@ stay the old skill's. What it costs against a refit, and how far their reproduct
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
@@ -20,13 +20,10 @@ from ._encoding import encode
 from ._skill_file import skill_duration_problem
 from ._spaces import warn_outside_limits
 
-if TYPE_CHECKING:
-    from ._skill import Skill
-
 __all__ = ["update_skill"]
 
 
-def update_skill(skill: Skill, new: Demonstration | Sequence[Demonstration]) -> Skill:
+def update_skill(skill: Any, new: Demonstration | Sequence[Demonstration]) -> Any:
     """:meth:`pbdkit.Skill.update` (see there)."""
     demos, options = skill._learned_from("update")
     given: object = new

@@ -1,0 +1,103 @@
+"""Teaching where it fails, in simulation (issue 39, item 5): the teachers of
+``pbdkit study --active`` and the comparison's record."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pbdkit.apps._study_active import (
+    ActiveSize,
+    _features,
+    _median_needed,
+    _Teacher,
+    needed,
+    run_active,
+    split_grid,
+)
+from pbdkit.sim import get_task
+from pbdkit.sim._active import spread_placements, wide_ranges
+
+
+def test_needed_is_the_first_size_at_the_target_and_its_median_over_seeds() -> None:
+    n = [2, 3, 4, 5]
+    assert needed([0.5, 0.96, 0.9, 1.0], n) == 3
+    assert needed([0.5, 0.6, 0.9, 0.94], n) is None
+    assert _median_needed([3, 4, 5]) == 4.0
+    assert _median_needed([3, None, None]) is None  # most seeds never reach it
+    assert _median_needed([3, 5, None]) == 5.0
+
+
+def test_the_grid_keeps_where_the_spread_skill_works_and_lists_the_rest() -> None:
+    grid = [{"glass": np.array([float(i), 0.0, 0.1])} for i in range(5)]
+    kept, excluded = split_grid(grid, [True, False, True, True, False])
+    assert [p["glass"][0] for p in kept] == [0.0, 2.0, 3.0]
+    assert excluded == [{"glass": [1.0, 0.0, 0.1]}, {"glass": [4.0, 0.0, 0.1]}]
+
+
+def test_the_wide_ranges_are_twice_the_demonstrated_half_width_on_each_side() -> None:
+    for task in ("coaster", "slot"):
+        spec = get_task(task)
+        wide = wide_ranges(spec)
+        assert set(wide) == set(spec.tracked_objects)
+        for k, r in wide.items():
+            d = spec.ranges[k]
+            np.testing.assert_allclose(r.high - r.low, 2 * (d.high - d.low))
+            np.testing.assert_allclose(r.low + r.high, d.low + d.high)
+            if d.yaw is not None:
+                assert r.yaw is not None
+                assert r.yaw[1] - r.yaw[0] == pytest.approx(2 * (d.yaw[1] - d.yaw[0]))
+
+
+def test_the_random_teacher_stays_in_the_ranges_and_the_filling_one_goes_farthest() -> None:
+    spec = get_task("coaster")
+    wide = wide_ranges(spec)
+    teacher = _Teacher("random", spec, seed=4)
+    for objects in teacher.choices(None, []):
+        for k, r in wide.items():
+            assert np.all(objects[k] >= r.low - 1e-12) and np.all(objects[k] <= r.high + 1e-12)
+    done = spread_placements(spec, 3, seed=9)
+    filling = _Teacher("space_filling", spec, seed=4)
+    best = filling.choices(None, done)[0]
+    # Brute force over the same candidates: the one whose nearest demonstration is farthest,
+    # each axis scaled by its range.
+    have = np.array([_features(spec, d, wide) for d in done])
+    cands = spread_placements(spec, 256, 4 + len(done))
+    gaps = [np.min(np.linalg.norm(have - _features(spec, c, wide), axis=1)) for c in cands]
+    expected = cands[int(np.argmax(gaps))]
+    for k in wide:
+        np.testing.assert_array_equal(best[k], expected[k])
+
+
+@pytest.mark.slow
+def test_the_active_comparison_records_every_teachers_curve() -> None:
+    # The smallest comparison (the basin: one moving object, a 2 x 2 grid, one seed, one more
+    # demonstration per teacher): the record's shape and consistency, not its figures.
+    spec = get_task("basin")
+    size = ActiveSize(grid=2, seeds=1, max_demos=3)
+    active = run_active(spec, size=size, seed=0)
+    assert active["n_demos"] == [2, 3]
+    assert active["grid_points"] == 4
+    for kind in ("suggested", "random", "space_filling"):
+        curve = active["per_seed"]["0"][kind]
+        assert len(curve) == 2 and all(0.0 <= v <= 1.0 for v in curve)
+        assert active[kind] == curve  # one seed: its own median
+        assert active["needed"][kind] == needed(curve, [2, 3])
+    firsts = {active["per_seed"]["0"][k][0] for k in ("suggested", "random", "space_filling")}
+    assert len(firsts) == 1  # the same 2 demonstrations to start from
+    kept = 4 - len(active["excluded"])
+    assert kept > 0
+    for v in active["suggested"]:
+        assert round(v * kept) == pytest.approx(v * kept)  # a share of the kept points
+
+
+def test_seeds_go_with_active(tmp_path: object) -> None:
+    from typer.testing import CliRunner
+
+    from pbdkit.apps._cli import app
+
+    out = f"{tmp_path}/study"
+    result = CliRunner().invoke(app, ["study", "--task", "basin", "--seeds", "2", "--out", out])
+    assert result.exit_code == 2 and "--seeds goes with --active" in result.output
+    bad = CliRunner().invoke(app, ["study", "--active", "--seeds", "0", "--out", out])
+    assert bad.exit_code == 2 and "--seeds" in bad.output
