@@ -60,6 +60,9 @@ def test_uncertainty_refuses_in_one_line(skill: Skill) -> None:
     )
     with pytest.raises(ValueError, match=r"re-learn it with Skill\.learn to use uncertainty"):
         bare.uncertainty({"glass": np.zeros(3)})
+    with pytest.raises(ValueError, match=r"re-learn it with Skill\.learn to use suggest") as info:
+        bare.suggest({"glass": {"low": (0, 0, 0), "high": (1, 1, 0)}})
+    assert "\n" not in str(info.value)
     with pytest.raises(ValueError, match=r"objects lacks \['glass'\]"):
         skill.uncertainty({"cup": np.zeros(3)})
     with pytest.raises(ValueError, match="parts must be among"):

@@ -151,6 +151,7 @@ def _placement_scores(skill: Any, cands: list[dict[str, Float]], extra: list[dic
 
 def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Suggestion]:
     """:meth:`pbdkit.Skill.suggest` (see there and the module docstring)."""
+    skill._learned_from("suggest")  # one line, naming suggest, for a skill without them
     n = check_int(n, "n", minimum=1, maximum=100)
     checked = parse_ranges(skill, ranges)
     cands = _candidates(skill, checked, CANDIDATES, check_int(seed, "seed", minimum=0))
