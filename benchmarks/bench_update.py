@@ -38,6 +38,7 @@ from pbdkit.robots import katana
 from pbdkit.sim import get_task
 from pbdkit.sim._task_skill import teach
 from pbdkit.skill._spaces import space_floors, variability_floor
+from pbdkit.skill._uncertainty import _hands_at, _model
 
 
 def _timed(fn, repeat: int):  # type: ignore[no-untyped-def]
@@ -81,37 +82,24 @@ def _direct(skill: Skill, new_rows: dict[str, np.ndarray]) -> Skill:
 
 def _rows(skill: Skill, items: list[Demonstration]) -> dict[str, np.ndarray]:
     """Each space's rows as learning encodes the demonstrations (aligned, at the fit steps)."""
-    from pbdkit.skill._spaces import aligned_demonstrations, space_data
+    from pbdkit.skill._spaces import aligned_demonstrations, fit_steps, space_data
 
     options = skill.learn_options_
     assert options is not None
     aligned, _ = aligned_demonstrations(items, skill.robot, options["align"])
-    n_steps = skill.n_steps
-    n_fit = n_steps if options["fit_samples"] is None else options["fit_samples"]
-    steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
-    spaces = space_data(aligned, skill.robot, skill.object_names, n_steps, steps)
+    steps = fit_steps(skill.n_steps, options["fit_samples"])
+    spaces = space_data(aligned, skill.robot, skill.object_names, skill.n_steps, steps)
     return {k: v.reshape(-1, v.shape[2]) for k, v in spaces.items()}
-
-
-def _on_steps(res, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
-    own = ~res.lead_in
-    return np.stack(
-        [np.interp(np.arange(n), res.t[own], res.positions[own][:, i]) for i in range(3)], axis=1
-    )
 
 
 def _apart(a: Skill, b: Skill, placements: list[dict[str, np.ndarray]]) -> tuple[float, ...]:
     """Median and largest distance of the hand paths (mm), and the largest at the steps
     where each object's constraint is tightest in ``b`` (the grasp, the placement)."""
-    cons = b.constraints()
-    tightest = [
-        int(np.argmin(np.linalg.eigvalsh(cons.task_cov[k][:, :3, :3])[:, -1]))
-        for k in b.object_names
-    ]
+    tightest = [_model(b).tight[k] for k in b.object_names]
     med, big, at_tight = [], [], []
     for objects in placements:
-        pa = _on_steps(a.reproduce(objects), a.n_steps)
-        pb = _on_steps(b.reproduce(objects), b.n_steps)
+        pa = _hands_at(a.reproduce(objects), list(range(a.n_steps)))
+        pb = _hands_at(b.reproduce(objects), list(range(b.n_steps)))
         d = np.linalg.norm(pa - pb, axis=1) * 1000
         med.append(np.median(d))
         big.append(d.max())

@@ -47,6 +47,8 @@ __all__ = [
     "pose_matrix",
     "quaternion_from_matrix",
     "skew",
+    "wrap_angle",
+    "yaw_of",
 ]
 
 Float = NDArray[np.float64]
@@ -54,6 +56,18 @@ Float = NDArray[np.float64]
 #: :func:`as_pose` accepts (and re-orthonormalizes); beyond it the matrix is refused.
 ORTHONORMAL_TOLERANCE = 1e-4
 _SMALL = 1e-6  # rad: below it the series expansions are used
+
+
+def yaw_of(pose: npt.ArrayLike) -> float:
+    """The yaw (rad) of a pose's (4x4) or a rotation's (3x3) x axis about the vertical, in
+    (-pi, pi]."""
+    m = np.asarray(pose)
+    return math.atan2(float(m[1, 0]), float(m[0, 0]))
+
+
+def wrap_angle(angle: npt.ArrayLike) -> Float:
+    """Angles (rad) wrapped into [-pi, pi)."""
+    return np.asarray((np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi)
 
 
 def skew(r: npt.ArrayLike) -> Float:

@@ -12,7 +12,7 @@ import typer
 from rich.table import Table
 
 from .._io import write_json
-from .._rotations import as_pose
+from .._rotations import as_pose, yaw_of
 from .._validation import short
 from ._cli_output import console, fail, reports_errors
 
@@ -102,13 +102,9 @@ def suggest_command(
         cells = []
         row: dict[str, Any] = {"score": s.score, "objects": {}}
         for name in skill.object_names:
-            value = np.asarray(s.objects[name])
-            position = value[:3, 3] if value.shape == (4, 4) else value
-            text = ", ".join(f"{v:.3f}" for v in position)
-            if value.shape == (4, 4):
-                text += f", yaw {math.degrees(math.atan2(value[1, 0], value[0, 0])):.0f} deg"
-            cells.append(text)
-            row["objects"][name] = value.tolist()
+            coords, yaw = _where(s.objects[name])
+            cells.append(coords if yaw is None else f"{coords}, yaw {yaw:.0f} deg")
+            row["objects"][name] = np.asarray(s.objects[name]).tolist()
         table.add_row(str(i), *cells, f"{s.score:.2f}")
         rows.append(row)
     console.print(table)
@@ -130,7 +126,7 @@ def default_ranges(skill: Any) -> dict[str, dict[str, Any]]:
         half[2] = 0.0
         yaw = None
         if poses[0][1] is not None:
-            yaws = np.unwrap([math.atan2(r[1, 0], r[0, 0]) for _, r in poses if r is not None])
+            yaws = np.unwrap([yaw_of(r) for _, r in poses if r is not None])
             yc, yh = 0.5 * (yaws.min() + yaws.max()), max(0.5 * np.ptp(yaws), math.radians(7.5))
             yaw = (float(yc - 2 * yh), float(yc + 2 * yh))
         out[name] = {"low": centre - 2 * half, "high": centre + 2 * half, "yaw": yaw}
@@ -141,13 +137,17 @@ def placement_text(objects: dict[str, Any], names: list[str]) -> str:
     """One line: where each object goes (m; a pose's yaw in degrees)."""
     parts = []
     for name in names:
-        value = np.asarray(objects[name])
-        position = value[:3, 3] if value.shape == (4, 4) else value
-        text = f"{name} at ({', '.join(f'{v:.3f}' for v in position)})"
-        if value.shape == (4, 4):
-            text += f" turned {math.degrees(math.atan2(value[1, 0], value[0, 0])):.0f} deg"
-        parts.append(text)
+        coords, yaw = _where(objects[name])
+        parts.append(f"{name} at ({coords})" + ("" if yaw is None else f" turned {yaw:.0f} deg"))
     return ", ".join(parts)
+
+
+def _where(value: Any) -> tuple[str, float | None]:
+    """An object's position as text (m), and a pose's yaw (degrees; None for a position)."""
+    v = np.asarray(value)
+    posed = v.shape == (4, 4)
+    coords = ", ".join(f"{x:.3f}" for x in (v[:3, 3] if posed else v))
+    return coords, (math.degrees(yaw_of(v)) if posed else None)
 
 
 class SuggestingTeacher:

@@ -51,14 +51,15 @@ def run_lasa_demo(
     """
     from ..datasets import lasa
     from ..prob._gmm import GMM
+    from ..skill._spaces import fit_steps
     from ._plots import plot_lasa_summary, save_figure
 
     demos = lasa(shape)  # an unknown shape is refused before the folder is made
     n_steps = demos[0].pos.shape[0]
     t = np.linspace(0.0, 1.0, n_steps)
     # EM sees 100 evenly spaced steps per demonstration, as Skill.learn (fit_samples).
-    fit_steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(100, n_steps))).astype(int))
-    x = np.vstack([np.column_stack([t[fit_steps], d.pos[fit_steps]]) for d in demos])
+    steps = fit_steps(n_steps, 100)
+    x = np.vstack([np.column_stack([t[steps], d.pos[steps]]) for d in demos])
     start = time.perf_counter()
     gmm = GMM("auto", max_components=max_components).fit(x)
     learn_s = time.perf_counter() - start

@@ -108,10 +108,6 @@ def _median_needed(values: list[int | None]) -> float | None:
     return None if math.isinf(med) else med
 
 
-def _draw(r: PlacementRange, rng: np.random.Generator) -> Float:
-    return r.sample(rng)
-
-
 def _features(spec: TaskSpec, objects: dict[str, Any], wide: dict[str, PlacementRange]) -> Float:
     """A placement's coordinates scaled by the wide ranges (x, y, and yaw for a pose)."""
     out = []
@@ -136,12 +132,8 @@ class _Teacher:
 
     def choices(self, skill: Any, done: list[dict[str, Any]]) -> list[dict[str, Float]]:
         """Placements to try, best first."""
-        nominal = self.spec.nominal_objects()
         if self.kind == "random":
-            return [
-                {**nominal, **{k: _draw(r, self.rng) for k, r in self.wide.items()}}
-                for _ in range(8)
-            ]
+            return self.random(8)
         if self.kind == "space_filling":
             cands = spread_placements(self.spec, FILLING_CANDIDATES, self.seed + len(done))
             have = np.array([_features(self.spec, d, self.wide) for d in done])
@@ -155,13 +147,15 @@ class _Teacher:
             for k, r in self.wide.items()
             if k in skill.object_names
         }
+        nominal = self.spec.nominal_objects()
         return [{**nominal, **s.objects} for s in skill.suggest(ranges, n=8, seed=self.seed)]
 
-    def fallback(self) -> list[dict[str, Float]]:
-        """Where the teacher's own choices could not be shown: random placements."""
+    def random(self, n: int) -> list[dict[str, Float]]:
+        """``n`` random placements in the wide ranges (the random teacher's choices, and every
+        teacher's where its own could not be shown)."""
         nominal = self.spec.nominal_objects()
         return [
-            {**nominal, **{k: _draw(r, self.rng) for k, r in self.wide.items()}} for _ in range(32)
+            {**nominal, **{k: r.sample(self.rng) for k, r in self.wide.items()}} for _ in range(n)
         ]
 
 
@@ -238,7 +232,7 @@ def run_active(
                 tries = teacher.choices(skill, [_placement_of(d) for d in demos])
                 new = _first_shown(spec, tries, s * 1000 + n)
                 if new is None:
-                    new = _first_shown(spec, teacher.fallback(), s * 1000 + n)
+                    new = _first_shown(spec, teacher.random(32), s * 1000 + n)
                 if new is None:
                     raise RuntimeError(f"the {kind} teacher found nowhere to demonstrate")
                 demos.append(new)

@@ -127,22 +127,25 @@ def lower_bounds(
         steps, cols = np.repeat(np.arange(m), both.size), np.tile(both, m)
         ia, ib = a[cols], b[cols]
         caps, inside, apart = _capsules(
-            table, ia, ib, rot[steps, ia], rot[steps, ib], pos[steps, ia], pos[steps, ib]
+            table,
+            ia,
+            ib,
+            rot[steps, ia],
+            rot[steps, ib],
+            pos[steps, ia],
+            pos[steps, ib],
+            upper=floor is not None,
         )
         bound[:, both] = np.maximum(bound[:, both], caps.reshape(m, both.size))
         exact[:, both] |= inside.reshape(m, both.size)
-        ceiling = apart.reshape(m, both.size).min(axis=1)
-    if floor is not None:
-        solid = np.flatnonzero((table.kind[a] != _OTHER) & (table.kind[b] != _OTHER))
-        if solid.size:
-            shrink = table.radius * table.round  # a round sphere's surface, not its centre
-            upper = (gap[:, solid] - shrink[a[solid]] - shrink[b[solid]]).min(axis=1)
-            ceiling = np.maximum(np.minimum(upper, ceiling), floor)
-            live = bound < ceiling[:, None]
-        else:
-            ceiling = np.full(m, np.inf)
-    else:
-        ceiling = np.full(m, np.inf)
+        if apart is not None:
+            ceiling = apart.reshape(m, both.size).min(axis=1)
+    solid = np.flatnonzero((table.kind[a] != _OTHER) & (table.kind[b] != _OTHER))
+    if floor is not None and solid.size:  # (two cylinders are solid: no ceiling without)
+        shrink = table.radius * table.round  # a round sphere's surface, not its centre
+        upper = (gap[:, solid] - shrink[a[solid]] - shrink[b[solid]]).min(axis=1)
+        ceiling = np.maximum(np.minimum(upper, ceiling), floor)
+        live = bound < ceiling[:, None]
     for near, far in ((a, b), (b, a)):
         for kind in (_BOX, _CYLINDER, _SPHERE):
             # A round sphere's point bound is the spheres' bound: left out.
@@ -172,14 +175,16 @@ def _capsules(
     rot_b: Float,
     pos_a: Float,
     pos_b: Float,
-) -> tuple[Float, NDArray[np.bool_], Float]:
+    *,
+    upper: bool = True,
+) -> tuple[Float, NDArray[np.bool_], Float | None]:
     """Distances (N,) between the capsules around cylinders a and b (N,), posed at ``rot_a``,
     ``rot_b`` (N, 3, 3) and ``pos_a``, ``pos_b`` (N, 3) (each capsule holds its cylinder: a
     lower bound on theirs): the closest points of the axes' segments (Ericson, Real-Time
     Collision Detection, 5.1.9), less both radii; where that is the cylinders' distance
     (N,; the closest points inside both segments, apart); and an upper bound on it (N,): the
     distance of two points of the cylinders' sides, each the closest point of its axis moved
-    by its radius towards the other's, square to its axis."""
+    by its radius towards the other's, square to its axis (None unless ``upper``)."""
     half_a, half_b = table.extent[a, 1], table.extent[b, 1]
     axis_a, axis_b = rot_a[..., 2], rot_b[..., 2]  # (N, 3)
     start_a = pos_a - axis_a * half_a[:, None]
@@ -208,10 +213,12 @@ def _capsules(
     t = np.clip(t, 0.0, 1.0)
     gap = start_a + d1 * s[..., None] - (start_b + d2 * t[..., None])
     dist = np.linalg.norm(gap, axis=1) - table.extent[a, 0] - table.extent[b, 0]
+    exact = np.asarray(inside & (dist > 0.0))
+    if not upper:
+        return np.asarray(dist), exact, None
     side_a = _square(-gap, axis_a) * table.extent[a, 0][:, None]
     side_b = _square(gap, axis_b) * table.extent[b, 0][:, None]
-    upper = np.linalg.norm(gap + side_a - side_b, axis=1)
-    return np.asarray(dist), np.asarray(inside & (dist > 0.0)), np.asarray(upper)
+    return np.asarray(dist), exact, np.asarray(np.linalg.norm(gap + side_a - side_b, axis=1))
 
 
 def _square(v: Float, axis: Float) -> Float:

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
+from .._rotations import yaw_of
 from .._validation import check_positions, short
 from ..data._placement import check_placements, is_pose, position_of
 from ._glass import patch_prefix
@@ -131,11 +132,6 @@ def yaw_pose(position: npt.ArrayLike, yaw: float) -> Float:
     out[:2, :2] = [[c, -s], [s, c]]
     out[:3, 3] = np.asarray(position, dtype=np.float64)
     return out
-
-
-def yaw_of(pose: Float) -> float:
-    """The yaw (rad) of a pose's x axis about the vertical, in (-pi, pi]."""
-    return math.atan2(float(pose[1, 0]), float(pose[0, 0]))
 
 
 @dataclass(frozen=True)

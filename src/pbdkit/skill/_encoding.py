@@ -29,6 +29,7 @@ from ._provenance import LearnOptions, resolve_task_objects
 from ._spaces import (
     Alignment,
     aligned_demonstrations,
+    fit_steps,
     mean_relative_rotation,
     space_data,
     space_floors,
@@ -88,8 +89,7 @@ def encode(
     floors = variability_floor(options["reg_covar"])
     names = resolve_task_objects(options["task_objects"], items[0].object_names)
     has_gripper = items[0].gripper is not None
-    n_fit = n_steps if options["fit_samples"] is None else options["fit_samples"]
-    steps = np.unique(np.round(np.linspace(0, n_steps - 1, min(n_fit, n_steps))).astype(int))
+    steps = fit_steps(n_steps, options["fit_samples"])
 
     oriented = [k for k in names if options["orientation"] and is_pose(items[0].objects[k])]
     bases: dict[str, Float] = {}

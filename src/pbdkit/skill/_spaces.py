@@ -37,6 +37,7 @@ __all__ = [
     "MIN_STEP_SECONDS",
     "TIME_FLOOR",
     "VARIABILITY_FLOOR",
+    "fit_steps",
     "mean_relative_rotation",
     "space_data",
     "space_floors",
@@ -117,6 +118,13 @@ def variability_floor(reg_covar: float | Mapping[str, float] | None) -> dict[str
         return out
     v = check_positive_float(reg_covar, "reg_covar", allow_zero=True)
     return dict.fromkeys(VARIABILITY_FLOOR, v)
+
+
+def fit_steps(n_steps: int, fit_samples: int | None) -> NDArray[np.intp]:
+    """The steps of an ``n_steps`` grid each demonstration gives EM: ``fit_samples`` evenly
+    spaced ones, the first and the last included (all of them for None or more)."""
+    n_fit = n_steps if fit_samples is None else min(fit_samples, n_steps)
+    return np.unique(np.round(np.linspace(0, n_steps - 1, n_fit)).astype(np.intp))
 
 
 def space_floors(

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .._rotations import as_pose, pose_matrix
 from .._validation import check_int, short
-from ._uncertainty import SCORE_PART, _model, _wrap, _yaw, uncertainty
+from ._uncertainty import SCORE_PART, _model, placement_distance, uncertainty
 
 __all__ = ["CANDIDATES", "PRESELECT", "Suggestion", "parse_ranges", "suggest"]
 
@@ -126,29 +126,6 @@ def _candidates(skill: Any, ranges: dict[str, _Range], n: int, seed: int) -> lis
     return out
 
 
-def _placement_scores(skill: Any, cands: list[dict[str, Float]], extra: list[dict[str, Any]]):  # type: ignore[no-untyped-def]
-    """The placement part of every candidate, the ``extra`` placements counted as
-    demonstrated."""
-    model = _model(skill)
-    scores = np.zeros(len(cands))
-    for k in skill.object_names:
-        places, spread = model.places[k], model.spreads[k]
-        rows = []
-        for objects in [*cands, *extra]:
-            position, rotation = as_pose(objects[k], f"objects[{short(k)}]")
-            yaw = _yaw(rotation)
-            rows.append(np.r_[position, [] if yaw is None or places.shape[1] == 3 else [yaw]])
-        arr = np.array(rows)
-        width = arr.shape[1]
-        known = np.r_[places[:, :width], arr[len(cands) :]] if extra else places[:, :width]
-        diff = arr[: len(cands), None, :] - known[None, :, :]
-        if width > 3:
-            diff[..., 3] = _wrap(diff[..., 3])
-        near = np.min(np.linalg.norm(diff / spread[:width], axis=2), axis=1)
-        scores = np.maximum(scores, near)
-    return scores
-
-
 def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Suggestion]:
     """:meth:`pbdkit.Skill.suggest` (see there and the module docstring)."""
     skill._learned_from("suggest")  # one line, naming suggest, for a skill without them
@@ -161,7 +138,7 @@ def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Su
     while len(chosen) < n:
         # The farthest from what was demonstrated (and suggested) first; where the score is
         # another part than the placement's, the PRESELECT farthest are measured by it.
-        far = _placement_scores(skill, cands, [s.objects for s in chosen])
+        far = placement_distance(skill, cands, [s.objects for s in chosen])
         order = [int(i) for i in np.argsort(-far, kind="stable") if int(i) not in taken]
         if SCORE_PART != "placement":
             pool = order[:PRESELECT]

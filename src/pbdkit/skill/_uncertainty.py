@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,8 +36,9 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import NDArray
 
-from .._rotations import as_pose
+from .._rotations import as_pose, wrap_angle, yaw_of
 from .._validation import short
+from ._update import warm_skill
 
 __all__ = [
     "PARTS",
@@ -45,6 +46,7 @@ __all__ = [
     "SCORE_PART",
     "YAW_SPREAD_FLOOR",
     "Uncertainty",
+    "placement_distance",
     "uncertainty",
 ]
 
@@ -83,14 +85,6 @@ class Uncertainty:
     parts: dict[str, float] = field(default_factory=dict)
 
 
-def _yaw(rotation: Float | None) -> float | None:
-    return None if rotation is None else float(math.atan2(rotation[1, 0], rotation[0, 0]))
-
-
-def _wrap(angle: Float) -> Float:
-    return np.asarray((angle + np.pi) % (2.0 * np.pi) - np.pi)
-
-
 class _Model:
     """What a skill's uncertainty needs, computed once per skill: the demonstrated placements
     and their spreads, the tightest step of each object's constraint and its standard
@@ -102,18 +96,13 @@ class _Model:
         self.places: dict[str, Float] = {}
         self.spreads: dict[str, Float] = {}
         for k in skill.object_names:
-            rows = []
-            for d in demos:
-                position, rotation = as_pose(d.objects[k], f"objects[{short(k)}]")
-                yaw = _yaw(rotation)
-                rows.append(np.r_[position, [] if yaw is None else [yaw]])
-            places = np.array(rows)
+            places = np.array([_place_row(d.objects[k], k, posed=True) for d in demos])
             floor = np.r_[
                 np.full(3, POSITION_SPREAD_FLOOR), [YAW_SPREAD_FLOOR] * (places.shape[1] - 3)
             ]
             spread = places.std(axis=0)
             if places.shape[1] > 3:
-                spread[3] = float(np.std(_wrap(places[:, 3] - places[0, 3])))
+                spread[3] = float(np.std(wrap_angle(places[:, 3] - places[0, 3])))
             self.places[k] = places
             self.spreads[k] = np.maximum(spread, floor)
         cons = skill.constraints()
@@ -130,33 +119,15 @@ class _Model:
     def loo(self) -> list[Any]:
         """The skills learned leaving one demonstration out (K kept, EM from the skill's)."""
         if self._loo is None:
-            from ._encoding import encode
-
             skill, out = self.skill, []
             for i in range(len(self.demos)):
                 items = [d for j, d in enumerate(self.demos) if j != i]
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    code = encode(
-                        items,
-                        skill.robot,
-                        self.options,
-                        warm=skill.gmms,
-                        n_old=len(items),
-                        old_bases=skill.rotation_base,
+                    # No new demonstration: every space keeps its K.
+                    out.append(
+                        warm_skill(skill, items, self.options, len(items), reach=skill.reach)
                     )
-                out.append(
-                    type(skill)(
-                        skill.robot,
-                        code.gmms,
-                        n_steps=skill.n_steps,
-                        object_names=skill.object_names,
-                        has_gripper=skill.has_gripper,
-                        reach=skill.reach,
-                        rotation_base=code.rotation_base,
-                        calibration=code.calibration,
-                    )
-                )
             self._loo = out
         return self._loo
 
@@ -167,6 +138,38 @@ def _model(skill: Any) -> _Model:
         model = _Model(skill)
         skill._uncertainty_model = model
     return model
+
+
+def _place_row(value: object, name: str, *, posed: bool) -> Float:
+    """An object's placement as the placement part compares it: its position, and its yaw
+    where it is a pose and ``posed`` (the demonstrations give it as one)."""
+    position, rotation = as_pose(value, f"objects[{short(name)}]")
+    return position if rotation is None or not posed else np.r_[position, yaw_of(rotation)]
+
+
+def placement_distance(
+    skill: Any,
+    placements: Sequence[Mapping[str, Any]],
+    extra: Sequence[Mapping[str, Any]] = (),
+) -> Float:
+    """The placement part (N,) of each of ``placements``: over the skill's objects, the
+    largest distance to the nearest demonstrated placement (and of ``extra``, counted as
+    demonstrated), each axis divided by the demonstrated spread."""
+    model = _model(skill)
+    out = np.zeros(len(placements))
+    for k in skill.object_names:
+        places, spread = model.places[k], model.spreads[k]
+        posed = places.shape[1] > 3
+        rows = np.array([_place_row(p[k], k, posed=posed) for p in placements])
+        width = rows.shape[1]
+        known = places[:, :width]
+        if extra:
+            known = np.r_[known, [_place_row(p[k], k, posed=posed) for p in extra]]
+        diff = rows[:, None, :] - known[None, :, :]
+        if width > 3:
+            diff[..., 3] = wrap_angle(diff[..., 3])
+        out = np.maximum(out, np.min(np.linalg.norm(diff / spread[:width], axis=2), axis=1))
+    return out
 
 
 def _hands_at(res: Any, steps: list[int]) -> Float:
@@ -193,17 +196,7 @@ def uncertainty(
     placed: dict[str, tuple[Float, Float | None]] = {
         k: as_pose(objects[k], f"objects[{short(k)}]") for k in skill.object_names
     }
-    out: dict[str, float] = {}
-    worst = 0.0
-    for k, (position, rotation) in placed.items():
-        places, spread = model.places[k], model.spreads[k]
-        yaw = _yaw(rotation)
-        here = np.r_[position, [] if yaw is None or places.shape[1] == 3 else [yaw]]
-        diff = here[None, :] - places[:, : here.size]
-        if here.size > 3:
-            diff[:, 3] = _wrap(diff[:, 3])
-        worst = max(worst, float(np.min(np.linalg.norm(diff / spread[: here.size], axis=1))))
-    out["placement"] = worst
+    out: dict[str, float] = {"placement": float(placement_distance(skill, [objects])[0])}
     told = {k: np.asarray(objects[k], dtype=np.float64) for k in objects}
     steps = [model.tight[k] for k in skill.object_names]
     fused = None

@@ -17,10 +17,11 @@ import numpy as np
 
 from ..data._demonstration import Demonstration, check_demonstrations
 from ._encoding import encode
+from ._provenance import LearnOptions
 from ._skill_file import skill_duration_problem
 from ._spaces import warn_outside_limits
 
-__all__ = ["update_skill"]
+__all__ = ["update_skill", "warm_skill"]
 
 
 def update_skill(skill: Any, new: Demonstration | Sequence[Demonstration]) -> Any:
@@ -48,26 +49,39 @@ def update_skill(skill: Any, new: Demonstration | Sequence[Demonstration]) -> An
     if problem:
         raise ValueError(f"new: {problem} (are the time stamps t in seconds?)")
     warn_outside_limits(added, skill.robot)
+    return warm_skill(skill, items, options, len(demos), duration=duration, keep=True)
+
+
+def warm_skill(
+    skill: Any,
+    items: list[Demonstration],
+    options: LearnOptions,
+    n_old: int,
+    *,
+    duration: float = float("nan"),
+    keep: bool = False,
+    reach: float | None = None,
+) -> Any:
+    """The skill of ``items`` encoded from ``skill``'s GMMs (:func:`encode` with ``warm``:
+    its first ``n_old`` are what ``skill`` learned), its orientation bases kept. ``keep``: the
+    new skill keeps ``items`` and ``options`` (an update); ``reach``: instead of the one the
+    demonstrations give."""
     code = encode(
-        items,
-        skill.robot,
-        options,
-        warm=skill.gmms,
-        n_old=len(demos),
-        old_bases=skill.rotation_base,
+        items, skill.robot, options, warm=skill.gmms, n_old=n_old, old_bases=skill.rotation_base
     )
+    kept: dict[str, Any] = {}
+    if keep:
+        kept = {"demonstrations": items, "learn_options": options, "n_samples": code.n_samples}
     return type(skill)(
         skill.robot,
         code.gmms,
         n_steps=skill.n_steps,
         object_names=skill.object_names,
         has_gripper=skill.has_gripper,
-        reach=code.reach,
+        reach=code.reach if reach is None else reach,
         duration=duration,
         rotation_base=code.rotation_base,
         aligned=code.aligned,
         calibration=code.calibration,
-        demonstrations=items,
-        learn_options=options,
-        n_samples=code.n_samples,
+        **kept,
     )
