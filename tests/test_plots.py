@@ -83,7 +83,9 @@ def test_basin_pouring_gesture_is_tight_in_joint_space_with_enough_components(
     c = skill.constraints()
     assert skill.selection_["joint"].method == "cv"
     assert skill.n_components["joint"] >= 5
-    assert np.sqrt(c.joint_cov[-1, 4, 4]) < 0.05  # rad
+    # Measured: 0.048 rad; 0.053 since the gripper is scored and the arrival aligned to the
+    # millimetre (issue 34), where the demonstrations' own end roll spreads by 0.012 rad.
+    assert np.sqrt(c.joint_cov[-1, 4, 4]) < 0.06  # rad
     assert abs(c.joint_mean[-1, 4] - np.mean([d.joints[-1, 4] for d in demos])) < 0.1
 
 

@@ -49,6 +49,12 @@ CLEARANCE = "clearance"
 #: bound ``step_limit`` does not apply: the timing keeps the limits). Larger let the path jump
 #: past an obstacle between two clear samples (docs: "Collisions").
 CLEARANCE_STEP = 1.0
+#: A fused step in which a joint reverses, moving faster than this fraction of its step bound
+#: (``step_limit``, else ``max_step``) in both steps (a reversal as
+#: :func:`pbdkit.motion._limits.count_reversals` counts it), shrinks the trust region to half
+#: the last step: it lands between the two postures, where a period-2 cycle's energy is lowest.
+#: The region then doubles on every step that does not reverse (docs: "Stability").
+REVERSAL_FRACTION = 0.25
 
 
 class LoopOutput(NamedTuple):
@@ -245,7 +251,20 @@ class FusedStep(ControllerStep):
         self.prec_list, self.eta_list = list(c.joint_prec), list(c.joint_eta)
         # The clearance constraint (None: none; docs: "Collisions").
         self.avoid = run.avoid
+        # Reversals: steps longer than this (squared) count; the last step and the region.
+        self.fast2 = REVERSAL_FRACTION * REVERSAL_FRACTION * self.free2
+        self.fast = REVERSAL_FRACTION * (
+            math.sqrt(self.free2) if step_limit is None else np.minimum(step_limit, max_step)
+        )
+        self.cap2 = max_step * max_step
+        self.reset()
         self.set_objects(run.objects)
+
+    def reset(self) -> None:
+        """Forget the last step (a loop starts: no reversal to damp)."""
+        self._prev: Float | None = None
+        self._prev2 = 0.0
+        self._radius2 = math.inf
 
     def set_objects(self, objs: Mapping[str, Float]) -> None:
         """New object positions (every object in use), for every step from now on."""
@@ -318,6 +337,18 @@ class FusedStep(ControllerStep):
         else:
             step2 = step.dot(step)
         limited = False
+        # A fast step that reverses the last fast one: the trust region halves that step
+        # (REVERSAL_FRACTION); otherwise it doubles, and is gone past max_step.
+        radius2 = self._radius2
+        if self._prev is not None:
+            if min(step2, self._prev2) > self.fast2 and _reverses(step, self._prev, self.fast):
+                radius2 = 0.25 * self._prev2
+            elif radius2 < math.inf:
+                radius2 = 4.0 * radius2 if radius2 < self.cap2 else math.inf
+        self._radius2 = radius2
+        if step2 > radius2:
+            step = step * math.sqrt(radius2 / step2)
+            target, step2, limited = theta + step, radius2, True
         # Velocity bound, trust region of the linearization; where the clearance acts, the
         # trust region alone (docs: "Collisions").
         if clearance is not None:
@@ -349,6 +380,8 @@ class FusedStep(ControllerStep):
                 new = theta + 0.5 * (new - theta)
                 x_new, jac_new, axes_new = self.kinematics(new)
                 z_new[:n], z_new[n:] = new, x_new
+        self._prev = taken = new - theta
+        self._prev2 = taken.dot(taken)
         return new, x_new, jac_new, axes_new, limited
 
     # The step itself, under the interface's name: no wrapper, one call less per step.
@@ -371,6 +404,11 @@ class FusedStep(ControllerStep):
             k: float(np.trace(s_hand @ self.prec[j, i])) / 3 for i, k in enumerate(self.tasks)
         }
         return {JOINT: min(1.0, max(0.0, 1.0 - math.fsum(shares.values()))), **shares}
+
+
+def _reverses(step: Float, prev: Float, fast: Float | float) -> bool:
+    """Whether a joint moving fast (more than ``fast``) in both steps reverses."""
+    return bool(np.any((step * prev < 0.0) & (np.abs(step) > fast) & (np.abs(prev) > fast)))
 
 
 def _rises(z: Float, z_new: Float, q_t: Float, b_t: Float, clearance: tuple[Float, Float]) -> bool:
@@ -397,6 +435,7 @@ def _fused_loop(
     n_steps, n = c.n_steps, c.n_joints
     limited: list[int] = []
     theta = theta0
+    step.reset()
     x, jac, axes = step.kinematics(theta)
     # Python lists: appending costs less than writing rows into arrays, step by step.
     joints_l, positions_l, jacs_l = [theta], [x], [jac]

@@ -116,7 +116,7 @@ def encode(
     for k, X in data.items():
         old = None if warm is None else warm.get(k)
         if old is not None:
-            kept = _warm_fit(old, X, groups, n_old, options, space_floor[k], k == JOINT, n)
+            kept = _warm_fit(old, X, groups, n_old, options, space_floor[k], k == JOINT)
             if kept is not None:
                 gmms[k] = kept
                 continue
@@ -126,8 +126,10 @@ def encode(
             max_components=options["max_components"],
             reg_covar=space_floor[k],
             random_state=options["random_state"],
-            # The gripper is a binary command thresholded at 0.5: K is chosen on the joints.
-            score_dims=list(range(1, n + 1)) if k == JOINT else None,
+            # K is scored on the joints and the gripper: its closing is a phase where the
+            # demonstrations agree, and a K that blurs it closes the hand early (docs/math.md,
+            # "Choosing K").
+            score_dims=None,
             bic_samples_per_sequence=options["bic_samples_per_sequence"],
             # Calibration widens the joint space only (docs/math.md, "Calibration").
             loo_residuals=options["calibrate"] and k == JOINT,
@@ -162,7 +164,6 @@ def _warm_fit(
     options: LearnOptions,
     floor: Float,
     joint: bool,
-    n: int,
 ) -> GMM | None:
     """One space's GMM refitted from ``old``'s responsibilities, its K kept; None where K is
     chosen (``"auto"``) and the data warrant choosing it again."""
@@ -177,7 +178,7 @@ def _warm_fit(
         max_components=options["max_components"],
         reg_covar=floor,
         random_state=options["random_state"],
-        score_dims=list(range(1, n + 1)) if joint else None,
+        score_dims=None,
         loo_residuals=options["calibrate"] and joint,
     )
     gmm._warm = old  # EM starts where the old fit ended (GMM._initial_resp)
