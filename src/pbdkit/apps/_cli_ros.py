@@ -218,21 +218,19 @@ def record(
     )
     objects = parse_objects(obj or [], sources=True)
     check_sources(objects)
-    if teacher is not None:
-        taught = (teacher.skill.demonstrations_ or [])[0]
-        if set(taught.object_names) != set(objects):
-            fail(
-                f"--suggest {suggest}'s demonstrations have objects {list(taught.object_names)}"
-                f"; record them (--object NAME=SOURCE for each)"
-            )
     names = _robot_joint_names(robot, tip)
-    if teacher is not None and teacher.skill.n_joints != len(names):
-        fail(f"--suggest {suggest} is a skill of {teacher.skill.n_joints} joints, not {robot}'s")
+    if teacher is not None:
+        teacher.check_takes(names, objects, gripper=gripper_joint is not None)
     demos = load_demonstrations(out) if out.exists() else []
-    if demos and (demos[0].n_joints != len(names) or set(demos[0].object_names) != set(objects)):
+    if demos and (
+        demos[0].n_joints != len(names)
+        or set(demos[0].object_names) != set(objects)
+        or (demos[0].gripper is None) != (gripper_joint is None)
+    ):
         fail(
             f"{out} holds demonstrations of {demos[0].n_joints} joints with objects "
-            f"{list(demos[0].object_names)}; record into another file"
+            f"{list(demos[0].object_names)}, {'without' if demos[0].gripper is None else 'with'}"
+            " a gripper; record into another file"
         )
 
     def save(demo: Any) -> None:
@@ -247,7 +245,7 @@ def record(
     def body(node: Any, stop: Any) -> int:
         if teacher is not None:
             _say(teacher.next_text())
-        sources = ObjectSources(node, objects, log=_say)
+        sources = ObjectSources(node, objects, [] if teacher is None else teacher.posed, log=_say)
         n = record_takes(
             node, names, sources, settings, save=save, toggled=pressed, log=_say, stop=stop
         )

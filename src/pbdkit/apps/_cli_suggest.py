@@ -165,7 +165,47 @@ class SuggestingTeacher:
                 f"{path} does not keep its demonstrations (a skill file of version 1 or 2): "
                 "learn it again with pbdkit learn"
             )
+        self.taught = self.skill.demonstrations_[0]
         self.ranges = default_ranges(self.skill) if ranges is None else ranges
+
+    @property
+    def posed(self) -> list[str]:
+        """The objects its demonstrations hold as poses: the takes must hold them so too."""
+        from ..data._placement import is_pose
+
+        return [k for k in self.taught.object_names if is_pose(self.taught.objects[k])]
+
+    def check_takes(self, joint_names: list[str], sources: dict[str, Any], gripper: bool) -> None:
+        """Refuse, in one line (exit 2), takes that :meth:`pbdkit.Skill.update` would refuse
+        after the first one: of another arm (``joint_names``, the robot's), of other objects
+        (``sources``: --object NAME=SOURCE), fixed coordinates of a position for an object
+        it holds as a pose or the other way round, a gripper (``gripper``: --gripper-joint)
+        where it has none or none where it has one."""
+        skill, path = self.skill, self.path
+        if list(skill.robot.joint_names) != list(joint_names):
+            fail(
+                f"--suggest {path} is a skill of the joints {list(skill.robot.joint_names)}, "
+                f"not of --robot's {list(joint_names)}"
+            )
+        if set(self.taught.object_names) != set(sources):
+            fail(
+                f"--suggest {path}'s demonstrations have objects "
+                f"{list(self.taught.object_names)}; record them (--object NAME=SOURCE for each)"
+            )
+        if skill.has_gripper != gripper:
+            with_, fix = (
+                ("with", "give --gripper-joint NAME:OPEN:CLOSED")
+                if skill.has_gripper
+                else ("without", "leave out --gripper-joint")
+            )
+            fail(f"--suggest {path} was learned {with_} a gripper: {fix}")
+        posed = self.posed
+        for name, source in sources.items():
+            if not isinstance(source, str) and (np.size(source) == 7) != (name in posed):
+                kind, give = (
+                    ("pose", "x,y,z,qw,qx,qy,qz") if name in posed else ("position", "x,y,z")
+                )
+                fail(f"--object {name}: {path}'s demonstrations hold it as a {kind}: give {give}")
 
     def next_text(self) -> str:
         """Where the next take's objects go."""
