@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -15,6 +16,9 @@ from .._io import write_json
 from .._rotations import as_pose, yaw_of
 from .._validation import short
 from ._cli_output import console, fail, reports_errors
+
+if TYPE_CHECKING:
+    from ..skill._suggest import Suggestion
 
 __all__ = [
     "SuggestingTeacher",
@@ -133,13 +137,13 @@ def default_ranges(skill: Any) -> dict[str, dict[str, Any]]:
     return out
 
 
-def placement_text(objects: dict[str, Any], names: list[str]) -> str:
+def placement_text(objects: Mapping[str, Any], names: Sequence[str]) -> str:
     """One line: where each object goes (m; a pose's yaw in degrees)."""
     parts = []
     for name in names:
         coords, yaw = _where(objects[name])
-        parts.append(f"{name} at ({coords})" + ("" if yaw is None else f" turned {yaw:.0f} deg"))
-    return ", ".join(parts)
+        parts.append(f"{name} at ({coords}) m" + ("" if yaw is None else f", yaw {yaw:.0f} deg"))
+    return "; ".join(parts)
 
 
 def _where(value: Any) -> tuple[str, float | None]:
@@ -207,9 +211,15 @@ class SuggestingTeacher:
                 )
                 fail(f"--object {name}: {path}'s demonstrations hold it as a {kind}: give {give}")
 
-    def next_text(self) -> str:
-        """Where the next take's objects go."""
-        found = self.skill.suggest(self.ranges, n=1)
+    def suggest(self) -> list[Suggestion]:
+        """The next take's placement (a list of one, or none where nothing inside the ranges
+        is within reach)."""
+        return self.skill.suggest(self.ranges, n=1)
+
+    def next_text(self, found: list[Suggestion] | None = None) -> str:
+        """Where the next take's objects go (``found``: :meth:`suggest`'s, made here if
+        None)."""
+        found = self.suggest() if found is None else found
         if not found:
             return "no placement inside the ranges is within reach: place the objects yourself"
         where = placement_text(found[0].objects, self.skill.object_names)
