@@ -5,6 +5,8 @@ assertion."""
 from __future__ import annotations
 
 import json
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -495,28 +497,107 @@ def _pbdkit(*args: str, **kw: Any) -> subprocess.Popen[str]:
 
 
 COASTER_OBJECTS = ["--object", "glass=/objects/glass", "--object", "coaster=/objects/coaster"]
+#: An object's place in a ``put ...`` line of `pbdkit ros record --suggest`.
+PLACED = re.compile(r"(\w+) at \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\)")
 
 
-def coaster_round_trip(workdir: str, takes: str = "5", placement: str = "5") -> None:
-    """`pbdkit ros sim --teach` replays the teacher and `pbdkit ros record --auto` records
-    the takes; `pbdkit learn` learns them; `pbdkit ros sim --perturb move` and `pbdkit ros
-    run` (two processes) run the skill on a new placement with the coaster moved while the
-    glass is carried: the sim judges it a success, and every command it received is within
-    the limits."""
-    work = Path(workdir)
-    demos, skill, report = work / "demos.npz", work / "skill.npz", work / "report.json"
-    teach = _pbdkit("ros", "sim", "--task", "coaster", "--teach", "--takes", takes,
-                    "--time-scale", "10")  # fmt: skip
-    rec = _pbdkit("ros", "record", "--out", str(demos), "--takes", takes, "--auto",
-                  *COASTER_OBJECTS, "--gripper-joint", "gripper:0:1",
-                  "--timeout", "15")  # fmt: skip
+def _teacher(takes: int, seed: int) -> subprocess.Popen[str]:
+    """`pbdkit ros sim --teach` (10x real time), the teacher's placements and motions of
+    ``seed``: its takes begin when a recorder subscribes."""
+    return _pbdkit("ros", "sim", "--task", "coaster", "--teach", "--takes", str(takes),
+                   "--seed", str(seed), "--time-scale", "10")  # fmt: skip
+
+
+def _recorder(demos: Path, takes: int, *extra: str) -> subprocess.Popen[str]:
+    """`pbdkit ros record --auto`, ``takes`` takes into ``demos``."""
+    return _pbdkit("ros", "record", "--out", str(demos), "--takes", str(takes), "--auto",
+                   *COASTER_OBJECTS, "--gripper-joint", "gripper:0:1", "--timeout", "15",
+                   *extra)  # fmt: skip
+
+
+def _recorded(
+    teach: subprocess.Popen[str], rec: subprocess.Popen[str], takes: int, said: str = ""
+) -> str:
+    """Wait for the recorder (its output so far: ``said``), stop the teacher; all it said."""
     out, err = rec.communicate(timeout=120)
     teach.terminate()
     teach.communicate(timeout=10)
-    assert rec.returncode == 0 and f"{takes} take(s) recorded" in out, (rec.returncode, out, err)
+    said += out
+    assert rec.returncode == 0 and f"{takes} take(s) recorded" in said, (rec.returncode, said, err)
+    return said
+
+
+def _record_suggested(teach: subprocess.Popen[str], demos: Path, skill: Path, takes: int) -> None:
+    """`pbdkit ros record --suggest SKILL` over ``takes`` more takes of ``teach`` (the teacher
+    of seed 1: placements and motions the skill has not seen). It places the objects itself,
+    it does not follow the suggestions: this checks the record/update loop. Before each take
+    a line ``put ...`` names every object's place, the skill's first suggestion then (within
+    the 3 decimals printed) inside the default ranges of the skill it began with; after each
+    take the skill file loads and holds one more demonstration, the take that was appended
+    to ``demos``; the suggestion before the second take is not the first one. The files are
+    copied as each take leaves them and checked once the takes are done (loading them
+    meanwhile would take the recorder's CPU)."""
+    from pbdkit import Skill, load_demonstrations
+    from pbdkit.apps._cli_suggest import default_ranges
+
+    copies = [(skill.with_suffix(".0.npz"), demos.with_suffix(".0.npz"))]
+    for src, dst in zip((skill, demos), copies[0], strict=True):
+        shutil.copy(src, dst)
+    rec = _recorder(demos, takes, "--suggest", str(skill))
+    assert rec.stdout is not None
+    lines: list[str] = []
+    for line in rec.stdout:
+        lines.append(line)
+        if " updated: learned from " in line:  # both files are written before this line
+            k = len(copies)
+            copies.append((skill.with_suffix(f".{k}.npz"), demos.with_suffix(f".{k}.npz")))
+            for src, dst in zip((skill, demos), copies[k], strict=True):
+                shutil.copy(src, dst)
+    said = _recorded(teach, rec, takes, "".join(lines))
+    puts = [i for i, line in enumerate(lines) if line.startswith("put ")]
+    starts = [lines.index(f"take {k}: recording\n") for k in range(1, takes + 1)]
+    assert len(puts) == len(copies) == takes + 1, said
+    # a suggestion before each take, one after the last (for the next session)
+    assert [i in puts for i in sorted(puts + starts)] == [True, False] * takes + [True], said
+    began = Skill.load(copies[0][0])
+    first, ranges = len(began.demonstrations_ or []), default_ranges(began)
+    placed = []
+    for k, (skill_k, demos_k) in enumerate(copies):
+        learned, recorded = Skill.load(skill_k), load_demonstrations(demos_k)
+        assert learned.demonstrations_ is not None
+        assert len(learned.demonstrations_) == len(recorded) == first + k, (k, said)
+        if k:  # the take: the last of --out and the last the skill learned
+            np.testing.assert_array_equal(recorded[-1].t, learned.demonstrations_[-1].t)
+            np.testing.assert_array_equal(recorded[-1].joints, learned.demonstrations_[-1].joints)
+        put = {m[1]: np.array(m.groups()[1:], dtype=float) for m in PLACED.finditer(lines[puts[k]])}
+        assert sorted(put) == sorted(learned.object_names), lines[puts[k]]
+        expected = learned.suggest(ranges)[0].objects
+        for name, where in put.items():
+            np.testing.assert_allclose(where, expected[name], atol=6e-4, err_msg=lines[puts[k]])
+        placed.append(np.concatenate([put[name] for name in sorted(put)]))
+    assert np.abs(placed[1] - placed[0]).max() > 1e-3, (lines[puts[0]], lines[puts[1]])
+
+
+def coaster_round_trip(workdir: str, takes: str = "3", suggested: str = "2",
+                       placement: str = "5") -> None:  # fmt: skip
+    """`pbdkit ros sim --teach` replays the teacher and `pbdkit ros record --auto` records
+    ``takes``; `pbdkit learn` learns them; `pbdkit ros record --suggest` records
+    ``suggested`` more, updating the skill after each (:func:`_record_suggested`); `pbdkit
+    ros sim --perturb move` and `pbdkit ros run` (two processes) run the updated skill on a
+    new placement with the coaster moved while the glass is carried: the sim judges it a
+    success, and every command it received is within the limits."""
+    work = Path(workdir)
+    demos, skill, report = work / "demos.npz", work / "skill.npz", work / "report.json"
+    _recorded(_teacher(int(takes), 0), _recorder(demos, int(takes)), int(takes))
+    # While it learns: the next teacher starts (it waits for a recorder), _record_suggested
+    # imports what it checks with.
+    teach = _teacher(int(suggested), 1)
     learn = _pbdkit("learn", str(demos), "--out", str(skill))
+    import pbdkit.apps._cli_suggest  # noqa: F401
+
     lo, le = learn.communicate(timeout=120)
     assert learn.returncode == 0, (lo, le)
+    _record_suggested(teach, demos, skill, int(suggested))
     sim = _pbdkit("ros", "sim", "--task", "coaster", "--placement", placement, "--perturb",
                   "move", "--skill", str(skill), "--exit-after-run", "--report", str(report),
                   "--interpolate-from-desired-state")  # fmt: skip
@@ -611,6 +692,37 @@ def record_on_enter(workdir: str) -> None:
     print(f"OK: 2 takes of {durations[0]:.2f} s and {durations[1]:.2f} s")
 
 
+def record_suggest_poses(skill_file: str, workdir: str) -> None:
+    """`pbdkit ros record --suggest SKILL --takes 1` (Enter starts and stops the take), the
+    glass on a PoseStamped topic: it says where to put the glass, turned (the skill's
+    demonstrations hold it as a pose), and learns the take. The files: the caller's."""
+    demos = Path(workdir) / "demos.npz"
+    driver = subprocess.Popen([sys.executable, __file__, "moving_katana", "30"])
+    glass = subprocess.Popen([sys.executable, __file__, "publish_pose", "/objects/glass",
+                              "0.4,0.1,0.1", "0.4,0.1,0.1"])  # fmt: skip
+    rec = subprocess.Popen(
+        [sys.executable, "-m", "pbdkit", "ros", "record", "--out", str(demos), "--takes", "1",
+         "--object", "glass=/objects/glass", "--suggest", skill_file, "--timeout", "15"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert rec.stdin is not None
+    lines: list[str] = []
+    for wait_for in ("Enter starts a take", "recording (Enter stops it)"):
+        _wait_for_text(rec, wait_for, lines)
+        time.sleep(0.5)
+        rec.stdin.write("\n")
+        rec.stdin.flush()
+    out, err = rec.communicate(timeout=30)
+    for proc in (driver, glass):
+        proc.terminate()
+        proc.wait(timeout=10)
+    said = "".join(lines) + out
+    assert rec.returncode == 0, (rec.returncode, said, err)
+    assert "learned from 6 demonstrations" in said, said
+    assert said.startswith("put glass at (") and " turned " in said.splitlines()[0], said
+    print("OK: 1 take, learned")
+
+
 def sim_cameras() -> None:
     """`pbdkit ros sim --cameras` publishes the stereo tracker's estimates on /objects/NAME:
     within 3 mm of the placement, not the placement itself."""
@@ -650,6 +762,7 @@ def sim_cameras() -> None:
 CASES["moving_katana"] = moving_katana
 CASES["sim_cameras"] = sim_cameras
 CASES["record_on_enter"] = record_on_enter
+CASES["record_suggest_poses"] = record_suggest_poses
 
 
 if __name__ == "__main__":

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosgraph import run_on_private_graph
+from rosgraph import needs_ros, run_on_private_graph
 
-from pbdkit import Skill
+from pbdkit import Demonstration, Robot, Skill, load_demonstrations, save_demonstrations
 from pbdkit.ros import JointOrder, parse_joint_map
 from pbdkit.ros._graph import private_graph_env
 
@@ -145,10 +145,12 @@ def test_pbdkit_ros_run_checks_the_scene_before_it_sends_anything(
 
 def test_record_learn_and_run_the_coaster_over_a_real_graph(tmp_path: Path) -> None:
     # The whole chain on a private graph (tests/ros_cases.py, coaster_round_trip): `pbdkit ros
-    # sim --teach` replays five takes (10x real time), `pbdkit ros record --auto` records them,
-    # `pbdkit learn` learns the skill, and `pbdkit ros run` runs it against `pbdkit ros sim
-    # --perturb move` on a sixth placement: the coaster slides 5 cm while the glass is
-    # carried, the run re-plans, and the sim judges the glass placed.
+    # sim --teach` replays three takes (10x real time), `pbdkit ros record --auto` records
+    # them, `pbdkit learn` learns the skill; `pbdkit ros record --suggest` records two more
+    # (another teacher's), saying before each where to put the objects and updating the skill
+    # after each; `pbdkit ros run` runs the updated skill against `pbdkit ros sim --perturb
+    # move` on another placement: the coaster slides 5 cm while the glass is carried, the
+    # run re-plans, and the sim judges the glass placed.
     done = run_on_private_graph("test_record_learn_and_run", "coaster_round_trip",
                                 str(tmp_path), timeout=240)  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
@@ -162,6 +164,37 @@ def test_record_starts_and_stops_takes_on_enter(tmp_path: Path) -> None:
                                 timeout=90)  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.startswith("OK: 2 takes"), done.stdout
+
+
+def test_record_suggest_keeps_the_poses_the_skill_learned(
+    demos: list[Demonstration], robot: Robot, tmp_path: Path
+) -> None:
+    # `pbdkit ros record --suggest` with the glass skill learned with the glass as a pose, the
+    # glass on a PoseStamped topic (tests/ros_cases.py, record_suggest_poses): the take keeps
+    # the pose, as the skill's demonstrations do, and the skill learns it. (It kept the
+    # topic's position, as without --suggest, and the update refused the take once recorded.)
+    from synthetic_teacher import N_STEPS
+
+    posed = []
+    for d in demos:
+        pose = np.eye(4)
+        pose[:3, 3] = d.objects["glass"]
+        posed.append(Demonstration(d.t, d.joints, {"glass": pose}))  # no gripper: no joint
+    path = tmp_path / "skill.npz"
+    Skill.learn(posed, robot, n_steps=N_STEPS, random_state=0).save(path)
+    done = run_on_private_graph("test_record_suggest_poses", "record_suggest_poses", str(path),
+                                str(tmp_path), timeout=90)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("OK: 1 take, learned"), done.stdout
+    (take,), learned = load_demonstrations(tmp_path / "demos.npz"), Skill.load(path)
+    glass = np.eye(4)
+    glass[:3, 3] = [0.4, 0.1, 0.1]  # where the topic has it, not turned
+    np.testing.assert_allclose(take.objects["glass"], glass, atol=1e-12)
+    assert learned.demonstrations_ is not None and len(learned.demonstrations_) == 6
+    np.testing.assert_array_equal(learned.demonstrations_[-1].joints, take.joints)
+    np.testing.assert_array_equal(
+        learned.demonstrations_[-1].objects["glass"], take.objects["glass"]
+    )
 
 
 def test_ros_sim_publishes_what_the_cameras_see() -> None:
@@ -212,3 +245,31 @@ def test_run_and_record_settings_refuse_what_cannot_work() -> None:
         RecordSettings(takes=0)
     with pytest.raises(ValueError, match="--rest must be > 0"):
         RecordSettings(rest=0.0)
+
+
+def test_record_refuses_an_out_file_its_takes_could_not_join(
+    demos: list[Demonstration], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Demonstrations with a gripper in --out, no --gripper-joint: refused in one line before
+    # the graph, not after the first take (which save_demonstrations refused, the take lost).
+    from typer.testing import CliRunner
+
+    from pbdkit.apps import _cli_ros
+    from pbdkit.apps._cli import app
+
+    needs_ros()
+    monkeypatch.setattr(_cli_ros, "run_node", _no_graph)
+    out = tmp_path / "demos.npz"
+    save_demonstrations(demos, out)
+    before = out.read_bytes()
+    result = CliRunner().invoke(
+        app, ["ros", "record", "--out", str(out), "--object", "glass=0.4,0.1,0.1"]
+    )
+    said = result.output.strip()
+    assert result.exit_code == 2 and len(said.splitlines()) == 1, said
+    assert said.endswith("objects ['glass'], with a gripper; record into another file"), said
+    assert out.read_bytes() == before
+
+
+def _no_graph(*args: object, **kwargs: object) -> None:
+    raise AssertionError("joined the ROS graph: the options should have been refused")

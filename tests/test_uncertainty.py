@@ -183,3 +183,52 @@ def test_ros_record_refuses_a_range_without_a_skill_to_suggest(tmp_path: Path) -
     result = CliRunner().invoke(app, ["ros", "record", "--out", str(out), "--range", "g=0:1,0:1"])
     assert result.exit_code == 2 and "--range goes with --suggest SKILL" in result.output
     assert not out.exists()
+
+
+GLASS, GRIPPER = ["--object", "glass=0.4,0.1,0.1"], ["--gripper-joint", "gripper:0:1"]
+SO100 = str(Path(__file__).parent / "data" / "arms" / "so100.urdf")  # 5 joints, not the Katana's
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["--robot", "panda", *GLASS, *GRIPPER],
+         r"a skill of the joints \['pan', .*\], not of --robot's \['panda_joint1'"),
+        (["--robot", SO100, "--tip", "gripper", *GLASS, *GRIPPER],
+         r"not of --robot's \['shoulder_pan'"),
+        (["--object", "cup=0.4,0.1,0.1", *GRIPPER], r"have objects \['glass'\]; record them"),
+        (["--object", "glass=0.4,0.1,0.1,1,0,0,0", *GRIPPER],
+         r"--object glass: .* hold it as a position: give x,y,z$"),
+        (GLASS, r"learned with a gripper: give --gripper-joint NAME:OPEN:CLOSED$"),
+    ],
+)  # fmt: skip
+def test_ros_record_refuses_a_skill_its_takes_could_not_update(
+    skill: Skill, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, args: list[str], match: str
+) -> None:
+    # `pbdkit ros record --suggest SKILL` refuses, in one line and before it joins the graph,
+    # what Skill.update would refuse after the first take: another arm (another joint count,
+    # or as many joints of other names), other objects, a pose for an object the skill has as
+    # a position, no gripper joint for a skill with a gripper (the glass skill has one).
+    import re
+
+    from rosgraph import needs_ros
+    from typer.testing import CliRunner
+
+    from pbdkit.apps import _cli_ros
+    from pbdkit.apps._cli import app
+
+    needs_ros()
+    monkeypatch.setattr(_cli_ros, "run_node", _no_graph)
+    path, out = tmp_path / "skill.npz", tmp_path / "demos.npz"
+    skill.save(path)
+    result = CliRunner().invoke(
+        app, ["ros", "record", "--out", str(out), "--suggest", str(path), *args]
+    )
+    said = result.output.strip()
+    assert result.exit_code == 2 and len(said.splitlines()) == 1, said
+    assert re.search(match, said), said
+    assert not out.exists()
+
+
+def _no_graph(*args: object, **kwargs: object) -> None:
+    raise AssertionError("joined the ROS graph: the options should have been refused")

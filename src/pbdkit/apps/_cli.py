@@ -617,10 +617,29 @@ def view(
             "keeps clear of it, and the arm is marked where it comes within 2 cm."
         ),
     ] = None,
+    suggest: Annotated[
+        int,
+        typer.Option(
+            "--suggest",
+            help="With --skill: show the N placements (0..100) where a demonstration would "
+            "help most (pbdkit suggest; a skill file of version 3) as ghosts of the objects, "
+            "to drag the objects to.",
+        ),
+    ] = 0,
+    ranges: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--range",
+            help="With --suggest: NAME=x0:x1,y0:y1[,yaw0:yaw1], where NAME may be put (as for "
+            "pbdkit suggest); default: each object's demonstrated box widened to twice its "
+            "half-width on each side.",
+        ),
+    ] = None,
 ) -> None:
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
     it in physics, or online while you drag (needs the view extra: pip install 'pbdkit\\[view]')."""
+    from ._cli_suggest import parse_range
     from ._view_serve import check_port, sigint_deferred
 
     if (task is None) == (skill_path is None):
@@ -630,6 +649,12 @@ def view(
             "--robot, --object and --scene apply to --skill; a task has its own arm, objects "
             "and scene"
         )
+    if task is not None and (suggest or ranges):
+        fail("--suggest and --range apply to --skill (a skill file)")
+    if ranges and not suggest:
+        fail("--range goes with --suggest N")
+    check_int(suggest, "--suggest", minimum=0, maximum=100)
+    parsed = [parse_range(r) for r in ranges or []]
     check_seed(seed)
     check_port(port)  # before the teaching and learning; serve checks again as it binds
     with sigint_deferred():  # a Ctrl+C in these imports ends the command after them
@@ -644,6 +669,7 @@ def view(
     if skill_path is not None:
         from ..skill._skill import Skill
         from ._view_plan import check_view_objects, typical_placements
+        from ._view_suggest import suggest_settings
         from ._view_urdf import arm_urdf
 
         if not skill_path.is_file():
@@ -652,6 +678,9 @@ def view(
         urdf = arm_urdf(robot, skill.robot)
         objects = typical_placements(skill)
         objects.update(check_view_objects(parse_objects(obj or []), skill))
+        suggesting = suggest_settings(
+            skill, suggest, parsed, say=lambda line: console.print(line, soft_wrap=True)
+        )
         title = f"skill {skill_path.name}"
         obstacles = None
         if scene is not None:
@@ -661,7 +690,15 @@ def view(
             skill.check(skill.reproduce(objects).joints[:1], obstacles, objects=objects)
 
         def factory(server: Any) -> ViewApp:
-            return ViewApp(skill, objects, server, urdf=urdf, title=title, scene=obstacles)
+            return ViewApp(
+                skill,
+                objects,
+                server,
+                urdf=urdf,
+                title=title,
+                scene=obstacles,
+                suggest=suggesting,
+            )
 
     else:
         assert task is not None

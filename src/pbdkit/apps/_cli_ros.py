@@ -184,6 +184,15 @@ def record(
             "on each side.",
         ),
     ] = None,
+    view: Annotated[
+        bool,
+        typer.Option(
+            help="With --suggest: also show, in a browser on 127.0.0.1 (--port), where the "
+            "next take's objects go, as ghosts that turn when an object is in place, with "
+            "the arm and the objects live (pip install 'pbdkit\\[view]').",
+        ),
+    ] = False,
+    port: Annotated[int, typer.Option(help="With --view: the page's port.")] = 8080,
 ) -> None:
     """Record demonstrations on a live arm (kinesthetic teaching: putting the arm in its
     hand-guiding mode is yours). A take starts and stops on Enter, or with --takes N --auto on
@@ -194,6 +203,8 @@ def record(
 
     if ranges and suggest is None:
         fail("--range goes with --suggest SKILL")
+    if view and suggest is None:
+        fail("--view goes with --suggest SKILL")
     teacher = None
     if suggest is not None:
         parsed = [parse_range(r) for r in ranges or []]
@@ -218,47 +229,81 @@ def record(
     )
     objects = parse_objects(obj or [], sources=True)
     check_sources(objects)
-    if teacher is not None:
-        taught = (teacher.skill.demonstrations_ or [])[0]
-        if set(taught.object_names) != set(objects):
-            fail(
-                f"--suggest {suggest}'s demonstrations have objects {list(taught.object_names)}"
-                f"; record them (--object NAME=SOURCE for each)"
-            )
     names = _robot_joint_names(robot, tip)
-    if teacher is not None and teacher.skill.n_joints != len(names):
-        fail(f"--suggest {suggest} is a skill of {teacher.skill.n_joints} joints, not {robot}'s")
+    if teacher is not None:
+        teacher.check_takes(names, objects, gripper=gripper_joint is not None)
     demos = load_demonstrations(out) if out.exists() else []
-    if demos and (demos[0].n_joints != len(names) or set(demos[0].object_names) != set(objects)):
+    if demos and (
+        demos[0].n_joints != len(names)
+        or set(demos[0].object_names) != set(objects)
+        or (demos[0].gripper is None) != (gripper_joint is None)
+    ):
         fail(
             f"{out} holds demonstrations of {demos[0].n_joints} joints with objects "
-            f"{list(demos[0].object_names)}; record into another file"
+            f"{list(demos[0].object_names)}, {'without' if demos[0].gripper is None else 'with'}"
+            " a gripper; record into another file"
         )
+    page = None if teacher is None or not view else _record_view(teacher, robot, port)
 
     def save(demo: Any) -> None:
         demos.append(demo)
         save_demonstrations(demos, out)
         if teacher is not None:
             _say(teacher.took(demo))
-            _say(teacher.next_text())
+            announce()
+
+    def announce() -> None:
+        assert teacher is not None
+        found = teacher.suggest()
+        _say(teacher.next_text(found))
+        if page is not None:
+            page.show(found)
 
     pressed = _enter_presses() if not auto else (lambda: False)
 
     def body(node: Any, stop: Any) -> int:
         if teacher is not None:
-            _say(teacher.next_text())
-        sources = ObjectSources(node, objects, log=_say)
+            announce()
+        sources = ObjectSources(node, objects, [] if teacher is None else teacher.posed, log=_say)
         n = record_takes(
-            node, names, sources, settings, save=save, toggled=pressed, log=_say, stop=stop
+            node,
+            names,
+            sources,
+            settings,
+            save=save,
+            toggled=pressed,
+            log=_say,
+            stop=stop,
+            on_sample=None if page is None else page.sample,
         )
         _say(f"{n} take(s) recorded; {out} holds {len(demos)} demonstration(s)")
         return 0
 
-    code = run_node(body, "pbdkit_ros_record")
+    try:
+        code = run_node(body, "pbdkit_ros_record")
+    finally:
+        if page is not None:
+            page.close()
     if isinstance(code, Exception):
         typer.echo(f"error: {code}", err=True)
         raise typer.Exit(3)
     raise typer.Exit(code)
+
+
+def _record_view(teacher: Any, robot: str, port: int) -> Any:
+    """``--view``: the page (:class:`pbdkit.apps._view_record.RecordView`), served."""
+    try:
+        import viser  # noqa: F401
+        import yourdfpy  # noqa: F401
+    except ImportError as exc:
+        fail(f"--view needs the view extra (pip install 'pbdkit[view]'): {exc}")
+    from ._view_record import RecordView
+    from ._view_urdf import arm_urdf
+
+    urdf = arm_urdf(robot, teacher.skill.robot)
+    page = RecordView(teacher.skill, port, urdf=urdf, ranges=teacher.ranges)
+    _say(f"view: serving {page.url}")
+    return page
 
 
 def _robot_joint_names(robot: str, tip: str | None) -> list[str]:

@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -15,6 +16,9 @@ from .._io import write_json
 from .._rotations import as_pose, yaw_of
 from .._validation import short
 from ._cli_output import console, fail, reports_errors
+
+if TYPE_CHECKING:
+    from ..skill._suggest import Suggestion
 
 __all__ = [
     "SuggestingTeacher",
@@ -133,13 +137,13 @@ def default_ranges(skill: Any) -> dict[str, dict[str, Any]]:
     return out
 
 
-def placement_text(objects: dict[str, Any], names: list[str]) -> str:
+def placement_text(objects: Mapping[str, Any], names: Sequence[str]) -> str:
     """One line: where each object goes (m; a pose's yaw in degrees)."""
     parts = []
     for name in names:
         coords, yaw = _where(objects[name])
-        parts.append(f"{name} at ({coords})" + ("" if yaw is None else f" turned {yaw:.0f} deg"))
-    return ", ".join(parts)
+        parts.append(f"{name} at ({coords}) m" + ("" if yaw is None else f", yaw {yaw:.0f} deg"))
+    return "; ".join(parts)
 
 
 def _where(value: Any) -> tuple[str, float | None]:
@@ -165,11 +169,57 @@ class SuggestingTeacher:
                 f"{path} does not keep its demonstrations (a skill file of version 1 or 2): "
                 "learn it again with pbdkit learn"
             )
+        self.taught = self.skill.demonstrations_[0]
         self.ranges = default_ranges(self.skill) if ranges is None else ranges
 
-    def next_text(self) -> str:
-        """Where the next take's objects go."""
-        found = self.skill.suggest(self.ranges, n=1)
+    @property
+    def posed(self) -> list[str]:
+        """The objects its demonstrations hold as poses: the takes must hold them so too."""
+        from ..data._placement import is_pose
+
+        return [k for k in self.taught.object_names if is_pose(self.taught.objects[k])]
+
+    def check_takes(self, joint_names: list[str], sources: dict[str, Any], gripper: bool) -> None:
+        """Refuse, in one line (exit 2), takes that :meth:`pbdkit.Skill.update` would refuse
+        after the first one: of another arm (``joint_names``, the robot's), of other objects
+        (``sources``: --object NAME=SOURCE), fixed coordinates of a position for an object
+        it holds as a pose or the other way round, a gripper (``gripper``: --gripper-joint)
+        where it has none or none where it has one."""
+        skill, path = self.skill, self.path
+        if list(skill.robot.joint_names) != list(joint_names):
+            fail(
+                f"--suggest {path} is a skill of the joints {list(skill.robot.joint_names)}, "
+                f"not of --robot's {list(joint_names)}"
+            )
+        if set(self.taught.object_names) != set(sources):
+            fail(
+                f"--suggest {path}'s demonstrations have objects "
+                f"{list(self.taught.object_names)}; record them (--object NAME=SOURCE for each)"
+            )
+        if skill.has_gripper != gripper:
+            with_, fix = (
+                ("with", "give --gripper-joint NAME:OPEN:CLOSED")
+                if skill.has_gripper
+                else ("without", "leave out --gripper-joint")
+            )
+            fail(f"--suggest {path} was learned {with_} a gripper: {fix}")
+        posed = self.posed
+        for name, source in sources.items():
+            if not isinstance(source, str) and (np.size(source) == 7) != (name in posed):
+                kind, give = (
+                    ("pose", "x,y,z,qw,qx,qy,qz") if name in posed else ("position", "x,y,z")
+                )
+                fail(f"--object {name}: {path}'s demonstrations hold it as a {kind}: give {give}")
+
+    def suggest(self) -> list[Suggestion]:
+        """The next take's placement (a list of one, or none where nothing inside the ranges
+        is within reach)."""
+        return self.skill.suggest(self.ranges, n=1)
+
+    def next_text(self, found: list[Suggestion] | None = None) -> str:
+        """Where the next take's objects go (``found``: :meth:`suggest`'s, made here if
+        None)."""
+        found = self.suggest() if found is None else found
         if not found:
             return "no placement inside the ranges is within reach: place the objects yourself"
         where = placement_text(found[0].objects, self.skill.object_names)

@@ -21,6 +21,8 @@ a panel:
 - for a task: ``run in physics`` executes the plan in MuJoCo and replays it with the outcome;
   ``online`` runs the controller in the physics loop at the wall clock's pace, the objects still
   draggable (an object in the hand stays there).
+- with ``suggest``: where to demonstrate next, as ghosts of the objects to drag them to
+  (:class:`pbdkit.apps._view_suggest.ViewSuggestions`).
 
 The library does not need any of this: viser and yourdfpy are the optional extra
 ``pbdkit[view]`` and are imported only by the view's modules, when the command runs (the server:
@@ -54,6 +56,7 @@ from ._view_plan import (
     OBJECT_RGBS,
     LatestWins,
     Plan,
+    camera_pose,
     carry_transform,
     coarse_skill,
     constraint_colors,
@@ -61,8 +64,12 @@ from ._view_plan import (
     make_plan,
     quat_wxyz,
     step_gaussians,
+    wxyz_of,
+    yaw_deg,
+    yaw_pose,
 )
 from ._view_scene import SceneLayer
+from ._view_suggest import SuggestSettings, ViewSuggestions
 
 if TYPE_CHECKING:
     import viser
@@ -109,22 +116,6 @@ def metrics_text(metrics: Mapping[str, Any]) -> str:
     )
 
 
-def _wxyz_of(value: Float) -> tuple[float, float, float, float]:
-    if value.shape == (4, 4):
-        w = quat_wxyz(value[:3, :3])
-        return (float(w[0]), float(w[1]), float(w[2]), float(w[3]))
-    return (1.0, 0.0, 0.0, 0.0)
-
-
-def _yaw_deg(value: Float) -> float:
-    return math.degrees(math.atan2(float(value[1, 0]), float(value[0, 0])))
-
-
-def _yaw_pose(position: Float, yaw_deg: float) -> Float:
-    """A pose at ``position`` turned about the vertical by ``yaw_deg``."""
-    return pose_matrix(position, exp_map([0.0, 0.0, math.radians(yaw_deg)]))
-
-
 class ViewApp:
     """The page: scene, panel, planner (module docstring).
     :func:`pbdkit.apps._view_serve.serve` runs it.
@@ -154,6 +145,8 @@ class ViewApp:
     scene : Scene, optional
         Obstacles, drawn and kept clear of by the fused controller (a task's own scene is
         checked without it): :class:`pbdkit.apps._view_scene.SceneLayer`.
+    suggest : SuggestSettings, optional
+        Show the skill's suggestions as ghosts (:attr:`suggestions`).
     """
 
     def __init__(
@@ -167,6 +160,7 @@ class ViewApp:
         title: str = "pbdkit view",
         preview_steps: int | None = PREVIEW_STEPS,
         scene: Scene | None = None,
+        suggest: SuggestSettings | None = None,
     ) -> None:
         self.skill = skill
         #: Steps of a preview plan (None, or a skill of no more steps: no previews).
@@ -196,6 +190,7 @@ class ViewApp:
         self.controller = "fused"
         self.colors = constraint_colors([JOINT, *skill.object_names])
         self.plan: Plan | None = None
+        self.suggestions: ViewSuggestions | None = None  # set last: moves may come before
         self.step = 0
         self.plans = 0
         self._run_thread: threading.Thread | None = None
@@ -219,6 +214,7 @@ class ViewApp:
             target=self._play_loop, name="pbdkit-view-play", daemon=True
         )
         self._player.start()
+        self.suggestions = None if suggest is None else ViewSuggestions(self, suggest)
         self.request_plan()
 
     # ------------------------------------------------------------------ scene
@@ -226,13 +222,8 @@ class ViewApp:
         scene = self.server.scene
         scene.set_up_direction("+z")
         scene.add_grid("/grid", width=2.0, height=2.0, cell_size=0.1, position=(0.0, 0.0, -0.001))
-        # Look at the middle of the base and the objects, from a distance the arm's reach sets.
-        objects = np.mean([position_of(v) for v in self.objects.values()], axis=0)
-        reach = float(self.skill.reach) if np.isfinite(self.skill.reach) else 1.0
-        centre = 0.5 * objects + np.array([0.0, 0.0, 0.15 * reach])
-        view = np.array([0.9, -1.2, 0.8])
-        self.server.initial_camera.position = centre + 1.05 * reach * view / np.linalg.norm(view)
-        self.server.initial_camera.look_at = centre
+        camera = self.server.initial_camera
+        camera.position, camera.look_at = camera_pose(self.skill.reach, self.objects.values())
         if self.ts is not None:
             from ._view_world import SimDrawing
 
@@ -257,7 +248,7 @@ class ViewApp:
                 disable_rotations=not rotations,
                 depth_test=False,
                 position=np.asarray(position_of(value), dtype=np.float64),
-                wxyz=_wxyz_of(value),
+                wxyz=wxyz_of(value),
             )
             if self.ts is None:
                 color = self.colors.get(name, (90, 90, 90))
@@ -325,7 +316,7 @@ class ViewApp:
                 yaw: Any = None
                 if value.shape == (4, 4):
                     yaw = gui.add_number(
-                        f"{name} yaw (deg)", initial_value=round(_yaw_deg(value), 2), step=1.0
+                        f"{name} yaw (deg)", initial_value=round(yaw_deg(value), 2), step=1.0
                     )
                     yaw.on_update(self._field_changed(name))
                 pos.on_update(self._field_changed(name))
@@ -372,7 +363,7 @@ class ViewApp:
             return np.asarray(position, dtype=np.float64)
         rot = matrix_from_quaternion(wxyz)
         if self.ts is not None:
-            return _yaw_pose(position, math.degrees(math.atan2(rot[1, 0], rot[0, 0])))
+            return yaw_pose(position, math.degrees(math.atan2(rot[1, 0], rot[0, 0])))
         pose = np.eye(4)
         pose[:3, :3] = rot
         pose[:3, 3] = position
@@ -391,9 +382,9 @@ class ViewApp:
                     self._set_fields(name, old)
                 return
             if old.shape == (4, 4) and self.ts is not None:
-                value = _yaw_pose(p, float(yaw.value))
+                value = yaw_pose(p, float(yaw.value))
             elif old.shape == (4, 4):  # in 3-D: turned about the vertical by the yaw's change
-                turn = exp_map([0.0, 0.0, math.radians(float(yaw.value) - _yaw_deg(old))])
+                turn = exp_map([0.0, 0.0, math.radians(float(yaw.value) - yaw_deg(old))])
                 value = pose_matrix(p, turn @ old[:3, :3])
             else:
                 value = p
@@ -433,13 +424,15 @@ class ViewApp:
             if not from_handle:
                 handle = self.handles[name]
                 handle.position = np.asarray(position_of(value), dtype=np.float64)
-                handle.wxyz = _wxyz_of(value)
+                handle.wxyz = wxyz_of(value)
             self._set_fields(name, value)
             live = self._live
             if live is not None:
                 with live.lock:
                     live.moves[name] = value.copy()
         self.request_plan(arrived, preview=preview)
+        if self.suggestions is not None:
+            self.suggestions.moved()
 
     def hold(self, name: str, held: bool) -> None:
         """Mark object ``name`` as held (a drag under way: plans are previews) or released,
@@ -456,7 +449,7 @@ class ViewApp:
         try:
             pos.value = np.round(position_of(value), 4)
             if yaw is not None:
-                yaw.value = round(_yaw_deg(value), 2)
+                yaw.value = round(yaw_deg(value), 2)
         finally:
             self._updating_fields = False
 
@@ -791,6 +784,8 @@ class ViewApp:
         self._stop.set()
         self._playing.clear()
         self.planner.close()
+        if self.suggestions is not None:
+            self.suggestions.close()
         thread = self._run_thread
         if thread is not None:
             thread.join(timeout=10.0)

@@ -14,18 +14,19 @@
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import warnings
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .._rotations import exp_map, quaternion_from_matrix
+from .._rotations import exp_map, pose_matrix, quaternion_from_matrix
 from .._validation import short
 from ..data._placement import position_of, rotation_of
 from ..reproduction._constraints import JOINT
@@ -46,6 +47,7 @@ __all__ = [
     "OBJECT_RGBS",
     "LatestWins",
     "Plan",
+    "camera_pose",
     "carry_transform",
     "check_view_objects",
     "coarse_skill",
@@ -55,6 +57,9 @@ __all__ = [
     "quat_wxyz",
     "step_gaussians",
     "typical_placements",
+    "wxyz_of",
+    "yaw_deg",
+    "yaw_pose",
 ]
 
 Float = NDArray[np.float64]
@@ -358,6 +363,37 @@ def ellipsoid_pose(cov: Float, n_sd: float = N_SD) -> tuple[Float, Float]:
 def quat_wxyz(rot: Float) -> Float:
     """Unit quaternion (w, x, y, z) of a rotation matrix."""
     return quaternion_from_matrix(rot)
+
+
+def camera_pose(reach: float, placements: Iterable[Any]) -> tuple[Float, Float]:
+    """Where the page's camera starts, and the point it looks at: the middle of the base and
+    the objects (their mean position; the base alone without any), from a distance the arm's
+    ``reach`` (m; 1 if unknown) sets."""
+    positions = [position_of(v) for v in placements]
+    objects = np.mean(positions, axis=0) if positions else np.zeros(3)
+    reach = float(reach) if np.isfinite(reach) else 1.0
+    centre = 0.5 * objects + np.array([0.0, 0.0, 0.15 * reach])
+    view = np.array([0.9, -1.2, 0.8])
+    return centre + 1.05 * reach * view / np.linalg.norm(view), centre
+
+
+def wxyz_of(value: Float) -> tuple[float, float, float, float]:
+    """The (w, x, y, z) quaternion a node takes for a placement: a pose's (4x4) rotation, the
+    identity for a position (3,)."""
+    if value.shape == (4, 4):
+        w = quat_wxyz(value[:3, :3])
+        return (float(w[0]), float(w[1]), float(w[2]), float(w[3]))
+    return (1.0, 0.0, 0.0, 0.0)
+
+
+def yaw_deg(value: Float) -> float:
+    """A pose's (4x4) yaw about the vertical (degrees)."""
+    return math.degrees(math.atan2(float(value[1, 0]), float(value[0, 0])))
+
+
+def yaw_pose(position: Float, yaw: float) -> Float:
+    """A pose at ``position`` turned about the vertical by ``yaw`` (degrees)."""
+    return pose_matrix(position, exp_map([0.0, 0.0, math.radians(yaw)]))
 
 
 def check_view_objects(given: Mapping[str, Any], skill: Skill) -> dict[str, Float]:

@@ -11,7 +11,7 @@ rest), and stops after ``rest`` s at rest (the samples of that rest but the firs
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -121,11 +121,15 @@ def record_takes(
     toggled: Callable[[], bool] = lambda: False,
     log: Callable[[str], None] = print,
     stop: Callable[[], bool] = lambda: False,
+    on_sample: Callable[[Float, Mapping[str, Float]], None] | None = None,
 ) -> int:
     """Record takes until ``settings.takes`` are done or ``stop()``; each finished take goes
     to ``save`` (a Demonstration). ``toggled()`` true: Enter was pressed (start or stop a take,
-    without ``auto``). Returns the number of takes. Raises TimeoutError without joint states
-    or an object's first message within ``settings.timeout``."""
+    without ``auto``). ``on_sample(q, objects)``: the latest joint angles and where the
+    objects are, at each turn of the loop that has new joint states (it must return at once:
+    ``pbdkit ros record --view`` hands them to its page). Returns the number of takes. Raises
+    TimeoutError without joint states or an object's first message within
+    ``settings.timeout``."""
     import rclpy
 
     def spin(seconds: float) -> None:
@@ -161,6 +165,8 @@ def record_takes(
         spin(0.01)
         sources.check_silent()
         batch, samples[:] = list(samples), []
+        if on_sample is not None and batch:
+            on_sample(batch[-1][1], sources.values)
         if not settings.auto and toggled():  # Enter: start or stop a take
             if take is None:
                 take = _start(sources, batch[-1:], hand, settings)
