@@ -65,12 +65,13 @@ Warp = Callable[[list[Float], list[Float], float], list[Float]]
 #: joints, the gripper, the hand relative to one object, a trajectory's columns): a coordinate
 #: that barely moves (a hand sliding on a table, a wrist held still) is not blown up into noise.
 SPREAD_FLOOR = 0.1
-#: The hand relative to an object enters the features as p / (|p| + NEAR_SCALE) (m): near the
-#: object a millimetre counts as much as a centimetre does 10 cm away. In metres, a hand 5 mm
-#: short of a box looked like one on it, and the DTW put the arrival anywhere in the dwell
-#: before the grasp (the xArm7's pauses teacher: arrivals over 4.3 % of the duration; 1.3 %
-#: with this).
-NEAR_SCALE: float | None = 0.05
+#: None: the hand relative to an object enters the features in metres. A length (m): as
+#: p / (|p| + NEAR_SCALE), near the object a millimetre counting as much as a centimetre does
+#: 10 cm away. In metres, a hand 5 mm short of a box looks like one on it, and the DTW puts the
+#: arrival anywhere in the dwell before the grasp (the xArm7's pauses teacher: arrivals over
+#: 4.3 % of the duration; 1.3 % with 0.05). Not the default yet: the sharper phases it gives
+#: changed which obstacles the avoidance can keep clear of (docs/alignment.md).
+NEAR_SCALE: float | None = None
 #: At most this many samples of a series enter the DTW; a longer one is decimated (evenly, its
 #: first and last samples kept) and the warped times of the samples in between are interpolated.
 #: The DTW's cost grows with the square of it: 500 aligns five demonstrations of 1000 samples in
