@@ -110,7 +110,9 @@ def test_a_sliding_coaster_is_followed_online_and_missed_offline(
         for k, r in {"online": online, "offline": offline, "knew": reference}.items()
     }
     assert online.success and reference.success and not offline.success
-    assert abs(err["online"] - err["knew"]) < 3.0
+    # Measured: 3.5 mm (0.1 and 3.6 mm; under 3 before the gripper was scored in the joint
+    # space's K).
+    assert abs(err["online"] - err["knew"]) < 4.5
     assert err["offline"] == pytest.approx(50.0, abs=10.0)  # missed by the displacement
     # The controller was told where the coaster went: its last position is the final one.
     np.testing.assert_allclose(online.online.objects["coaster"][-1], final, atol=1e-9)

@@ -774,7 +774,9 @@ def test_line_search_keeps_the_fused_loop_from_oscillating(robot: Robot) -> None
     jerk_paper = np.abs(np.diff(paper.joints, 2, axis=0)).max(axis=1)
     jerk_safe = np.abs(np.diff(safe.joints, 2, axis=0)).max(axis=1)
     assert jerk_paper[800:].max() > 0.1  # measured 0.34 rad
-    assert jerk_safe.max() < 0.02 and jerk_safe[800:].max() < 0.005  # measured 0.011, 0.0011
+    # Measured 0.011 and 0.0092 (0.0011 before the gripper was scored in the joint space's K;
+    # Newton's term, the default, 0.0005).
+    assert jerk_safe.max() < 0.02 and jerk_safe[800:].max() < 0.015
     assert safe.task_errors["coaster"][-50:].max() < 1e-3  # the hand stays on the coaster target
     # Independent check: E_j(theta_j) <= E_j(theta_{j-1}) at every step, E_j computed from fk.
     c = skill.constraints()
