@@ -24,7 +24,7 @@ import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,9 +35,6 @@ from ..data._placement import position_of
 from ..skill._suggest import Suggestion
 from ._cli_suggest import default_ranges, placement_text, ranges_from_options
 from ._view_plan import LatestWins, constraint_colors, wxyz_of
-
-if TYPE_CHECKING:
-    from ._view import ViewApp
 
 __all__ = [
     "FAINT_OPACITY",
@@ -56,6 +53,21 @@ __all__ = [
 
 Float = NDArray[np.float64]
 RGB = tuple[int, int, int]
+
+
+class ViewLike(Protocol):
+    """What :class:`ViewSuggestions` uses of :class:`pbdkit.apps._view.ViewApp` (a protocol,
+    so that this module does not import the view that imports it)."""
+
+    server: Any
+    skill: Any
+    colors: Any
+    objects: dict[str, Float]
+    handles: dict[str, Any]
+    _lock: Any
+
+    def move_object(self, name: str, placement: Any) -> None: ...
+
 
 #: An object this close to its ghost (m, between the positions) ...
 MATCH_DISTANCE = 0.01
@@ -352,11 +364,11 @@ class ViewSuggestions:
 
     Parameters
     ----------
-    app : ViewApp
+    app : ViewLike
     settings : SuggestSettings
     """
 
-    def __init__(self, app: ViewApp, settings: SuggestSettings) -> None:
+    def __init__(self, app: ViewLike, settings: SuggestSettings) -> None:
         self.app, self.settings, self.seed = app, settings, settings.seed
         self.ghosts = SuggestionGhosts(
             app.server,
