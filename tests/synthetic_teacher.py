@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from pbdkit.data._demonstration import Demonstration
 from pbdkit.robots._robot import Robot
+from pbdkit.skill._skill import Skill
 
 Float = NDArray[np.float64]
 
@@ -86,3 +87,20 @@ def unseen_glass(demos: list[Demonstration]) -> tuple[Float, float]:
     mean = np.mean([d.objects["glass"] for d in demos], axis=0)
     new = mean + np.array([0.05, -0.07, 0.0])
     return new, float(np.linalg.norm(new - mean))
+
+
+def bare_skill(skill: Skill) -> Skill:
+    """``skill`` built by hand from its parts, without what it was learned from (its
+    demonstrations, options and sample counts): as a skill file of version 1 or 2 loads."""
+    return Skill(
+        skill.robot,
+        skill.gmms,
+        n_steps=skill.n_steps,
+        object_names=skill.object_names,
+        has_gripper=skill.has_gripper,
+        reach=skill.reach,
+        duration=skill.duration,
+        rotation_base=skill.rotation_base,
+        aligned=skill.aligned_,
+        calibration=skill.calibration_,
+    )

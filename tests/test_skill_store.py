@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 from numpy.typing import NDArray
-from synthetic_teacher import synthetic_demos
+from synthetic_teacher import bare_skill, synthetic_demos
 
 from pbdkit._io import open_npz
 from pbdkit.data._demonstration import Demonstration, save_demonstrations
@@ -92,22 +92,6 @@ def oriented(robot: Robot, posed_demos: list[Demonstration]) -> Skill:
         task_objects=("coaster", "glass"),
         align=False,
         calibrate=False,
-    )
-
-
-def _bare(skill: Skill) -> Skill:
-    """The skill built by hand from its parts, without what it was learned from."""
-    return Skill(
-        skill.robot,
-        skill.gmms,
-        n_steps=skill.n_steps,
-        object_names=skill.object_names,
-        has_gripper=skill.has_gripper,
-        reach=skill.reach,
-        duration=skill.duration,
-        rotation_base=skill.rotation_base,
-        aligned=skill.aligned_,
-        calibration=skill.calibration_,
     )
 
 
@@ -294,7 +278,7 @@ def test_a_skill_without_demonstrations_writes_version_1_or_2_and_says_to_learn_
     name: str, version: int, request: pytest.FixtureRequest, tmp_path: Path
 ) -> None:
     learned: Skill = request.getfixturevalue(name)
-    bare = _bare(learned)
+    bare = bare_skill(learned)
     assert bare.demonstrations_ is None and bare.learn_options_ is None and bare.n_samples_ is None
     for what in ("update", "suggest"):
         with pytest.raises(ValueError, match=ONE_LINE.format(what)):
@@ -336,7 +320,7 @@ def test_the_constructor_checks_what_it_is_given(positions: Skill) -> None:
     }
 
     def build(**change: Any) -> Skill:
-        bare = _bare(positions)
+        bare = bare_skill(positions)
         return Skill(
             bare.robot,
             bare.gmms,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_teacher import bare_skill
 
 from pbdkit import Skill
 from pbdkit.data._demonstration import Demonstration
@@ -50,14 +51,7 @@ def test_every_part_grows_away_from_what_was_demonstrated(
 
 
 def test_uncertainty_refuses_in_one_line(skill: Skill) -> None:
-    bare = Skill(
-        skill.robot,
-        skill.gmms,
-        n_steps=skill.n_steps,
-        object_names=skill.object_names,
-        has_gripper=skill.has_gripper,
-        reach=skill.reach,
-    )
+    bare = bare_skill(skill)
     with pytest.raises(ValueError, match=r"re-learn it with Skill\.learn to use uncertainty"):
         bare.uncertainty({"glass": np.zeros(3)})
     with pytest.raises(ValueError, match=r"re-learn it with Skill\.learn to use suggest") as info:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic_teacher import N_STEPS, synthetic_demos
+from synthetic_teacher import N_STEPS, bare_skill, synthetic_demos
 
 from pbdkit import Skill
 from pbdkit.data._demonstration import Demonstration
@@ -75,14 +75,7 @@ def test_k_is_chosen_again_once_the_demonstrations_have_doubled(
 def test_an_update_refuses_what_it_cannot_learn(
     skill: Skill, demos: list[Demonstration], robot: Robot
 ) -> None:
-    bare = Skill(
-        skill.robot,
-        skill.gmms,
-        n_steps=skill.n_steps,
-        object_names=skill.object_names,
-        has_gripper=skill.has_gripper,
-        reach=skill.reach,
-    )
+    bare = bare_skill(skill)
     with pytest.raises(ValueError, match=r"re-learn it with Skill.learn to use update") as info:
         bare.update(demos[0])
     assert "\n" not in str(info.value)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 from browser import free_port
+from synthetic_teacher import bare_skill
 
 from pbdkit._rotations import matrix_from_quaternion, pose_matrix, yaw_of
 from pbdkit.skill._skill import Skill
@@ -205,14 +206,7 @@ def test_view_command_suggest_options(skill: Skill, tmp_path: Path, monkeypatch:
 
     path = tmp_path / "skill.npz"
     skill.save(path)
-    bare = Skill(
-        skill.robot,
-        skill.gmms,
-        n_steps=skill.n_steps,
-        object_names=skill.object_names,
-        has_gripper=skill.has_gripper,
-        reach=skill.reach,
-    )
+    bare = bare_skill(skill)
     old = tmp_path / "v1.npz"
     bare.save(old)
     served: list[Any] = []

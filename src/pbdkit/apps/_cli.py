@@ -30,6 +30,7 @@ from ._cli_options import (
     OnlineOption,
     PerturbHelp,
     PerturbOption,
+    SuggestRangeOption,
     check_bag_output,
     check_lasa_shape,
     check_output,
@@ -626,15 +627,7 @@ def view(
             "to drag the objects to.",
         ),
     ] = 0,
-    ranges: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--range",
-            help="With --suggest: NAME=x0:x1,y0:y1[,yaw0:yaw1], where NAME may be put (as for "
-            "pbdkit suggest); default: each object's demonstrated box widened to twice its "
-            "half-width on each side.",
-        ),
-    ] = None,
+    ranges: SuggestRangeOption = None,
 ) -> None:
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run

@@ -28,6 +28,7 @@ __all__ = [
     "OnlineOption",
     "PerturbHelp",
     "PerturbOption",
+    "SuggestRangeOption",
     "check_bag_output",
     "check_lasa_shape",
     "check_output",
@@ -168,6 +169,16 @@ OnlineOption = Annotated[
         help="Run the controllers in the physics loop, step by step from the measured joint "
         "angles, told the object positions at 15 Hz (default: reproduce once, play the "
         "trajectory).",
+    ),
+]
+# Shared by `view` and `ros record` (each with --suggest).
+SuggestRangeOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--range",
+        help="With --suggest: NAME=x0:x1,y0:y1[,yaw0:yaw1], where NAME may be put (as for "
+        "pbdkit suggest); default: each object's demonstrated box widened to twice its "
+        "half-width on each side.",
     ),
 ]
 # Where a --perturb help lists the registered perturbations (pbdkit.sim.register_perturbation).

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 import typer
 
 from .._validation import short
-from ._cli_options import PerturbHelp, parse_objects
+from ._cli_options import PerturbHelp, SuggestRangeOption, parse_objects
 from ._cli_output import fail, reports_errors
 from ._cli_ros_node import run_node
 from ._cli_ros_sim import sim_command
@@ -175,15 +175,7 @@ def record(
             "(Skill.suggest); after it, update the skill with the take and write it back.",
         ),
     ] = None,
-    ranges: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--range",
-            help="With --suggest: NAME=x0:x1,y0:y1[,yaw0:yaw1], where NAME may be put (as for "
-            "pbdkit suggest); default: its demonstrated box widened to twice its half-width "
-            "on each side.",
-        ),
-    ] = None,
+    ranges: SuggestRangeOption = None,
     view: Annotated[
         bool,
         typer.Option(

@@ -263,7 +263,6 @@ class FusedStep(ControllerStep):
     def reset(self) -> None:
         """Forget the last step (a loop starts: no reversal to damp)."""
         self._prev: Float | None = None
-        self._prev2 = 0.0
         self._radius2 = math.inf
 
     def set_objects(self, objs: Mapping[str, Float]) -> None:
@@ -339,12 +338,16 @@ class FusedStep(ControllerStep):
         limited = False
         # A fast step that reverses the last fast one: the trust region halves that step
         # (REVERSAL_FRACTION); otherwise it doubles, and is gone past max_step.
-        radius2 = self._radius2
-        if self._prev is not None:
-            if min(step2, self._prev2) > self.fast2 and _reverses(step, self._prev, self.fast):
-                radius2 = 0.25 * self._prev2
-            elif radius2 < math.inf:
-                radius2 = 4.0 * radius2 if radius2 < self.cap2 else math.inf
+        # (The last step's length only where this one is fast: slow steps skip it.)
+        radius2, prev, prev2 = self._radius2, self._prev, 0.0
+        reverses = False
+        if prev is not None and step2 > self.fast2:
+            prev2 = prev.dot(prev)
+            reverses = prev2 > self.fast2 and _reverses(step, prev, self.fast)
+        if reverses:
+            radius2 = 0.25 * prev2
+        elif radius2 < math.inf:
+            radius2 = 4.0 * radius2 if radius2 < self.cap2 else math.inf
         self._radius2 = radius2
         if step2 > radius2:
             step = step * math.sqrt(radius2 / step2)
@@ -380,8 +383,7 @@ class FusedStep(ControllerStep):
                 new = theta + 0.5 * (new - theta)
                 x_new, jac_new, axes_new = self.kinematics(new)
                 z_new[:n], z_new[n:] = new, x_new
-        self._prev = taken = new - theta
-        self._prev2 = taken.dot(taken)
+        self._prev = new - theta
         return new, x_new, jac_new, axes_new, limited
 
     # The step itself, under the interface's name: no wrapper, one call less per step.
