@@ -298,6 +298,12 @@ def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: 
 
     taper = enc.taper
     assert taper == max(TAPER_MIN, round(TAPER * joints.shape[0]))
+    # Each moving body is moved around its own steps within the margin; together they are the
+    # encounter's.
+    assert set(enc.spans) == {enc.moving, *enc.others}
+    assert min(lo for lo, _ in enc.spans.values()) == enc.lo
+    assert max(hi for _, hi in enc.spans.values()) == enc.hi
+    assert enc.others == {}, "one body met: the Gaussian below is its alone"
     checked = 0
     for k in (enc.lo - taper // 2, (enc.lo + enc.hi) // 2, enc.hi + taper // 3):
         q = joints[k]
@@ -311,10 +317,10 @@ def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: 
                 for e in np.eye(q.shape[0])
             ]
         )
-        w = enc.weight(k)
+        w = enc.weight(k, enc.moving)
         rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / SIGMA**2
         np.testing.assert_allclose(lam, rho * np.outer(r, r), rtol=1e-5, atol=1e-6 * rho * r @ r)
-        push = enc.ref[k] + enc.amplitude * w - enc.escape.dot(point(q))
+        push = enc.ref[k] + enc.lift(k)[0] * w - enc.escape.dot(point(q))
         expected = lam @ q + rho * r * push
         np.testing.assert_allclose(info, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
         checked += 1
@@ -350,7 +356,7 @@ def test_the_passes_look_only_where_the_check_finds_the_scene_near(
     every, some = out[0][1], out[1][1]
     assert len(every.encounters) == len(some.encounters) == 1
     a, b = every.encounters[0], some.encounters[0]
-    assert (a.lo, a.hi, a.amplitude, a.moving) == (b.lo, b.hi, b.amplitude, b.moving)
+    assert (a.lo, a.hi, a.needs, a.moving) == (b.lo, b.hi, b.needs, b.moving)
     assert a.others.keys() == b.others.keys()
     assert every.precisions.keys() == some.precisions.keys()
     for step, (lam, info) in every._terms.items():
@@ -384,20 +390,29 @@ def test_a_seven_joint_arm_bends_around_a_box_on_its_way_down() -> None:
     plain = skill.reproduce(told)
     own = np.flatnonzero(~plain.lead_in)
     closes = np.flatnonzero(plain.gripper & ~plain.lead_in)[0]
+    box = {"box": Box((0.04, 0.04, 0.04), (0.0, 0.0, -0.02))}
     centre = plain.positions[(own[0] + closes) // 2] - np.array([0.10, 0.0, 0.0])
-    scene = Scene(
-        [Box((0.05, 0.05, 0.05), centre, name="obstacle")],
-        objects={"box": Box((0.04, 0.04, 0.04), (0.0, 0.0, -0.02))},
-    )
+    scene = Scene([Box((0.05, 0.05, 0.05), centre, name="obstacle")], objects=box)
     through = skill.reproduce(told, scene=scene, avoid=False)
     assert through.clearance is not None and through.clearance.min() < -0.02
-    assert any("obstacle" in c for c in through.collisions)
+    met = {c[2] for c in through.collisions if "obstacle" in c}
+    assert "panda_hand" in met and len(met) >= 3, met
     around = skill.reproduce(told, scene=scene, margin=0.02)
     assert around.infeasible is None and not around.collisions
     assert around.clearance is not None and around.clearance.min() >= 0.02 - TOLERANCE
     # The grasp is kept: the hand meets the box where the plain run does.
     grasp = np.flatnonzero(around.gripper & ~around.lead_in)[0]
     assert np.linalg.norm(around.positions[grasp] - plain.positions[closes]) < 0.005
+    # Lower down (0.6 of the way), 6 cm behind the path: keeping clear took the hand 35 cm off
+    # the grasp, where the skill's box constraint is 7 mm loose (over TIGHT), and that run was
+    # kept, unreported. Now it is reported, and the plain run comes back, its contact listed.
+    lower = plain.positions[own[0] + int(0.6 * (closes - own[0]))] - np.array([0.06, 0.0, 0.0])
+    behind = Scene([Box((0.05, 0.05, 0.05), lower, name="obstacle")], objects=box)
+    with pytest.warns(CollisionWarning, match=r"mm from the box constraint at sample \d+"):
+        out = skill.reproduce(told, scene=behind, margin=0.02)
+    assert out.infeasible is not None and any("obstacle" in c for c in out.collisions)
+    blind = skill.reproduce(told, scene=behind, avoid=False)
+    np.testing.assert_array_equal(out.joints, blind.joints)
 
 
 def test_capsule_bounds_bracket_coals_cylinder_distance() -> None:

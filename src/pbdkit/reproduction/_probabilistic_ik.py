@@ -62,6 +62,12 @@ Remake = Callable[[RunSetup], ReproductionResult]
 TIGHT = 0.005
 #: ... by more than this (m) further from it than the plain run.
 CONFLICT = 0.005
+#: In a constraint's tightest phase (its loosest direction's standard deviation within
+#: TIGHTEST times its smallest along the path), a hand moved further than LEFT_SIGMAS of those
+#: deviations (and CONFLICT) leaves it too: a skill learned 7 mm loose at its grasp is not
+#: given up by 20 cm there.
+TIGHTEST = 2.0
+LEFT_SIGMAS = 3.0
 
 
 class CollisionWarning(UserWarning):
@@ -206,14 +212,21 @@ def _leaves_tight(
     """Where the avoided run leaves a tight constraint of the skill that the plain run kept:
     the first (sample, constraint, the avoided run's hand error there in m) whose error grows
     by more than :data:`CONFLICT` where the constraint's standard deviation (its loosest
-    direction) is under :data:`TIGHT`; None where the clearance and the skill agree."""
+    direction) is under :data:`TIGHT`, or by more than :data:`LEFT_SIGMAS` of those deviations
+    in its tightest phase (:data:`TIGHTEST`); None where the clearance and the skill agree."""
     own = np.flatnonzero(_path_steps(avoided)[0])
     steps = np.floor(avoided.t[own] + 1e-9).astype(int)
+    # The plain run's samples by the skill's step: the two runs' lead-ins may differ in length.
+    kept = np.flatnonzero(_path_steps(plain)[0])
+    kept_steps = np.floor(plain.t[kept] + 1e-9).astype(int)
     for name in run.tasks:
         cov = run.constraints.task_cov[name][steps, :3, :3]
         loosest = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
-        grown = (avoided.task_errors[name] - plain.task_errors[name])[own]
-        bad = np.flatnonzero((loosest < TIGHT) & (grown > CONFLICT))
+        before = np.full(max(int(steps.max()), int(kept_steps.max())) + 1, np.inf)
+        before[kept_steps] = plain.task_errors[name][kept]
+        grown = avoided.task_errors[name][own] - before[steps]
+        tightest = (loosest < TIGHTEST * loosest.min()) & (grown > LEFT_SIGMAS * loosest)
+        bad = np.flatnonzero((grown > CONFLICT) & ((loosest < TIGHT) | tightest))
         if bad.size:
             sample = int(own[bad[0]])
             return (sample, name, float(avoided.task_errors[name][sample]))
