@@ -26,6 +26,7 @@ from pbdkit.reproduction._avoid import (
     TAPER_MIN,
     TOLERANCE,
     Avoidance,
+    _Encounter,
     _meetings,
 )
 from pbdkit.reproduction._controller import PlanFailedWarning
@@ -362,6 +363,36 @@ def test_the_passes_look_only_where_the_check_finds_the_scene_near(
     for step, (lam, info) in every._terms.items():
         np.testing.assert_array_equal(lam, some._terms[step][0])
         np.testing.assert_array_equal(info, some._terms[step][1])
+
+
+def test_a_bumps_lift_is_the_envelope_of_its_steps_needs() -> None:
+    # a_k = max_j need_j c(k - j), c a raised cosine over `taper` steps, by brute force: each
+    # step lifted by what it and its neighbours need, a step far from every need not at all.
+    rng = np.random.default_rng(5)
+    at, need = rng.choice(80, 12, replace=False), rng.uniform(0.01, 0.2, 12)
+    needs = {int(j): float(v) for j, v in zip(at, need, strict=True)}
+    enc = _Encounter(
+        body="box",
+        lo=0,
+        hi=79,
+        joint=1,
+        local=np.zeros(3),
+        escape=np.array([0.0, 0.0, 1.0]),
+        needs=needs,
+        ref=np.zeros(200),
+        taper=9,
+    )
+    steps = np.arange(-20, 120)
+    expected = [
+        max(v * (0.5 + 0.5 * np.cos(np.pi * min(abs(k - j) / 9, 1.0))) for j, v in needs.items())
+        for k in steps
+    ]
+    np.testing.assert_allclose(enc.lift(steps), expected, rtol=0, atol=1e-15)
+    for j, v in needs.items():
+        assert enc.lift(j)[0] >= v  # every step gets at least its own need
+    assert enc.amplitude == max(needs.values()) == enc.lift(steps).max()
+    far = steps[np.all(np.abs(steps[:, None] - np.array(list(needs))[None]) >= 9, axis=1)]
+    assert far.size and not enc.lift(far).any()
 
 
 def test_a_body_met_twice_is_bent_around_twice() -> None:
