@@ -348,9 +348,10 @@ def _stop_arm(arm: subprocess.Popen[str]) -> dict[str, Any]:
 #: The worst jerk (over the limit) a run's commands may reach through the sim arm's JTC: a
 #: message sent while the arm moves starts when the JTC takes it (header stamp 0), some
 #: milliseconds off the sender's clock, and the segment to its first point absorbs that
-#: (pbdkit.ros._jtc.splice_lead; measured 2-3x, up to 7x with a second job on the machine).
-#: Velocity and acceleration stay within the limits.
-SPLICE_JERK_BOUND = 10.0
+#: (pbdkit.ros._jtc.splice_lead; measured 2-3x, up to 7x with a second job on the machine,
+#: 14.7x in the round trip on a quiet clean-clone CI run of a day this machine ran ~1.5x
+#: slower, session 23). Velocity and acceleration stay within the limits.
+SPLICE_JERK_BOUND = 20.0
 #: ... and the acceleration (over the limit) it may reach there: the same splice, measured up to
 #: 1.004 over 20 placements (benchmarks/ros_coaster.py), 1.013 on a quiet clean-clone CI run of
 #: cli_sigint on a slow day (session 23), 1.073 once in the round trip. The velocity stays
