@@ -125,15 +125,24 @@ class _Encounter:
     def weight(self, k: int, body: str | None = None) -> float:
         """w_k: 1 over lo .. hi (``body``'s own span, if given), a raised cosine to 0 over
         ``taper`` steps on either side."""
-        gap = self._gap(k, body)
-        if gap <= 0:
-            return 1.0
-        return 0.5 * (1.0 + math.cos(math.pi * min(gap, self.taper) / self.taper))
+        return _taper_weight(self._gap(k, body), self.taper)
 
     def _gap(self, k: int, body: str | None) -> int:
         """How many steps k lies outside lo .. hi (``body``'s span, if given); <= 0 inside."""
         lo, hi = self.spans.get(body, (self.lo, self.hi)) if body else (self.lo, self.hi)
         return lo - k if k < lo else k - hi
+
+
+def _taper_weight(gap: int, taper: int) -> float:
+    """1 at a gap <= 0 steps outside a span, a raised cosine to 0 at ``taper`` steps."""
+    if gap <= 0:
+        return 1.0
+    return 0.5 * (1.0 + math.cos(math.pi * min(gap, taper) / taper))
+
+
+def _moving(prox: Any) -> int:
+    """Which of a pair's two bodies moves with the arm (0 or 1)."""
+    return 0 if prox.joints[0] > 0 else 1
 
 
 def _meetings(
@@ -251,7 +260,7 @@ class Avoidance:
         rots, origins = frames
         nearest: dict[str, tuple[int, Any]] = {}
         for step, prox in hits:
-            moving = 0 if prox.joints[0] > 0 else 1
+            moving = _moving(prox)
             name = prox.bodies[moving]
             span = enc.spans.setdefault(name, [step, step])
             span[0], span[1] = min(span[0], step), max(span[1], step)
@@ -260,7 +269,7 @@ class Avoidance:
             if name not in nearest or prox.distance < nearest[name][1].distance:
                 nearest[name] = (step, prox)
         for name, (step, prox) in nearest.items():
-            moving = 0 if prox.joints[0] > 0 else 1
+            moving = _moving(prox)
             joint, j = int(prox.joints[moving]), step - self.first
             local = rots[j, joint].T.dot(prox.points[moving] - origins[j, joint])
             points = np.einsum("kab,b->ka", rots[:, joint], local) + origins[:, joint]
@@ -274,7 +283,7 @@ class Avoidance:
     def _moved(enc: _Encounter, step: int, prox: Any) -> float:
         """How much of the lift ``prox``'s moving body was given at ``step``: its weight
         there, or 1 for a body the encounter does not move yet (its point stays where it is)."""
-        name = prox.bodies[0 if prox.joints[0] > 0 else 1]
+        name = prox.bodies[_moving(prox)]
         return enc.weight(step, name) if name in enc.spans else 1.0
 
     def _covering(self, body: str, lo: int, hi: int) -> _Encounter | None:
@@ -299,7 +308,7 @@ class Avoidance:
         the point and direction where it came nearest, each step's need its shortfall."""
         step, prox = min(hits, key=lambda hit: hit[1].distance)
         j = step - self.first  # the path's sample
-        moving = 0 if prox.joints[0] > 0 else 1
+        moving = _moving(prox)
         joint = int(prox.joints[moving])
         rots, origins = frames
         local = rots[j, joint].T.dot(prox.points[moving] - origins[j, joint])
@@ -317,7 +326,7 @@ class Avoidance:
             taper=max(TAPER_MIN, round(TAPER * joints.shape[0])),
             moving=prox.bodies[moving],
         )
-        own = [k for k, p in hits if p.bodies[0 if p.joints[0] > 0 else 1] == enc.moving]
+        own = [k for k, p in hits if p.bodies[_moving(p)] == enc.moving]
         enc.spans[enc.moving] = [min(own), max(own)]
         for k, p in hits:
             enc.needs[k] = max(enc.needs.get(k, 0.0), self._shortfall(p))
@@ -330,7 +339,7 @@ class Avoidance:
         head-on is passed, not backed away from: up (the base frame's z) without it, unless
         the other body is above; where that leaves less than :data:`ESCAPE_MIN`, the contact
         normal without it."""
-        moving = 0 if prox.joints[0] > 0 else 1
+        moving = _moving(prox)
         away = -np.asarray(prox.normal) if moving == 0 else np.asarray(prox.normal)
         lo, hi = max(j - 1, 0), min(j + 1, joints.shape[0] - 1)
         rows = self._point_rows(j, prox.points[moving], int(prox.joints[moving]), frames)
@@ -375,9 +384,10 @@ class Avoidance:
             for step in range(lo, hi + 1):
                 k = step - first
                 for name, (joint, local, ref) in points.items():
-                    if enc._gap(step, name) > enc.taper:
+                    gap = enc._gap(step, name)
+                    if gap > enc.taper:
                         continue  # this body is moved only around its own span
-                    w = enc.weight(step, name)
+                    w = _taper_weight(gap, enc.taper)
                     rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
                     point = rots[k, joint].dot(local) + origins[k, joint]
                     row = enc.escape.dot(self._point_rows(k, point, joint, frames))
