@@ -543,6 +543,33 @@ def _recorded(
     return said
 
 
+def _check_whole_takes(demos: Path, teachers: list[tuple[int, int]]) -> None:
+    """Each take in ``demos`` holds the whole of the teacher's demonstration it recorded
+    (``teachers``: (seed, takes) of each `pbdkit ros sim --teach`, in order): from its first
+    posture to its last (within 0.05 rad), the gripper closing when the teacher closed it (within
+    0.5 s of the take's start; the recorder keeps up to PRE_ROLL = 0.3 s before the motion).
+    A recorder that stopped reading the graph while it saved a take or updated the skill began
+    the next take 1.4-1.9 s into its motion (0.6-1.2 rad from its first posture), its gripper
+    closing 0.5-0.7 s late (the states read late took the gripper's latest opening)."""
+    from pbdkit import load_demonstrations
+    from pbdkit.ros._teach_replay import TeacherReplay
+    from pbdkit.sim import get_task
+
+    spec = get_task("coaster")
+    taught = [take.demo for seed, n in teachers for take in TeacherReplay(spec, seed, n).takes]
+    recorded = load_demonstrations(demos)
+    assert len(recorded) == len(taught), (len(recorded), len(taught))
+
+    def grasp(d: Any) -> float:
+        return float(d.t[int(np.argmax(d.gripper > 0.5))] - d.t[0])
+
+    for k, (got, want) in enumerate(zip(recorded, taught, strict=True)):
+        first = float(np.abs(got.joints[0] - want.joints[0]).max())
+        last = float(np.abs(got.joints[-1] - want.joints[-1]).max())
+        late = grasp(got) - grasp(want)
+        assert first < 0.05 and last < 0.05 and abs(late) < 0.5, (k, first, last, late)
+
+
 def _record_suggested(teach: subprocess.Popen[str], demos: Path, skill: Path, takes: int) -> None:
     """`pbdkit ros record --suggest SKILL` over ``takes`` more takes of ``teach`` (the teacher
     of seed 1: placements and motions the skill has not seen). It places the objects itself,
@@ -614,6 +641,7 @@ def coaster_round_trip(workdir: str, takes: str = "3", suggested: str = "2",
     lo, le = learn.communicate(timeout=120)
     assert learn.returncode == 0, (lo, le)
     _record_suggested(teach, demos, skill, int(suggested))
+    _check_whole_takes(demos, [(0, int(takes)), (1, int(suggested))])
     sim = _pbdkit("ros", "sim", "--task", "coaster", "--placement", placement, "--perturb",
                   "move", "--skill", str(skill), "--exit-after-run", "--report", str(report),
                   "--interpolate-from-desired-state")  # fmt: skip
@@ -626,7 +654,7 @@ def coaster_round_trip(workdir: str, takes: str = "3", suggested: str = "2",
     so, se = sim.communicate(timeout=60)
     got = json.loads(report.read_text())
     assert run.returncode == 0, (run.returncode, ro, re_, so, se)
-    assert sim.returncode == 0 and got["success"], (so, se, got)
+    assert sim.returncode == 0 and got["success"], (so, se, got, ro)
     assert got["perturb"]["name"] == "move" and "re-planned" in ro, (got["perturb"], ro)
     # The acceleration of a splice (a re-plan sent while the arm moves starts when the JTC takes
     # it, a few ms off the sender's clock; docs/ros2.md): measured up to 1.004 over 20

@@ -50,10 +50,11 @@ class JointStateListener:
 
     A message with none of the arm's joints (another part's, on the same topic) is ignored; one
     that gives some of them but not all is kept as :attr:`error` (the first one) and otherwise
-    ignored: the caller decides whether to stop.
+    ignored: the caller decides whether to stop. ``depth``: the subscription's history (the
+    messages kept for the node while it is busy elsewhere).
     """
 
-    def __init__(self, node: Any, topic: str, order: JointOrder) -> None:
+    def __init__(self, node: Any, topic: str, order: JointOrder, depth: int = QOS_DEPTH) -> None:
         from sensor_msgs.msg import JointState
 
         self.order, self.topic = order, topic
@@ -66,7 +67,7 @@ class JointStateListener:
         #: Called with each good message's time (its header stamp, s; where that is 0, when it
         #: came on the node's monotonic clock) and positions (the arm's order), if set.
         self.on_state: Callable[[float, Float], None] | None = None
-        self._sub = node.create_subscription(JointState, topic, self._on_message, QOS_DEPTH)
+        self._sub = node.create_subscription(JointState, topic, self._on_message, depth)
 
     def _on_message(self, msg: Any) -> None:
         if self._names.isdisjoint(msg.name):

@@ -6,12 +6,21 @@ A take starts and stops on Enter, or (``auto``) on motion: it starts when a join
 posture it rested at by :data:`MOTION_START` (with the last :data:`PRE_ROLL` s before it, at
 rest), and stops after ``rest`` s at rest (the samples of that rest but the first
 :data:`PRE_ROLL` s dropped). Putting the arm in its hand-guiding mode is the user's part.
+
+The node's messages are taken on a thread of their own (:func:`_receiving`), into a history of
+:data:`HISTORY` joint states: none is lost while the recorder is busy, saving a take or (``pbdkit
+ros record --suggest``) updating a skill with it for seconds while the teacher starts the next
+one. Each joint state takes the gripper's opening of the same stamp (:class:`_Hand`), not the
+latest one.
 """
 
 from __future__ import annotations
 
+import threading
 import time
-from collections.abc import Callable, Mapping
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,6 +45,9 @@ REST_SPEED = 0.02
 #: ``auto``: a take with less motion than this (s, between its pre-roll and its rest) is not
 #: a demonstration (a driver's settling, a bump) and is dropped, with a line.
 MIN_MOTION = 1.0
+#: The joint states' subscription history: 8 s of a 250 Hz driver (or of ``pbdkit ros sim
+#: --time-scale 10``) kept for a receiving thread held up (the GIL of a skill's update).
+HISTORY = 2000
 #: Faster than any arm (rad/s): a jump (a simulator's reset, a driver's restart) starts the
 #: wait for a take afresh from where the arm is now.
 JUMP_SPEED = 20.0
@@ -130,21 +142,30 @@ def record_takes(
     ``pbdkit ros record --view`` hands them to its page). Returns the number of takes. Raises
     TimeoutError without joint states or an object's first message within
     ``settings.timeout``."""
-    import rclpy
+    with _receiving(node):
+        return _record(node, joint_names, sources, settings, save, toggled, log, stop, on_sample)
 
-    def spin(seconds: float) -> None:
-        rclpy.spin_once(node, timeout_sec=seconds)
 
+def _record(
+    node: Any,
+    joint_names: list[str],
+    sources: ObjectSources,
+    settings: RecordSettings,
+    save: Callable[[Demonstration], None],
+    toggled: Callable[[], bool],
+    log: Callable[[str], None],
+    stop: Callable[[], bool],
+    on_sample: Callable[[Float, Mapping[str, Float]], None] | None,
+) -> int:
+    """:func:`record_takes`, the node's callbacks on another thread (:func:`_receiving`)."""
+    spin = time.sleep  # the messages come meanwhile
     order = JointOrder(joint_names, settings.joint_map)
-    samples: list[tuple[float, Float]] = []
-    listener = JointStateListener(node, settings.joint_states, order)
+    samples: deque[tuple[float, Float]] = deque()  # appended there, taken here
+    listener = JointStateListener(node, settings.joint_states, order, HISTORY)
     listener.on_state = lambda t, q: samples.append((t, q))
-    hand = None
-    if settings.gripper_joint is not None:
-        name, _, _ = settings.gripper_joint
-        hand = JointStateListener(node, settings.joint_states, JointOrder([name]))
+    hand = None if settings.gripper_joint is None else _Hand(node, settings)
     start = time.monotonic()
-    while listener.q is None or (hand is not None and hand.q is None):
+    while listener.q is None or (hand is not None and hand.listener.q is None):
         if listener.error is not None:
             raise ValueError(listener.error)
         if time.monotonic() - start > settings.timeout:
@@ -164,15 +185,15 @@ def record_takes(
     while (settings.takes is None or done < settings.takes) and not stop():
         spin(0.01)
         sources.check_silent()
-        batch, samples[:] = list(samples), []
+        batch = [samples.popleft() for _ in range(len(samples))]
         if on_sample is not None and batch:
             on_sample(batch[-1][1], sources.values)
         if not settings.auto and toggled():  # Enter: start or stop a take
             if take is None:
-                take = _start(sources, batch[-1:], hand, settings)
+                take = _start(sources, batch[-1:], hand)
                 log(f"take {done + 1}: recording (Enter stops it)")
                 continue
-            _append(take, batch, hand, settings)
+            _append(take, batch, hand)
             done += _finish(take, hand, save, log, done)
             take = None
             if settings.takes is None or done < settings.takes:
@@ -186,11 +207,11 @@ def record_takes(
                     recent, auto.rested_at = [], q
                 recent = [(s, p) for s, p in recent if t - s <= PRE_ROLL] + [(t, q)]
                 if settings.auto and auto.starts(q):
-                    take = _start(sources, recent, hand, settings)
+                    take = _start(sources, recent, hand)
                     auto.still_since = None
                     log(f"take {done + 1}: recording")
                 continue
-            _append(take, [(t, q)], hand, settings)
+            _append(take, [(t, q)], hand)
             if settings.auto and auto.stops(t, moving):
                 assert auto.still_since is not None
                 keep = int(np.searchsorted(take.t, auto.still_since + PRE_ROLL)) + 1
@@ -207,34 +228,66 @@ def record_takes(
     return done
 
 
-def _start(
-    sources: ObjectSources,
-    first: list[tuple[float, Float]],
-    hand: JointStateListener | None,
-    settings: RecordSettings,
-) -> Take:
+@contextmanager
+def _receiving(node: Any) -> Iterator[None]:
+    """The node's callbacks run on a thread of their own while the block runs."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, name="pbdkit-record", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        thread.join(timeout=2.0)
+
+
+class _Hand:
+    """The gripper joint's openings by stamp (0 open, 1 closed), from the same joint states:
+    a joint state of the arm takes the opening of its own stamp (the last one before it), so
+    that a take's gripper keeps its timing however late the recorder reads the states."""
+
+    def __init__(self, node: Any, settings: RecordSettings) -> None:
+        assert settings.gripper_joint is not None
+        name, self.open, self.closed = settings.gripper_joint
+        self.listener = JointStateListener(node, settings.joint_states, JointOrder([name]), HISTORY)
+        self.states: deque[tuple[float, float]] = deque()  # appended there, taken here
+        self.listener.on_state = lambda t, q: self.states.append((t, self.opening(q[0])))
+
+    def opening(self, position: float) -> float:
+        return float(np.clip((position - self.open) / (self.closed - self.open), 0.0, 1.0))
+
+    def at(self, t: float) -> float:
+        """The opening at stamp ``t``: of the last state at or before it (the first one's
+        before any); states before that one are forgotten (``t`` only grows)."""
+        states = self.states
+        while len(states) > 1 and states[1][0] <= t:
+            states.popleft()
+        if states:
+            return states[0][1]
+        assert self.listener.q is not None  # record_takes waits for a first state
+        return self.opening(float(self.listener.q[0]))
+
+
+def _start(sources: ObjectSources, first: list[tuple[float, Float]], hand: _Hand | None) -> Take:
     """A take from ``first`` on, the objects where they are now."""
     take = Take(objects={k: v.copy() for k, v in sources.values.items()})
-    _append(take, first, hand, settings)
+    _append(take, first, hand)
     return take
 
 
-def _append(
-    take: Take,
-    batch: list[tuple[float, Float]],
-    hand: JointStateListener | None,
-    settings: RecordSettings,
-) -> None:
-    g = _gripper_value(hand, settings)
+def _append(take: Take, batch: list[tuple[float, Float]], hand: _Hand | None) -> None:
     for t, q in batch:
         take.t.append(t)
         take.q.append(q)
-        take.gripper.append(g)
+        take.gripper.append(0.0 if hand is None else hand.at(t))
 
 
 def _finish(
     take: Take,
-    hand: JointStateListener | None,
+    hand: _Hand | None,
     save: Callable[[Demonstration], None],
     log: Callable[[str], None],
     done: int,
@@ -246,11 +299,3 @@ def _finish(
     save(take.demonstration(hand is not None))
     log(f"take {done + 1}: {take.t[-1] - take.t[0]:.1f} s, {len(take.t)} states; saved")
     return 1
-
-
-def _gripper_value(hand: JointStateListener | None, settings: RecordSettings) -> float:
-    """The gripper's opening as the demonstrations hold it: 0 open, 1 closed."""
-    if hand is None or hand.q is None or settings.gripper_joint is None:
-        return 0.0
-    _, open_, closed = settings.gripper_joint
-    return float(np.clip((hand.q[0] - open_) / (closed - open_), 0.0, 1.0))

@@ -16,9 +16,9 @@ Topics (QoS depth :data:`pbdkit.ros._graph.QOS_DEPTH`, reliable):
   (:class:`~pbdkit.ros._jtc.TrajectoryFollower`), not with ``teach``. A message starts when it
   arrives (its header stamp is not read); a refused one is logged and counted.
 
-With ``teach`` the replay begins once something subscribes to ``/joint_states`` (a recorder:
-started before or after ``pbdkit ros sim``, it sees the first take whole); until then the world
-waits at its first posture, its joint states published.
+With ``teach`` the replay begins :data:`SUBSCRIBER_GRACE` s after something subscribes to
+``/joint_states`` (a recorder: started before or after ``pbdkit ros sim``, it sees the first
+take whole); until then the world waits at its first posture, its joint states published.
 
 Header stamps: the node's clock when the world began plus the world's time of the state (to a
 physics step the node's clock itself, in real time; with ``time_scale`` > 1 the world's own
@@ -46,6 +46,11 @@ GRIPPER_TOPIC = "/gripper_controller/joint_trajectory"
 BASE_FRAME = "base_link"
 #: Seconds between the timer's ticks: the physics catches up, the joint states are published.
 PERIOD = 0.004
+#: With ``teach``: seconds (on the clock) the world still waits once ``/joint_states`` has a
+#: subscriber. The publisher's side of a match can come before the subscriber's, which loses
+#: what is published meanwhile: on a loaded machine a recorder missed the first 0.5-1.9 s of
+#: the first take's motion (the rest before it is 0.15 s at ``--time-scale 10``).
+SUBSCRIBER_GRACE = 1.0
 
 
 def trajectory_arrays(msg: Any) -> tuple[list[str], list[float], Any, Any, Any]:
@@ -142,6 +147,7 @@ class SimWorld:
         self._restart_clock()
         #: With ``teach``: the world waits for a subscriber on /joint_states (module docstring).
         self.waiting = self.settings.teach
+        self._subscribed_at: float | None = None  # when the waiting world first saw one
         self._timer = node.create_timer(PERIOD, self._tick)
 
     @staticmethod
@@ -197,6 +203,13 @@ class SimWorld:
         if self.waiting:
             self._restart_clock()
             if self._js.get_subscription_count() == 0:
+                self._subscribed_at = None
+            elif self._subscribed_at is None:
+                self._subscribed_at = self._clock()
+            if (
+                self._subscribed_at is None
+                or self._clock() - self._subscribed_at < SUBSCRIBER_GRACE
+            ):
                 self._publish()  # at rest, at world time 0
                 return
             self.waiting = False
