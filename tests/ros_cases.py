@@ -359,9 +359,13 @@ SPLICE_JERK_BOUND = 20.0
 SPLICE_ACCEL_BOUND = 1.1
 
 
-def _splice_ok(got: dict) -> bool:
+def _splice_ok(got: dict, stamped: bool = False) -> bool:
     """The sim arm's commands (``_stop_arm``): velocity within the limits, acceleration
-    and jerk within the splice's bounds."""
+    and jerk within the splice's bounds; ``stamped`` (`pbdkit ros run --latency`: each
+    message starts where the run planned it, whatever the graph's latency) all three within
+    the limits."""
+    if stamped:
+        return bool(got["worst"] <= 1.0)
     found = re.search(r"MotionPeaks\(velocity=([0-9.e+-]+)", got["out"])
     velocity = float(found.group(1)) if found else got["va"]
     return bool(
@@ -401,7 +405,7 @@ def cli_topics_renamed_gripper(skill_file: str) -> None:
     maps = [f"--joint-map={k}={v}" for k, v in RENAMED.items()]
     cli = _cli(skill_file, "--object", "glass=/objects/glass", "--grasped", "glass",
                "--gripper-controller", "gripper_controller", "--gripper-joint", "k_gripper:0:1",
-               *maps)  # fmt: skip
+               "--latency", "0.3", *maps)  # fmt: skip
     lines: list[str] = []
     _wait_for_line(cli, "running", lines)
     time.sleep(0.5)
@@ -413,7 +417,7 @@ def cli_topics_renamed_gripper(skill_file: str) -> None:
     text = "".join(lines) + out
     assert cli.returncode == 0, (cli.returncode, text, err)
     assert "re-planned" in text and f"{moved[1]:.3f}"[:-1] in text, text
-    assert _splice_ok(got), got
+    assert _splice_ok(got, stamped=True), got
     assert got.get("gripper") == 1.0, got
     print(f"OK: re-planned, gripper closed, worst v/a/j {got['worst']:.3f}")
 
@@ -649,20 +653,21 @@ def coaster_round_trip(workdir: str, takes: str = "3", suggested: str = "2",
     _wait_for_line(sim, "ros sim:", lines)
     run = _pbdkit("ros", "run", str(skill), "--controller", "arm_controller", *COASTER_OBJECTS,
                   "--grasped", "glass", "--gripper-controller", "gripper_controller",
-                  "--gripper-joint", "gripper:0:1", "--timeout", "15")  # fmt: skip
+                  "--gripper-joint", "gripper:0:1", "--timeout", "15",
+                  "--latency", "0.3")  # fmt: skip
     ro, re_ = run.communicate(timeout=120)
     so, se = sim.communicate(timeout=60)
     got = json.loads(report.read_text())
     assert run.returncode == 0, (run.returncode, ro, re_, so, se)
     assert sim.returncode == 0 and got["success"], (so, se, got, ro)
     assert got["perturb"]["name"] == "move" and "re-planned" in ro, (got["perturb"], ro)
-    # The acceleration of a splice (a re-plan sent while the arm moves starts when the JTC takes
-    # it, a few ms off the sender's clock; docs/ros2.md): measured up to 1.004 over 20
-    # placements (benchmarks/ros_coaster.py), and 1.073 in 1 of 3 runs of this case with the
-    # skill updated by two suggested takes (issue 39).
+    # --latency 0.3: each message stamped, the re-plans taking over 0.3 s after they are sent,
+    # so that the sim's JTC starts each where the run planned it: every command within the
+    # limits (0.55-0.75 of the acceleration, 0.60-0.64 of the jerk, with a busy loop beside it;
+    # unstamped its splices reached 1.23 x the acceleration limit and 14.7 x the jerk).
     assert got["peak_velocity_ratio"] <= 1.0, got
-    assert got["peak_acceleration_ratio"] <= SPLICE_ACCEL_BOUND, got
-    assert got["peak_jerk_ratio"] <= SPLICE_JERK_BOUND, got
+    assert got["peak_acceleration_ratio"] <= 1.0, got
+    assert got["peak_jerk_ratio"] <= 1.0, got
     print(f"OK: success; worst v/a/j received {got['peak_velocity_ratio']:.3f}/"
           f"{got['peak_acceleration_ratio']:.3f}/{got['peak_jerk_ratio']:.3f}")  # fmt: skip
 

@@ -307,7 +307,7 @@ def test_a_late_plan_is_joined_from_the_commands_not_asked_again(
     ctrl = skill.controller({"glass": glass})
     st = ctrl._timed
     assert st is not None
-    planner = _Late(st.setup, [20, 20, 0])
+    planner = _Late(st.setup, [20, 20, 100])
     stream = ctrl.stream(1000, planner=planner)
     q = demos[1].joints[0].copy()
     setpoints, given, lead = [q], glass, -1.0
@@ -380,3 +380,36 @@ def test_the_issues_coaster_push_stops_lift2_on_its_limit(
     speed = np.abs(np.diff(after, axis=0)) / ctrl.dt
     assert np.all(speed <= limits.velocity * (1.0 + 1e-9))
     assert ctrl.fault is None and ctrl.done
+
+
+def test_a_handover_delay_keeps_the_commands_already_sent(
+    skill: Skill, demos: list[Demonstration], limits: MotionLimits
+) -> None:
+    # `pbdkit ros run --latency D` (Controller.handover_delay): the commands sent are the arm's
+    # controller's for D s. Every plan, the first from rest, one on time and one late (joined),
+    # takes over no sooner than D after the call that took its reply, and the setpoints until
+    # then are those of the motion in force before that call.
+    glass, _ = unseen_glass(demos)
+    ctrl = skill.controller({"glass": glass})
+    st = ctrl._timed
+    assert st is not None
+    delay = 0.05
+    ctrl.handover_delay = delay
+    planner = _Late(st.setup, [20, 20, 100])
+    stream = ctrl.stream(1000, planner=planner)
+    q = demos[1].joints[0].copy()
+    setpoints, given, taken = [q], glass, []
+    for k in range(1400):
+        if k in (300, 700):
+            given = given + np.array([0.01, 0.0, 0.0])
+        before, had = st.motion, st.handover
+        q = stream.step(q, objects={"glass": given})
+        setpoints.append(q)
+        if st.handover is not None and st.handover is not had:
+            taken.append((k, st.handover[0], before))
+    assert len(taken) == 3 and st.joins == 1 and ctrl.fault is None, (taken, st.joins)
+    for k, t0, before in taken:
+        assert t0 >= k * 1e-3 + delay - 1e-9, (k, t0)  # call k is at k ms
+        for j in range(k + 1, math.floor(t0 * 1000)):
+            np.testing.assert_array_equal(setpoints[j], before.at(j * 1e-3)[0])
+    assert _peaks(np.array(setpoints), limits) <= 1.0 + 1e-9

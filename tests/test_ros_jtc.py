@@ -146,3 +146,44 @@ def test_the_points_sent_continue_the_motion_and_the_controller_follows_it() -> 
     # where the motion's jerk switches sign: 1.40x at 20 ms between points (1.57x at 40 ms,
     # 1.18x at 5 ms). `pbdkit ros run` must plan what it sends with a jerk margin (issue 37).
     assert 1.0 < peaks.jerk <= 1.45, peaks
+
+
+def test_a_stamped_message_starts_at_its_stamp_whatever_its_latency() -> None:
+    # `pbdkit ros run --stamp`: a message sent at `now` and taken 15 ms later (a loaded graph)
+    # keeps its points at now + time_from_start, and the controller stays on the motion; the
+    # same message unstamped starts when taken, 15 ms late: the segment to its first point
+    # catches up the motion by v * 15 ms in its 60 ms, past the acceleration limit.
+    lim = MotionLimits(np.full(2, 1.19), np.full(2, 6.0), np.full(2, 60.0))
+    t = np.linspace(0.0, 3.0, 61)
+    q = np.column_stack([0.4 * np.sin(t), 0.3 * np.cos(1.5 * t)])
+    motion = follow(t, q, lim.scaled(0.995))
+    now, period, latency, lead = 0.73, 1.0 / 125.0, 0.015, 0.06
+    tfs, p, v, a = trajectory_points(motion, now, period, lead=lead)
+    grid = np.arange(0.0, motion.end + 0.2, 1e-3)
+    exact = np.array([motion.at(float(s))[0] for s in grid])
+    errors, peaks = {}, {}
+    for stamped in (True, False):
+        f = TrajectoryFollower(NAMES, q[0], interpolate_from_desired_state=True)
+        f.receive(0.0, NAMES, *trajectory_points(motion, 0.0, period), stamp=0.0)
+        desired = []
+        for s in grid:
+            if abs(s - (now + latency)) < 5e-4:
+                f.receive(float(s), NAMES, tfs, p, v, a, stamp=now if stamped else None)
+            desired.append(f.desired(float(s))[0])
+        errors[stamped] = float(np.abs(np.array(desired) - exact).max())
+        peaks[stamped] = motion_peaks(grid, np.array(desired), lim, pad_rest=0)
+    assert errors[True] < 1e-4 and errors[False] > 5e-3, errors
+    assert peaks[True].acceleration <= 1.0 < peaks[False].acceleration, peaks
+
+
+def test_a_stamped_message_past_its_first_point_or_its_end() -> None:
+    f = _follower()
+    f.receive(0.0, NAMES, [1.0], [[1.0, 1.0]], [[0.0, 0.0]])
+    with pytest.raises(RejectedTrajectory, match="in the past"):  # as the JTC refuses it
+        f.receive(2.0, NAMES, [0.5, 1.0], [[2.0, 2.0], [3.0, 3.0]], stamp=0.5)
+    np.testing.assert_allclose(f.desired(2.0)[0], [1.0, 1.0])  # the old one holds
+    # Taken 0.75 s after its stamp, its first point (0.5 s) is past: it goes on its points
+    # (linear here), the state it arrived in dropped, as the JTC samples a started trajectory.
+    f.receive(1.25, NAMES, [0.5, 1.0], [[2.0, 2.0], [3.0, 3.0]], stamp=0.5)
+    np.testing.assert_allclose(f.desired(1.25)[0], [2.5, 2.5])
+    np.testing.assert_allclose(f.desired(1.5)[0], [3.0, 3.0])

@@ -79,6 +79,18 @@ def run(
             "anything is sent, and every plan keeps clear of it."
         ),
     ] = None,
+    latency: Annotated[
+        float | None,
+        typer.Option(
+            help="The longest (s) the arm's controller takes to take a message: each arm "
+            "trajectory is stamped with this machine's clock, its first point at least this "
+            "far ahead, and the controller starts it where the run planned it (a re-plan's "
+            "splice keeps the limits; it reacts this much later). Needs the controller's clock "
+            "within a millisecond of this machine's (the same machine, or chrony). Default: "
+            "stamp 0, each starts when the controller takes it (docs: ros2).",
+            max=0.5,
+        ),
+    ] = None,
 ) -> None:
     """Run a skill on an arm behind a joint_trajectory_controller. Exit codes: 0 ran to its end,
     at rest; 2 usage or refused; 3 stale joint states; 4 no or inactive controller; 5 following
@@ -109,6 +121,7 @@ def run(
         gripper_seconds=gripper_seconds,
         grasped=grasped,
         scene=None if scene is None else Scene.load(scene),
+        latency=latency,
     )
     if not skill_path.is_file():
         raise FileNotFoundError(2, "No such file", str(skill_path))

@@ -178,6 +178,11 @@ class Controller:
         The gripper command at :attr:`index`.
     done : bool
         True once a command has targeted the last step.
+    handover_delay : float
+        With the process planner: seconds added to every predicted hand-over (default 0), the
+        longest the commands take to reach the arm's controller (``pbdkit ros run
+        --latency``): a new plan then diverges from the commands already sent only after
+        they have arrived.
     """
 
     def __init__(
@@ -232,6 +237,7 @@ class Controller:
         self._last = _Targets(theta0.copy(), 0, None, None)
         self._no_jac = np.zeros((3, n))
         self._timed: _Timed | None = None
+        self.handover_delay = 0.0
         if timed:
             assert limits is not None
             distance = float(replan_distance)
@@ -509,12 +515,13 @@ class Controller:
         the planner's longest latency per step of its last five plans, times the steps left,
         plus :data:`LEAD_MARGIN` (a plan's cost is about proportional to the steps it makes: the
         first, the whole skill, takes twice as long as one from halfway);
-        :data:`FIRST_LEAD` before any."""
+        :data:`FIRST_LEAD` before any; plus :attr:`handover_delay`."""
         if st.planner.kind == "inline":
             return 0.0
         if not st.latencies:
-            return FIRST_LEAD
-        return LEAD_FACTOR * max(st.latencies) * self._steps_left(st.phase) + LEAD_MARGIN
+            return FIRST_LEAD + self.handover_delay
+        lead = LEAD_FACTOR * max(st.latencies) * self._steps_left(st.phase) + LEAD_MARGIN
+        return lead + self.handover_delay
 
     def _request(self, st: _Timed, now: float) -> None:
         """Ask the planner for a plan taking over at a predicted hand-over time, from the state
@@ -570,25 +577,26 @@ class Controller:
         assert reply.motion is not None and reply.result is not None
         t0 = reply.t0
         motion: Motion | _Handover = reply.motion
-        if t0 < now - 1e-9:
+        start = now + self.handover_delay  # the commands sent until then are the arm's
+        if t0 < start - 1e-9:
             if st.motion.at_rest_after(t0):
-                # Made from rest, and still there: it starts now.
-                reply = dataclasses.replace(reply, t0=now, motion=reply.motion.shifted(now - t0))
-                assert reply.motion is not None
-                t0, motion = now, reply.motion
+                # Made from rest, and still there: it starts now (the delay on).
+                moved = reply.motion.shifted(start - t0)
+                reply = dataclasses.replace(reply, t0=start, motion=moved)
+                t0, motion = start, moved
             else:
                 # Late: joined from where the commands are by a short segment onto it, where
                 # one within the limits exists; else asked again, further ahead (the latency is
                 # measured).
-                p, v, a, _ = self._guard(*st.motion.at(now))
+                p, v, a, _ = self._guard(*st.motion.at(start))
                 run = st.setup.run
                 bounds = (np.minimum(run.lower, p), np.maximum(run.upper, p))
-                joined = join(now, (p, v, a), reply.motion, st.plan_limits, LATE_JOINS, bounds)
+                joined = join(start, (p, v, a), reply.motion, st.plan_limits, LATE_JOINS, bounds)
                 if joined is None:
                     st.want = True
                     return
                 assert reply.motion is not None
-                t0, motion = now, _Handover(joined, reply.motion, joined.end)
+                t0, motion = start, _Handover(joined, reply.motion, joined.end)
                 st.joins += 1
         plan = _Plan.of(reply, request.objects)
         if st.plan is not None:
@@ -612,7 +620,9 @@ class Controller:
         """No plan: bring the arm to rest from where the commands are at ``now``, and say
         why."""
         st.fault = reason
-        st.motion = brake(now, st.motion.at(now), st.plan_limits)
+        start = now + self.handover_delay  # the commands sent until then are the arm's
+        stop = brake(start, st.motion.at(start), st.plan_limits)
+        st.motion = stop if start == now else _Handover(st.motion, stop, start)
         st.last = st.motion.at(now)
         st.handover, st.active, st.want = None, False, False
         warnings.warn(

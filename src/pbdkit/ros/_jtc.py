@@ -65,8 +65,9 @@ class RejectedTrajectory(ValueError):
 
 @dataclass(frozen=True)
 class _Trajectory:
-    start: float  # when it arrived (s, the follower's clock)
-    times: Float  # (P + 1,) from the start: 0 for the start state, then time_from_start
+    start: float  # its time 0 (s, the follower's clock): its stamp, or when it arrived
+    times: Float  # from the start: the state it started from where it came before its first
+    # point (at the arrival, <= 0 for a stamp ahead), then time_from_start
     q: Float  # (P + 1, n)
     v: Float | None
     a: Float | None
@@ -113,12 +114,17 @@ class TrajectoryFollower:
         velocities: Any = None,
         accelerations: Any = None,
         measured: tuple[Any, Any] | None = None,
+        stamp: float | None = None,
     ) -> None:
-        """A message arriving at ``now`` (header stamp 0): its points' ``times`` (time_from_start,
-        s) and per point the positions (and velocities, accelerations: each None, or one row per
-        point), its joints named ``names`` in any order; ``measured``: the arm's (position,
-        velocity) now, where the segment to the first point starts unless
-        ``interpolate_from_desired_state``. Raises RejectedTrajectory as the JTC refuses."""
+        """A message arriving at ``now``: its points' ``times`` (time_from_start, s) and per
+        point the positions (and velocities, accelerations: each None, or one row per point),
+        its joints named ``names`` in any order; ``measured``: the arm's (position, velocity)
+        now, where the segment to the first point starts unless
+        ``interpolate_from_desired_state``. ``stamp``: its header stamp on the follower's
+        clock (None: stamp 0, it starts when it arrives); a stamped message's points are at
+        ``stamp + times``, the segment to the first one from now, as the JTC: one whose first
+        point is past when it arrives starts on its points (the arm's state dropped), one that
+        ends in the past is refused. Raises RejectedTrajectory as the JTC refuses."""
         t = np.asarray(times, dtype=np.float64).reshape(-1)
         if t.size == 0:
             raise RejectedTrajectory("empty trajectory: no points")
@@ -141,14 +147,22 @@ class TrajectoryFollower:
         assert q is not None
         if v is not None and not self.allow_moving_end and np.any(v[-1] != 0.0):
             raise RejectedTrajectory("the last point has a non-zero velocity")
+        start = now if stamp is None else float(stamp)
+        if start + t[-1] < now:
+            raise RejectedTrajectory(
+                f"stamped {now - start:.3f} s ago, it ends {now - start - t[-1]:.3f} s in the past"
+            )
         p0, v0, a0 = self.desired(now)
         if not self.from_desired and measured is not None:
             p0 = np.asarray(measured[0], dtype=np.float64)
             v0 = np.asarray(measured[1], dtype=np.float64)
             a0 = np.zeros_like(p0)
+        if now - start >= t[0]:  # its first point is past: on its points from now
+            self._traj = _Trajectory(start, t, q, v, a)
+            return
         self._traj = _Trajectory(
-            now,
-            np.concatenate([[0.0], t]),
+            start,
+            np.concatenate([[now - start], t]),
             np.vstack([p0, q]),
             None if v is None else np.vstack([v0, v]),
             None if a is None else np.vstack([a0, a]),
@@ -157,7 +171,7 @@ class TrajectoryFollower:
     def desired(self, now: float) -> tuple[Float, Float, Float]:
         """The desired position, velocity and acceleration at ``now``."""
         tr = self._traj
-        s = max(0.0, now - tr.start)  # (before it arrived: where it started)
+        s = max(float(tr.times[0]), now - tr.start)  # (before it arrived: where it started)
         if s >= tr.times[-1]:
             n = tr.q.shape[1]
             return tr.q[-1].copy(), np.zeros(n), np.zeros(n)

@@ -54,6 +54,8 @@ JTC_JERK_MARGIN = 2.0
 #: Seconds between the points of a message (the JTC's quintics between them follow the motion
 #: closer, and overshoot its jerk less, the closer they are: 1.29x at 10 ms, 1.40x at 20 ms).
 POINT_SPACING = 0.01
+#: The longest ``--latency`` (s): a re-plan then reacts this much later.
+MAX_LATENCY = 0.5
 
 
 class RunFailed(Exception):
@@ -83,10 +85,15 @@ class RunSettings:
     gripper_seconds: float = 0.3  # each gripper message's one point, this far ahead
     grasped: str | None = None  # its source is ignored once the gripper closes
     scene: Any = None  # a pbdkit.Scene: every plan checked against it and kept clear of it
+    # The longest the arm's controller takes to take a message (s): each arm message is
+    # stamped with the run's clock, its first point at least this far ahead (None: stamp 0).
+    latency: float | None = None
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.speed <= 1.0:
             raise ValueError(f"--speed must be in [0.1, 1], got {self.speed}")
+        if self.latency is not None and not (0.0 < self.latency <= MAX_LATENCY):
+            raise ValueError(f"--latency must be in (0, {MAX_LATENCY:g}] s, got {self.latency}")
         if (self.gripper_controller is None) != (self.gripper_joint is None):
             raise ValueError("--gripper-controller and --gripper-joint go together")
         for name in ("stale", "max_following_error", "timeout", "controller_period",
@@ -153,6 +160,7 @@ def run_skill(
         planner="inline" if settings.dry_run else "process",
         scene=settings.scene,
     )
+    ctrl.handover_delay = 0.0 if settings.latency is None else settings.latency
     try:
         count = listener.count  # the posture to start from: a state that came after that
         while listener.count == count:
@@ -255,7 +263,7 @@ def _loop(
 ) -> int:
     """The run from the first plan to its end (see :func:`run_skill`)."""
     st = ctrl._timed
-    start = time.monotonic()
+    start = runner.t0 = time.monotonic()
     cmd = ctrl.step(q0)
     first = st.motion.at(0.0)[0]
     if float(np.abs(first - q0).max()) > 1e-9:  # a guard: the controller starts where measured
@@ -370,6 +378,16 @@ class _Gripper:
         return True
 
 
+class _Then:
+    """``first`` until ``at``, then ``then`` (a motion: ``at(t)`` and ``end``)."""
+
+    def __init__(self, first: Any, at: float, then: Any) -> None:
+        self.first, self.at_, self.then, self.end = first, at, then, then.end
+
+    def at(self, t: float) -> Any:
+        return (self.first if t < self.at_ else self.then).at(t)
+
+
 class _Runner:
     """What :func:`run_skill` sends: messages of a motion's points, and a brake."""
 
@@ -385,6 +403,7 @@ class _Runner:
         self.motion: Any = None  # the motion last sent
         self.jerk: Any = np.inf  # the planned jerk limit (the splices' lead: splice_lead)
         self.sent = 0
+        self.t0 = time.monotonic()  # the run's clock's 0 (set by _loop)
 
     def changed(self, motion: Any) -> bool:
         """Whether ``motion`` (the controller's now) is not the one last sent: a new plan's
@@ -398,18 +417,31 @@ class _Runner:
 
     def send(self, motion: Any, now: float, lead: float | None = None) -> None:
         """The points of ``motion`` from ``now`` (s on the run's clock) as one message, the
-        first ``lead`` s ahead (default: :func:`~pbdkit.ros._jtc.splice_lead`)."""
+        first ``lead`` s ahead (default: :func:`~pbdkit.ros._jtc.splice_lead`); with
+        ``settings.latency`` its header stamp is the node's clock at ``now``, and from rest its
+        first point at least that far ahead (moving, the motion sent continues the one the
+        controller follows until the message has reached it: the controller's
+        ``handover_delay``, :meth:`brake`)."""
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
         self.motion = motion
         period = self.settings.controller_period
         if lead is None:
-            lead = splice_lead(motion.at(now)[1], self.jerk, period)
+            velocity = motion.at(now)[1]
+            lead = splice_lead(velocity, self.jerk, period)
+            if self.settings.latency is not None and not np.any(velocity):
+                lead = max(lead, self.settings.latency)
         tfs, p, v, a = trajectory_points(motion, now, period, POINT_SPACING, lead)
         if self.settings.dry_run:
             return
         msg = JointTrajectory(joint_names=list(self.order.graph_names))
+        if self.settings.latency is not None:  # the node's clock at the run's ``now``
+            from rclpy.time import Time
+
+            ago = round((time.monotonic() - self.t0 - now) * 1e9)
+            clock_now = int(self.node.get_clock().now().nanoseconds)
+            msg.header.stamp = Time(nanoseconds=clock_now - ago).to_msg()
         for k in range(tfs.shape[0]):
             sec = math.floor(tfs[k])
             msg.points.append(
@@ -424,11 +456,15 @@ class _Runner:
         self.sent += 1
 
     def brake(self, motion: Any, now: float, limits: MotionLimits | None) -> None:
-        """A braking trajectory from the commanded state at the message's first point."""
+        """A braking trajectory from the commanded state at the message's first point (with
+        ``settings.latency``: the motion in force until then, the brake from that far ahead)."""
         if limits is None or self.sent == 0:
             return
         lead = splice_lead(motion.at(now)[1], limits.jerk, self.settings.controller_period)
-        self.send(brake(now + lead, motion.at(now + lead), limits.scaled(0.995)), now, lead)
+        latency = self.settings.latency
+        at = now + (lead if latency is None else max(lead, latency))
+        stop = brake(at, motion.at(at), limits.scaled(0.995))
+        self.send(_Then(motion, at, stop), now, lead)
         self.log("braking")
 
     @staticmethod

@@ -1,6 +1,7 @@
 """An arm on a ROS 2 graph without physics (:class:`SimArm`): a joint_trajectory_controller
 (:class:`~pbdkit.ros._jtc.TrajectoryFollower`) on ``/NAME/joint_trajectory`` whose commands the
-arm follows exactly, its joint states published on ``/joint_states``. The kinematic core of
+arm follows exactly (a message from when it arrives, or from its header stamp on the node's
+clock), its joint states published on ``/joint_states``. The kinematic core of
 ``pbdkit ros sim`` (issue 37; the MuJoCo world and the objects come on top of it) and the robot
 side of the tests of ``pbdkit ros run``."""
 
@@ -100,6 +101,8 @@ class SimArm:
             got = [list(getattr(p, field)) for p in points]
             return got if points and all(len(g) == len(self.names) for g in got) else None
 
+        stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+        ago = (int(self.node.get_clock().now().nanoseconds) - stamp) * 1e-9  # on the node's clock
         try:
             self.follower.receive(
                 now,
@@ -109,6 +112,7 @@ class SimArm:
                 rows("velocities"),
                 rows("accelerations"),
                 measured=(self.q, self.v),
+                stamp=None if stamp == 0 else now - ago,
             )
         except (RejectedTrajectory, ValueError) as err:
             self.rejected.append(str(err))

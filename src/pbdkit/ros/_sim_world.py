@@ -14,7 +14,8 @@ Topics (QoS depth :data:`pbdkit.ros._graph.QOS_DEPTH`, reliable):
 - it follows ``/arm_controller/joint_trajectory`` and ``/gripper_controller/joint_trajectory``
   (``trajectory_msgs/JointTrajectory``; the gripper's one joint ``gripper``) by the JTC's rules
   (:class:`~pbdkit.ros._jtc.TrajectoryFollower`), not with ``teach``. A message starts when it
-  arrives (its header stamp is not read); a refused one is logged and counted.
+  arrives (header stamp 0) or at its header stamp (read in the world's time, as the stamps it
+  publishes); a refused one is logged and counted.
 
 With ``teach`` the replay begins :data:`SUBSCRIBER_GRACE` s after something subscribes to
 ``/joint_states`` (a recorder: started before or after ``pbdkit ros sim``, it sees the first
@@ -189,8 +190,9 @@ class SimWorld:
             self.node.get_logger().warning(f"{topic}: rejected: {err}")
             return
         receive = world.receive_arm if kind == "arm" else world.receive_gripper
-        try:
-            receive(*arrays)  # counted there
+        stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+        try:  # a stamp in the world's time (the module docstring's header stamps)
+            receive(*arrays, stamp=None if stamp == 0 else (stamp - self._stamp0) * 1e-9)
         except ValueError as err:  # RejectedTrajectory, or a malformed point
             self.node.get_logger().warning(f"{topic}: rejected: {err}")
 

@@ -395,14 +395,16 @@ class TaskWorld:
         positions: Any,
         velocities: Any = None,
         accelerations: Any = None,
+        stamp: float | None = None,
     ) -> None:
-        """An arm trajectory arriving now (the world's time; header stamp 0): as
-        :meth:`TrajectoryFollower.receive`, the measured state the sim arm's. The first one
-        accepted starts the run. Raises RejectedTrajectory (a ValueError) as the JTC refuses,
-        counted in :attr:`messages`."""
+        """An arm trajectory arriving now (the world's time; ``stamp``: its header stamp in
+        the world's time, None for 0): as :meth:`TrajectoryFollower.receive`, the measured
+        state the sim arm's. The first one accepted starts the run. Raises
+        RejectedTrajectory (a ValueError) as the JTC refuses, counted in :attr:`messages`."""
         measured = (self._scene().joints(), self.joint_velocities())
-        self._receive("arm", self.arm, measured, names, times, positions, velocities, accelerations)
-        self._extend_run(float(np.max(times)), start=True)
+        args = (names, times, positions, velocities, accelerations)
+        self._receive("arm", self.arm, measured, *args, stamp=stamp)
+        self._extend_run(self._ends_in(times, stamp), start=True)
 
     def receive_gripper(
         self,
@@ -411,14 +413,18 @@ class TaskWorld:
         positions: Any,
         velocities: Any = None,
         accelerations: Any = None,
+        stamp: float | None = None,
     ) -> None:
         """A gripper trajectory (one joint, :data:`GRIPPER_JOINT`) arriving now: closed while
         its desired position is > 0.5. Raises RejectedTrajectory as the JTC refuses."""
         measured = ([1.0 if self.closed else 0.0], [0.0])
-        self._receive(
-            "gripper", self.gripper, measured, names, times, positions, velocities, accelerations
-        )
-        self._extend_run(float(np.max(times)), start=False)
+        args = (names, times, positions, velocities, accelerations)
+        self._receive("gripper", self.gripper, measured, *args, stamp=stamp)
+        self._extend_run(self._ends_in(times, stamp), start=False)
+
+    def _ends_in(self, times: Any, stamp: float | None) -> float:
+        """Seconds from now to a message's last point."""
+        return float(np.max(times)) + (0.0 if stamp is None else stamp - self.t)
 
     def _receive(
         self,
@@ -430,6 +436,8 @@ class TaskWorld:
         positions: Any,
         velocities: Any,
         accelerations: Any,
+        *,
+        stamp: float | None = None,
     ) -> None:
         """One trajectory to ``follower`` (``kind``: "arm" or "gripper"), counted in
         :attr:`messages`; refused while the world replays the teacher."""
@@ -440,7 +448,14 @@ class TaskWorld:
             )
         try:
             follower.receive(
-                self.t, names, times, positions, velocities, accelerations, measured=measured
+                self.t,
+                names,
+                times,
+                positions,
+                velocities,
+                accelerations,
+                measured=measured,
+                stamp=stamp,
             )
         except ValueError:
             self.messages[kind]["rejected"] += 1
