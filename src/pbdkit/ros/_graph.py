@@ -4,9 +4,11 @@ the ``ros`` extra, and the settings that keep a graph private (:func:`private_gr
 from __future__ import annotations
 
 import os
+import threading
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -14,7 +16,7 @@ from numpy.typing import NDArray
 
 from ._joints import JointOrder
 
-__all__ = ["JointStateListener", "private_graph_env", "ros_available"]
+__all__ = ["JointStateListener", "private_graph_env", "receiving", "ros_available"]
 
 Float = NDArray[np.float64]
 
@@ -31,6 +33,26 @@ def ros_available() -> bool:
     except ImportError:
         return False
     return True
+
+
+@contextmanager
+def receiving(node: Any) -> Iterator[None]:
+    """The node's callbacks run on a thread of their own while the block runs: every message
+    is taken as it comes, while the caller computes (``rclpy.spin_once`` in a loop takes one
+    callback a turn, and none while the caller is busy: a recorder missed takes' starts, a
+    run read joint states tens of milliseconds old). The caller then only sleeps between its
+    looks at what the callbacks left."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, name="pbdkit-ros-receive", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        thread.join(timeout=2.0)
 
 
 def private_graph_env(name: str, env: dict[str, str] | None = None) -> dict[str, str]:

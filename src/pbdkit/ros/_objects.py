@@ -14,6 +14,7 @@ package). Publish the object's pose as a PoseStamped instead.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -88,6 +89,7 @@ class ObjectSources:
         self.silent: set[str] = set()
         self.ignored: set[str] = set()  # e.g. the grasped object once the gripper closed
         self._subs: dict[str, Any] = {}
+        self._lock = threading.Lock()  # the messages may come on another thread (receiving)
 
     def subscribe(self, timeout: float, spin: Callable[[float], None]) -> None:
         """Find each topic's type on the graph and subscribe; then wait for a first message of
@@ -142,8 +144,11 @@ class ObjectSources:
         if name in self.silent:
             self.silent.discard(name)
             self.log(f"{name}: {self.topics[name]} speaks again")
-        self.values[name] = value
-        self.fresh[name] = value
+        with self._lock:
+            if name in self.ignored:  # (since the check above: ignore() on another thread)
+                return
+            self.values[name] = value
+            self.fresh[name] = value
         self.received[name] = time.monotonic()
         self.frames[name] = str(msg.header.frame_id)
 
@@ -160,15 +165,17 @@ class ObjectSources:
 
     def take_new(self) -> dict[str, Float]:
         """The values that arrived since the last call (for the controller's next step)."""
-        out, self.fresh = self.fresh, {}
+        with self._lock:
+            out, self.fresh = self.fresh, {}
         return out
 
     def ignore(self, name: str) -> None:
         """Stop taking ``name``'s messages (its last value holds): the object the gripper
         has closed on moves with the hand, and the skill is relative to where it was."""
         if name in self.topics and name not in self.ignored:
-            self.ignored.add(name)
-            self.fresh.pop(name, None)
+            with self._lock:
+                self.ignored.add(name)
+                self.fresh.pop(name, None)
 
     def describe(self) -> str:
         """The objects as seen now, one line."""

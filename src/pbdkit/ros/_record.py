@@ -7,20 +7,18 @@ posture it rested at by :data:`MOTION_START` (with the last :data:`PRE_ROLL` s b
 rest), and stops after ``rest`` s at rest (the samples of that rest but the first
 :data:`PRE_ROLL` s dropped). Putting the arm in its hand-guiding mode is the user's part.
 
-The node's messages are taken on a thread of their own (:func:`_receiving`), into a history of
-:data:`HISTORY` joint states: none is lost while the recorder is busy, saving a take or (``pbdkit
-ros record --suggest``) updating a skill with it for seconds while the teacher starts the next
-one. Each joint state takes the gripper's opening of the same stamp (:class:`_Hand`), not the
-latest one.
+The node's messages are taken on a thread of their own (:func:`~pbdkit.ros._graph.receiving`),
+into a history of :data:`HISTORY` joint states: none is lost while the recorder is busy,
+saving a take or (``pbdkit ros record --suggest``) updating a skill with it for seconds while
+the teacher starts the next one. Each joint state takes the gripper's opening of the same
+stamp (:class:`_Hand`), not the latest one.
 """
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..data._demonstration import Demonstration
-from ._graph import JointStateListener
+from ._graph import JointStateListener, receiving
 from ._joints import JointOrder
 from ._objects import ObjectSources
 
@@ -142,7 +140,7 @@ def record_takes(
     ``pbdkit ros record --view`` hands them to its page). Returns the number of takes. Raises
     TimeoutError without joint states or an object's first message within
     ``settings.timeout``."""
-    with _receiving(node):
+    with receiving(node):
         return _record(node, joint_names, sources, settings, save, toggled, log, stop, on_sample)
 
 
@@ -157,7 +155,8 @@ def _record(
     stop: Callable[[], bool],
     on_sample: Callable[[Float, Mapping[str, Float]], None] | None,
 ) -> int:
-    """:func:`record_takes`, the node's callbacks on another thread (:func:`_receiving`)."""
+    """:func:`record_takes`, the node's callbacks on another thread
+    (:func:`~pbdkit.ros._graph.receiving`)."""
     spin = time.sleep  # the messages come meanwhile
     order = JointOrder(joint_names, settings.joint_map)
     samples: deque[tuple[float, Float]] = deque()  # appended there, taken here
@@ -226,22 +225,6 @@ def _record(
                     log(f"take {done + 1}: {prompt}")
                 break
     return done
-
-
-@contextmanager
-def _receiving(node: Any) -> Iterator[None]:
-    """The node's callbacks run on a thread of their own while the block runs."""
-    from rclpy.executors import SingleThreadedExecutor
-
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, name="pbdkit-record", daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        executor.shutdown(timeout_sec=2.0)
-        thread.join(timeout=2.0)
 
 
 class _Hand:

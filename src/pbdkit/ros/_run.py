@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from ..motion._limits import MotionLimits, with_defaults
 from ..motion._motion import brake
-from ._graph import QOS_DEPTH, JointStateListener
+from ._graph import QOS_DEPTH, JointStateListener, receiving
 from ._joints import JointOrder
 from ._jtc import splice_lead, trajectory_points
 from ._objects import ObjectSources
@@ -127,7 +127,6 @@ def run_skill(
     returns the exit code (0: ran to its end, at rest). ``stop()`` true (a signal) brakes and
     returns 130. Raises RunFailed for the other endings, after braking where a message was
     sent."""
-    import rclpy
     from trajectory_msgs.msg import JointTrajectory
 
     try:
@@ -141,41 +140,40 @@ def run_skill(
     gripper = _Gripper(node, settings)
     runner = _Runner(node, pub, order, settings, log)
 
-    def spin(seconds: float) -> None:
-        rclpy.spin_once(node, timeout_sec=seconds)
-
-    _wait_for_graph(listener, [(pub, topic), *gripper.publishers()], settings, spin)
-    try:
-        sources.subscribe(settings.timeout, spin)
-    except TimeoutError as err:
-        raise RunFailed("stale", f"objects: {err}") from None
-    except ValueError as err:
-        raise RunFailed("usage", str(err)) from None
-    limits = scaled_limits(_arm_limits(skill, settings), settings.speed)
-    ctrl = skill.controller(  # its planner's process takes a second to start
-        dict(sources.values),
-        velocity_limit=limits.velocity,
-        acceleration_limit=limits.acceleration,
-        jerk_limit=limits.jerk,
-        planner="inline" if settings.dry_run else "process",
-        scene=settings.scene,
-    )
-    ctrl.handover_delay = 0.0 if settings.latency is None else settings.latency
-    try:
-        count = listener.count  # the posture to start from: a state that came after that
-        while listener.count == count:
-            if listener.age() > settings.timeout:
-                raise RunFailed(
-                    "stale", f"joint states on {settings.joint_states} stopped before the run"
-                )
-            spin(0.01)
-        assert listener.q is not None
-        q0 = listener.q.copy()
-        if settings.scene is not None:
-            _check_scene(skill, dict(sources.values), q0, limits, settings.scene, log)
-        return _loop(ctrl, q0, listener, sources, runner, gripper, settings, log, stop, spin)
-    finally:
-        ctrl.close()
+    spin = time.sleep  # the messages come meanwhile, on the receiving thread
+    with receiving(node):  # (one ROS callback a turn of the loop left the states stale)
+        _wait_for_graph(listener, [(pub, topic), *gripper.publishers()], settings, spin)
+        try:
+            sources.subscribe(settings.timeout, spin)
+        except TimeoutError as err:
+            raise RunFailed("stale", f"objects: {err}") from None
+        except ValueError as err:
+            raise RunFailed("usage", str(err)) from None
+        limits = scaled_limits(_arm_limits(skill, settings), settings.speed)
+        ctrl = skill.controller(  # its planner's process takes a second to start
+            dict(sources.values),
+            velocity_limit=limits.velocity,
+            acceleration_limit=limits.acceleration,
+            jerk_limit=limits.jerk,
+            planner="inline" if settings.dry_run else "process",
+            scene=settings.scene,
+        )
+        ctrl.handover_delay = 0.0 if settings.latency is None else settings.latency
+        try:
+            count = listener.count  # the posture to start from: a state that came after that
+            while listener.count == count:
+                if listener.age() > settings.timeout:
+                    raise RunFailed(
+                        "stale", f"joint states on {settings.joint_states} stopped before the run"
+                    )
+                spin(0.01)
+            assert listener.q is not None
+            q0 = listener.q.copy()
+            if settings.scene is not None:
+                _check_scene(skill, dict(sources.values), q0, limits, settings.scene, log)
+            return _loop(ctrl, q0, listener, sources, runner, gripper, settings, log, stop, spin)
+        finally:
+            ctrl.close()
 
 
 def _check_scene(
