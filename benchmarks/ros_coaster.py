@@ -33,8 +33,9 @@ def _pbdkit(*args: str) -> list[str]:
     return [sys.executable, "-m", "pbdkit", *args]
 
 
-def one(skill: Path, placement: int, work: Path) -> dict:
-    """One placement: the sim and the run in two processes on a private graph."""
+def one(skill: Path, placement: int, work: Path, latency: float | None = None) -> dict:
+    """One placement: the sim and the run (``--latency``: stamped) in two processes on a
+    private graph."""
     report = work / f"report_{placement}.json"
     sim_cmd = _pbdkit("ros", "sim", "--task", "coaster", "--placement", str(placement),
                       "--perturb", "move", "--skill", str(skill), "--exit-after-run",
@@ -42,6 +43,8 @@ def one(skill: Path, placement: int, work: Path) -> dict:
     run_cmd = _pbdkit("ros", "run", str(skill), "--controller", "arm_controller", *OBJECTS,
                       "--grasped", "glass", "--gripper-controller", "gripper_controller",
                       "--gripper-joint", "gripper:0:1", "--timeout", "15")  # fmt: skip
+    if latency is not None:
+        run_cmd += ["--latency", str(latency)]
     script = (
         "import subprocess\n"
         f"sim = subprocess.Popen({sim_cmd!r}, stdout=subprocess.PIPE, text=True)\n"
@@ -70,6 +73,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--placements", type=int, default=20)
     parser.add_argument("--out", type=Path, default=None, help="Write the rows as JSON.")
+    parser.add_argument(
+        "--latency", type=float, default=None, help="pbdkit ros run --latency (default: none)."
+    )
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="ros_coaster_"))
     demos, skill = work / "demos.npz", work / "skill.npz"
@@ -79,7 +85,7 @@ def main() -> None:
                    capture_output=True)  # fmt: skip
     rows = []
     for p in range(args.placements):
-        got = one(skill, p, work)
+        got = one(skill, p, work, args.latency)
         rows.append(got)
         print(
             f"placement {p:2d}: success {got['success']!s:5}  run exit {got['run_exit']}  "
@@ -102,10 +108,11 @@ def main() -> None:
         capture_output=True, text=True,
     )  # fmt: skip
     print()
+    stamped = "" if args.latency is None else f", --latency {args.latency:g}"
     print("| chain | success | worst v / a / j received (of the limits) |")
     print("| --- | --- | --- |")
     print(
-        f"| `ros sim` + `ros run` (graph) | {ok}/{len(rows)} | "
+        f"| `ros sim` + `ros run{stamped}` (graph) | {ok}/{len(rows)} | "
         f"{worst['velocity']:.3f} / {worst['acceleration']:.3f} / {worst['jerk']:.3f} |"
     )
     print(f"| `evaluate --online` (no graph) | see below | |\n{evaluated.stdout[-400:]}")
