@@ -239,6 +239,10 @@ def test_run_and_record_settings_refuse_what_cannot_work() -> None:
         RunSettings(gripper_controller="gripper_controller")
     with pytest.raises(ValueError, match="--gripper-seconds must be > 0"):
         RunSettings(gripper_seconds=0.0)
+    for latency in (0.0, -0.1, 0.6, float("nan")):
+        with pytest.raises(ValueError, match=r"--latency must be in \(0, 0.5\] s"):
+            RunSettings(latency=latency)
+    assert RunSettings(latency=0.5).latency == 0.5
     with pytest.raises(ValueError, match="--auto needs --takes N"):
         RecordSettings(auto=True)
     with pytest.raises(ValueError, match="--takes must be >= 1"):

@@ -149,7 +149,7 @@ def test_the_points_sent_continue_the_motion_and_the_controller_follows_it() -> 
 
 
 def test_a_stamped_message_starts_at_its_stamp_whatever_its_latency() -> None:
-    # `pbdkit ros run --stamp`: a message sent at `now` and taken 15 ms later (a loaded graph)
+    # `pbdkit ros run --latency`: a message sent at `now` and taken 15 ms later (a loaded graph)
     # keeps its points at now + time_from_start, and the controller stays on the motion; the
     # same message unstamped starts when taken, 15 ms late: the segment to its first point
     # catches up the motion by v * 15 ms in its 60 ms, past the acceleration limit.

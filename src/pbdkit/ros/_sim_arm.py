@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..data._ros import _stamp_ns
 from ._graph import QOS_DEPTH
 from ._jtc import RejectedTrajectory, TrajectoryFollower
 
@@ -101,7 +102,7 @@ class SimArm:
             got = [list(getattr(p, field)) for p in points]
             return got if points and all(len(g) == len(self.names) for g in got) else None
 
-        stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+        stamp = _stamp_ns(msg.header.stamp)
         ago = (int(self.node.get_clock().now().nanoseconds) - stamp) * 1e-9  # on the node's clock
         try:
             self.follower.receive(

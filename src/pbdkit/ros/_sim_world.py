@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ..data._ros import _stamp_ns
 from ._graph import QOS_DEPTH
 from ._jtc import RejectedTrajectory
 from ._task_world import TaskWorld, WorldSettings
@@ -190,7 +191,7 @@ class SimWorld:
             self.node.get_logger().warning(f"{topic}: rejected: {err}")
             return
         receive = world.receive_arm if kind == "arm" else world.receive_gripper
-        stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+        stamp = _stamp_ns(msg.header.stamp)
         try:  # a stamp in the world's time (the module docstring's header stamps)
             receive(*arrays, stamp=None if stamp == 0 else (stamp - self._stamp0) * 1e-9)
         except ValueError as err:  # RejectedTrajectory, or a malformed point
