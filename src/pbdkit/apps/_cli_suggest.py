@@ -81,8 +81,8 @@ def suggest_command(
     seed: Annotated[int, typer.Option(help="Seeds the candidate placements.")] = 0,
 ) -> None:
     """Where to put the objects for the next demonstration: the placements, inside the
-    ranges, where the skill is least sure (the skill must keep its demonstrations: a skill
-    file of version 3)."""
+    ranges, where a demonstration would lower the skill's uncertainty over them most (the
+    skill must keep its demonstrations: a skill file of version 3)."""
     from ..skill._skill import Skill
 
     parsed = [parse_range(r) for r in ranges]

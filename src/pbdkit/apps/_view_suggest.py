@@ -249,8 +249,9 @@ class SuggestionGhosts:
             n = len(self.suggestions)
             if n:
                 self._note = (
-                    f"{n} placement{'s' if n > 1 else ''} where the skill is least sure, "
-                    "the least sure first: drag the objects onto the active one's ghosts."
+                    f"{n} placement{'s' if n > 1 else ''} where a demonstration would teach "
+                    "the skill most, the best first: drag the objects onto the active one's "
+                    "ghosts."
                 )
             else:
                 self._note = "no placement inside the ranges is within the arm's reach."

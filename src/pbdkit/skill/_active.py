@@ -99,8 +99,9 @@ class ActiveMixin:
         -------
         list of Suggestion
             ``objects`` (every object of the skill) and ``score`` (the uncertainty there), the
-            most uncertain first; placements the arm cannot reach are left out, so fewer than
-            ``n`` when the ranges hold fewer.
+            one whose demonstration would lower the uncertainty over the ranges most first
+            (:doc:`/active`, "Where to demonstrate next"); placements the arm cannot reach are
+            left out, so fewer than ``n`` when the ranges hold fewer.
 
         Raises
         ------

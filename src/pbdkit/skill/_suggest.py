@@ -1,11 +1,13 @@
 """Where to demonstrate next: :meth:`pbdkit.Skill.suggest` (private; :doc:`/active`).
 
-Candidates are spread over the ranges a user allows (a scrambled Halton sequence, seeded),
-scored by the skill's uncertainty score (:data:`pbdkit.skill._uncertainty.SCORE_PART`), and
-taken from the most uncertain down, skipping those the skill could not reproduce at all or
-whose targets lie beyond the arm's reach (nothing a demonstration there could teach: the
-teacher could not show it either). For more than one suggestion the choice is greedy: each
-suggestion counts as demonstrated for the next, so that they spread out.
+Candidates are spread over the ranges a user allows (a scrambled Halton sequence, seeded) and
+taken in the order of how much a demonstration at each would lower the skill's uncertainty
+score (:data:`pbdkit.skill._uncertainty.SCORE_PART`, the placement part) on average over all the
+candidates (:func:`coverage_gain`: the expected reduction of active learning, not the largest
+uncertainty, which sends every demonstration to a corner of the ranges), skipping those the
+skill could not reproduce at all or whose targets lie beyond the arm's reach (nothing a
+demonstration there could teach: the teacher could not show it either). For more than one
+suggestion the choice is greedy: each suggestion counts as demonstrated for the next.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from numpy.typing import NDArray
 
 from .._rotations import as_pose, pose_matrix
 from .._validation import check_int, short
-from ._uncertainty import SCORE_PART, _model, placement_distance, uncertainty
+from ._uncertainty import SCORE_PART, _model, nearest_part, object_distances, uncertainty
 
 __all__ = ["CANDIDATES", "PRESELECT", "Suggestion", "parse_ranges", "suggest"]
 
@@ -135,11 +137,15 @@ def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Su
     chosen: list[Suggestion] = []
     taken: set[int] = set()  # chosen, or out of reach
     known: dict[int, float] = {}  # the score of the candidates measured so far
+    near = object_distances(skill, cands)  # to the demonstrated placements
+    pair = object_distances(skill, cands, cands)
     while len(chosen) < n:
-        # The farthest from what was demonstrated (and suggested) first; where the score is
-        # another part than the placement's, the PRESELECT farthest are measured by it.
-        far = placement_distance(skill, cands, [s.objects for s in chosen])
-        order = [int(i) for i in np.argsort(-far, kind="stable") if int(i) not in taken]
+        # Where a demonstration lowers the placement part over the candidates most first;
+        # where the score is another part than the placement's, the PRESELECT first are
+        # measured by it.
+        far = nearest_part(near, len(cands))
+        order = [int(i) for i in np.argsort(-coverage_gain(near, pair), kind="stable")]
+        order = [i for i in order if i not in taken]
         if SCORE_PART != "placement":
             pool = order[:PRESELECT]
             for i in pool:
@@ -153,10 +159,26 @@ def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Su
                 continue  # out of reach: nothing to teach there
             score = float(far[i]) if SCORE_PART == "placement" else known[i]
             chosen.append(Suggestion({k: v.copy() for k, v in cands[i].items()}, score))
+            near = {k: np.minimum(near[k], pair[k][:, [i]]) for k in near}  # counts as shown
             break
         else:
             break  # every candidate is out of reach
     return chosen
+
+
+def coverage_gain(near: dict[str, Float], pair: dict[str, Float]) -> Float:
+    """(N,): how much a demonstration at each candidate would lower the placement part, on
+    average over the candidates.
+
+    ``near[k]`` (N, M): object k's distances from the candidates to what was shown; ``pair[k]``
+    (N, N): between the candidates. With a demonstration at candidate c, candidate x's part is
+    max over k of min(min near[k][x], pair[k][x, c]).
+    """
+    now = nearest_part(near, len(next(iter(pair.values()))))
+    after = np.max(
+        [np.minimum(d.min(axis=1)[:, None], pair[k]) for k, d in near.items()], axis=0
+    )  # (x, c)
+    return np.asarray(now.mean() - after.mean(axis=0), dtype=np.float64)
 
 
 def _score(skill: Any, objects: dict[str, Float]) -> float:

@@ -46,6 +46,8 @@ __all__ = [
     "SCORE_PART",
     "YAW_SPREAD_FLOOR",
     "Uncertainty",
+    "nearest_part",
+    "object_distances",
     "placement_distance",
     "uncertainty",
 ]
@@ -147,6 +149,32 @@ def _place_row(value: object, name: str, *, posed: bool) -> Float:
     return position if rotation is None or not posed else np.r_[position, yaw_of(rotation)]
 
 
+def object_distances(
+    skill: Any,
+    placements: Sequence[Mapping[str, Any]],
+    others: Sequence[Mapping[str, Any]] | None = None,
+) -> dict[str, Float]:
+    """Per object of the skill, (N, M): the distance of each of ``placements`` to each of
+    ``others`` (the demonstrated placements when None), each axis divided by the demonstrated
+    spread along it."""
+    model = _model(skill)
+    out: dict[str, Float] = {}
+    for k in skill.object_names:
+        places, spread = model.places[k], model.spreads[k]
+        posed = places.shape[1] > 3
+        rows = np.array([_place_row(p[k], k, posed=posed) for p in placements])
+        width = rows.shape[1]
+        if others is None:
+            known = places[:, :width]
+        else:
+            known = np.array([_place_row(p[k], k, posed=posed) for p in others])
+        diff = rows[:, None, :] - known[None, :, :]
+        if width > 3:
+            diff[..., 3] = wrap_angle(diff[..., 3])
+        out[k] = np.linalg.norm(diff / spread[:width], axis=2)
+    return out
+
+
 def placement_distance(
     skill: Any,
     placements: Sequence[Mapping[str, Any]],
@@ -155,20 +183,19 @@ def placement_distance(
     """The placement part (N,) of each of ``placements``: over the skill's objects, the
     largest distance to the nearest demonstrated placement (and of ``extra``, counted as
     demonstrated), each axis divided by the demonstrated spread."""
-    model = _model(skill)
-    out = np.zeros(len(placements))
-    for k in skill.object_names:
-        places, spread = model.places[k], model.spreads[k]
-        posed = places.shape[1] > 3
-        rows = np.array([_place_row(p[k], k, posed=posed) for p in placements])
-        width = rows.shape[1]
-        known = places[:, :width]
-        if extra:
-            known = np.r_[known, [_place_row(p[k], k, posed=posed) for p in extra]]
-        diff = rows[:, None, :] - known[None, :, :]
-        if width > 3:
-            diff[..., 3] = wrap_angle(diff[..., 3])
-        out = np.maximum(out, np.min(np.linalg.norm(diff / spread[:width], axis=2), axis=1))
+    near = object_distances(skill, placements)
+    if extra:
+        more = object_distances(skill, placements, extra)
+        near = {k: np.c_[near[k], more[k]] for k in near}
+    return nearest_part(near, len(placements))
+
+
+def nearest_part(near: Mapping[str, Float], n: int) -> Float:
+    """The placement part (n,) from each object's distances to the placements shown (n, M):
+    the largest over the objects of the nearest one's."""
+    if not near:
+        return np.zeros(n)
+    out: Float = np.max([d.min(axis=1) for d in near.values()], axis=0)
     return out
 
 
