@@ -40,10 +40,11 @@ def _between(skill: object, res: object, scene: object, objects: dict) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=50)
+    parser.add_argument("--teach-seed", type=int, default=0, help="the skill's teacher's seed")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     spec = get_task("coaster")
-    ts = learn_task(spec, n_demos=5, seed=0)
+    ts = learn_task(spec, n_demos=5, seed=args.teach_seed)
     rng = np.random.default_rng([0, 1])  # evaluate's placements
     placements = [spec.sample_objects(rng) for _ in range(args.trials)]
     conditions = TrialConditions(perturb="obstacle")
@@ -67,7 +68,10 @@ def main() -> None:
         assert plain.times is not None and res.times is not None
         stretch.append(float(res.times[-1] / plain.times[-1]))
     n = args.trials
-    print(f"coaster, --perturb obstacle, {n} placements (seed 0), the fused controller's plans:")
+    print(
+        f"coaster, --perturb obstacle, {n} placements (seed 0), teach seed {args.teach_seed}, "
+        "the fused controller's plans:"
+    )
     print(
         "| plans | touching the box | smallest clearance, min / median | between samples, "
         "min / median | largest joint step |"

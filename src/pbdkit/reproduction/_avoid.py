@@ -10,7 +10,9 @@ along one direction, as one smooth bump:
   the frame of the joint it moves with (the nearest one's first, the others as they are met:
   with one point, a redundant arm swings another link in); **the direction** e: up without its
   component along the path (an obstacle met head-on is passed, not backed away from), or the
-  contact normal without it where that leaves little (:meth:`Avoidance._escape`);
+  contact normal without it where that leaves little (:meth:`Avoidance._escape`); with
+  ``beside``, the contact normal made level first (the passes run again where going over
+  fails: ``BESIDE`` in :mod:`._probabilistic_ik`);
 - **the bump**: at step k each point is asked to lie a_k * w_k further along e than on the
   path where the encounter was first met (ref_k; a point added later, where it lay less the
   bump the path already had), w_k being 1 over the point's own steps within the margin and
@@ -169,12 +171,16 @@ class Avoidance:
     (:meth:`update`).
 
     :meth:`terms` is what the fused step adds at step j; :attr:`precisions` gives each step's
-    Lambda_c for the covariance and the influence.
+    Lambda_c for the covariance and the influence. ``beside``: each encounter's direction is
+    level first (:meth:`_escape`).
     """
 
-    def __init__(self, checker: Any, margin: float = DEFAULT_MARGIN) -> None:
+    def __init__(
+        self, checker: Any, margin: float = DEFAULT_MARGIN, *, beside: bool = False
+    ) -> None:
         self.checker = checker
         self.margin = float(margin)
+        self.beside = bool(beside)
         self.n = int(checker._consts.shape[0])
         self.encounters: list[_Encounter] = []
         self.first = 0  # the skill's step of the path's first sample
@@ -338,7 +344,8 @@ class Avoidance:
         along the path (the moving point's motion through step j), so that an obstacle met
         head-on is passed, not backed away from: up (the base frame's z) without it, unless
         the other body is above; where that leaves less than :data:`ESCAPE_MIN`, the contact
-        normal without it."""
+        normal without it. With :attr:`beside`, the contact normal made level (without its
+        vertical component) is tried first."""
         moving = _moving(prox)
         away = -np.asarray(prox.normal) if moving == 0 else np.asarray(prox.normal)
         lo, hi = max(j - 1, 0), min(j + 1, joints.shape[0] - 1)
@@ -349,8 +356,11 @@ class Avoidance:
             return np.asarray(away / np.linalg.norm(away))
         along = motion / speed
         up = np.array([0.0, 0.0, 1.0])
-        # Up, unless the other body is above (up would go into it).
-        for candidate in (up, away) if float(up.dot(away)) > -0.5 else (away,):
+        # Up, unless the other body is above (up would go into it); beside: level, away.
+        order = (up, away) if float(up.dot(away)) > -0.5 else (away,)
+        if self.beside:
+            order = (away - away.dot(up) * up, *order)
+        for candidate in order:
             side = candidate - candidate.dot(along) * along
             size = float(np.linalg.norm(side))
             if size >= ESCAPE_MIN:

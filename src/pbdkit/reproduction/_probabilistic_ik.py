@@ -68,6 +68,11 @@ CONFLICT = 0.005
 #: given up by 20 cm there.
 TIGHTEST = 2.0
 LEFT_SIGMAS = 3.0
+#: Where the passes that go over an obstacle still meet it or leave a tight constraint, passes
+#: that go beside it (level, away from it: :class:`._avoid.Avoidance`'s ``beside``) are run
+#: too, and kept where they do neither. A path that goes down and away past a box (a coaster
+#: skill whose placement is near it) cannot be lifted over it without leaving the placement.
+BESIDE = True
 
 
 class CollisionWarning(UserWarning):
@@ -180,11 +185,13 @@ def _avoid_passes(
     report: CollisionReport,
     margin: float,
     remake: Remake,
+    *,
+    beside: bool = False,
 ) -> tuple[ReproductionResult, CollisionReport]:
     """The passes of :mod:`._avoid`: Table II again (``remake``) with the encounters each
     pass meets, until the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the
     largest smallest clearance) and its check (``report``: the check of ``res``)."""
-    avoidance = Avoidance(checker, margin)
+    avoidance = Avoidance(checker, margin, beside=beside)
     run = dataclasses.replace(run, avoid=avoidance)
     best: tuple[ReproductionResult, CollisionReport] | None = None
     for _ in range(MAX_PASSES):
@@ -282,6 +289,16 @@ def with_scene(
             # Where keeping the margin would leave a tight constraint of the skill, the plain
             # run stays, its contacts reported: the skill is not given up silently.
             left = _leaves_tight(run, res, avoided)
+            if BESIDE and (left is not None or avoided_report.collisions):
+                # Over the obstacle did not work: beside it.
+                side, side_report = _avoid_passes(
+                    run, res, checker, report, margin, remake, beside=True
+                )
+                side_left = _leaves_tight(run, res, side)
+                if side_left is None and (
+                    left is not None or _scene_min(side_report) > _scene_min(avoided_report)
+                ):
+                    avoided, avoided_report, left = side, side_report, None
             if left is None:
                 res, report = avoided, avoided_report
         else:
