@@ -524,6 +524,7 @@ def _pbdkit(*args: str, **kw: Any) -> subprocess.Popen[str]:
 COASTER_OBJECTS = ["--object", "glass=/objects/glass", "--object", "coaster=/objects/coaster"]
 #: An object's place in a ``put ...`` line of `pbdkit ros record --suggest`.
 PLACED = re.compile(r"(\w+) at \((-?[\d.]+), (-?[\d.]+), (-?[\d.]+)\)")
+UNCERTAINTY = re.compile(r"\(uncertainty ([\d.]+|inf)\)")
 
 
 def _teacher(takes: int, seed: int) -> subprocess.Popen[str]:
@@ -586,7 +587,9 @@ def _record_suggested(teach: subprocess.Popen[str], demos: Path, skill: Path, ta
     a line ``put ...`` names every object's place, the skill's first suggestion then (within
     the 3 decimals printed) inside the default ranges of the skill it began with; after each
     take the skill file loads and holds one more demonstration, the take that was appended
-    to ``demos``; the suggestion before the second take is not the first one. The files are
+    to ``demos``; the uncertainty printed is the suggestion's; the suggestion before the second
+    take is not the first one (its place, or its uncertainty: the teacher does not put the
+    objects where it says, so the best place to cover may stay where it was). The files are
     copied as each take leaves them and checked once the takes are done (loading them
     meanwhile would take the recorder's CPU)."""
     from pbdkit import Skill, load_demonstrations
@@ -613,7 +616,7 @@ def _record_suggested(teach: subprocess.Popen[str], demos: Path, skill: Path, ta
     assert [i in puts for i in sorted(puts + starts)] == [True, False] * takes + [True], said
     began = Skill.load(copies[0][0])
     first, ranges = len(began.demonstrations_ or []), default_ranges(began)
-    placed = []
+    placed, scores = [], []
     for k, (skill_k, demos_k) in enumerate(copies):
         learned, recorded = Skill.load(skill_k), load_demonstrations(demos_k)
         assert learned.demonstrations_ is not None
@@ -623,11 +626,16 @@ def _record_suggested(teach: subprocess.Popen[str], demos: Path, skill: Path, ta
             np.testing.assert_array_equal(recorded[-1].joints, learned.demonstrations_[-1].joints)
         put = {m[1]: np.array(m.groups()[1:], dtype=float) for m in PLACED.finditer(lines[puts[k]])}
         assert sorted(put) == sorted(learned.object_names), lines[puts[k]]
-        expected = learned.suggest(ranges)[0].objects
+        best = learned.suggest(ranges)[0]
         for name, where in put.items():
-            np.testing.assert_allclose(where, expected[name], atol=6e-4, err_msg=lines[puts[k]])
+            np.testing.assert_allclose(where, best.objects[name], atol=6e-4, err_msg=lines[puts[k]])
+        score = UNCERTAINTY.search(lines[puts[k]])
+        assert score is not None, lines[puts[k]]
+        assert abs(float(score[1]) - best.score) <= 0.0051, (lines[puts[k]], best.score)
         placed.append(np.concatenate([put[name] for name in sorted(put)]))
-    assert np.abs(placed[1] - placed[0]).max() > 1e-3, (lines[puts[0]], lines[puts[1]])
+        scores.append(float(score[1]))
+    moved = np.abs(placed[1] - placed[0]).max() > 1e-3
+    assert moved or scores[1] != scores[0], (lines[puts[0]], lines[puts[1]])
 
 
 def coaster_round_trip(workdir: str, takes: str = "3", suggested: str = "2",
