@@ -221,9 +221,11 @@ def _record(
                 else:
                     done += _finish(take, hand, save, log, done)
                 take, recent, auto.rested_at = None, [], q
-                if settings.takes is None or done < settings.takes:
-                    log(f"take {done + 1}: {prompt}")
-                break
+                if settings.takes is not None and done >= settings.takes:
+                    break
+                log(f"take {done + 1}: {prompt}")
+                # The rest of the batch goes on: the next take may start in it (a batch read
+                # late, on a loaded machine or at --time-scale 10, holds both).
     return done
 
 
