@@ -87,21 +87,24 @@ def test_suggestions_lower_the_uncertainty_over_the_ranges_most_and_spread_out(
         glass = s.objects["glass"]
         assert np.all(glass >= lo - 1e-12) and np.all(glass <= hi + 1e-12)
     # Brute force, independent of coverage_gain's arrays: the mean placement part over the
-    # candidates with each candidate counted as demonstrated, one skill.uncertainty call per
+    # candidates with each candidate counted as demonstrated, one placement_distance call per
     # pair. The first suggestion lowers it most (all candidates are within reach here).
-    cands = _candidates(skill, parse_ranges(skill, ranges), CANDIDATES, 0)[:48]
-    sample = [{"glass": c["glass"]} for c in cands]
+    full = _candidates(skill, parse_ranges(skill, ranges), CANDIDATES, 0)
+    sample = [{"glass": c["glass"]} for c in full[:48]]
+
+    def gain(places: list[dict[str, np.ndarray]]) -> np.ndarray:
+        nearest = {k: d.min(axis=1) for k, d in object_distances(skill, places).items()}
+        return coverage_gain(nearest, object_distances(skill, places, places))
 
     def mean_after(shown: list[dict[str, np.ndarray]]) -> float:
         return float(np.mean([placement_distance(skill, [x], shown)[0] for x in sample]))
 
     first = found[0]
-    gains = coverage_gain(object_distances(skill, sample), object_distances(skill, sample, sample))
+    gains = gain(sample)
     before = mean_after([])
     for i in (0, 7, 23, 47):
         assert gains[i] == pytest.approx(before - mean_after([sample[i]]), rel=1e-9, abs=1e-12)
-    full = _candidates(skill, parse_ranges(skill, ranges), CANDIDATES, 0)
-    everywhere = coverage_gain(object_distances(skill, full), object_distances(skill, full, full))
+    everywhere = gain(full)
     best = full[int(np.argmax(everywhere))]["glass"]
     np.testing.assert_array_equal(first.objects["glass"], best)
     # Its score is the uncertainty there; it is not the least sure candidate (a corner would

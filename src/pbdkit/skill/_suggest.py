@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from .._rotations import as_pose, pose_matrix
 from .._validation import check_int, short
-from ._uncertainty import SCORE_PART, _model, nearest_part, object_distances, uncertainty
+from ._uncertainty import SCORE_PART, _model, object_distances, uncertainty
 
 __all__ = ["CANDIDATES", "PRESELECT", "Suggestion", "parse_ranges", "suggest"]
 
@@ -137,14 +137,15 @@ def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Su
     chosen: list[Suggestion] = []
     taken: set[int] = set()  # chosen, or out of reach
     known: dict[int, float] = {}  # the score of the candidates measured so far
-    near = object_distances(skill, cands)  # to the demonstrated placements
+    # Each object's distance from each candidate to the nearest placement shown (N,).
+    nearest = {k: d.min(axis=1) for k, d in object_distances(skill, cands).items()}
     pair = object_distances(skill, cands, cands)
     while len(chosen) < n:
         # Where a demonstration lowers the placement part over the candidates most first;
         # where the score is another part than the placement's, the PRESELECT first are
         # measured by it.
-        far = nearest_part(near, len(cands))
-        order = [int(i) for i in np.argsort(-coverage_gain(near, pair), kind="stable")]
+        far = np.max(list(nearest.values()), axis=0)
+        order = [int(i) for i in np.argsort(-coverage_gain(nearest, pair), kind="stable")]
         order = [i for i in order if i not in taken]
         if SCORE_PART != "placement":
             pool = order[:PRESELECT]
@@ -159,25 +160,24 @@ def suggest(skill: Any, ranges: object, n: int = 1, *, seed: int = 0) -> list[Su
                 continue  # out of reach: nothing to teach there
             score = float(far[i]) if SCORE_PART == "placement" else known[i]
             chosen.append(Suggestion({k: v.copy() for k, v in cands[i].items()}, score))
-            near = {k: np.minimum(near[k], pair[k][:, [i]]) for k in near}  # counts as shown
+            nearest = {k: np.minimum(d, pair[k][:, i]) for k, d in nearest.items()}  # shown
             break
         else:
             break  # every candidate is out of reach
     return chosen
 
 
-def coverage_gain(near: dict[str, Float], pair: dict[str, Float]) -> Float:
+def coverage_gain(nearest: dict[str, Float], pair: dict[str, Float]) -> Float:
     """(N,): how much a demonstration at each candidate would lower the placement part, on
     average over the candidates.
 
-    ``near[k]`` (N, M): object k's distances from the candidates to what was shown; ``pair[k]``
-    (N, N): between the candidates. With a demonstration at candidate c, candidate x's part is
-    max over k of min(min near[k][x], pair[k][x, c]).
+    ``nearest[k]`` (N,): object k's distance from each candidate to the nearest placement shown;
+    ``pair[k]`` (N, N): between the candidates. The placement part of candidate x is
+    max over k of nearest[k][x]; with a demonstration at candidate c, max over k of
+    min(nearest[k][x], pair[k][x, c]).
     """
-    now = nearest_part(near, len(next(iter(pair.values()))))
-    after = np.max(
-        [np.minimum(d.min(axis=1)[:, None], pair[k]) for k, d in near.items()], axis=0
-    )  # (x, c)
+    now = np.max(list(nearest.values()), axis=0)
+    after = np.max([np.minimum(d[:, None], pair[k]) for k, d in nearest.items()], axis=0)
     return np.asarray(now.mean() - after.mean(axis=0), dtype=np.float64)
 
 

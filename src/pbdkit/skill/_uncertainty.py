@@ -46,7 +46,6 @@ __all__ = [
     "SCORE_PART",
     "YAW_SPREAD_FLOOR",
     "Uncertainty",
-    "nearest_part",
     "object_distances",
     "placement_distance",
     "uncertainty",
@@ -187,14 +186,8 @@ def placement_distance(
     if extra:
         more = object_distances(skill, placements, extra)
         near = {k: np.c_[near[k], more[k]] for k in near}
-    return nearest_part(near, len(placements))
-
-
-def nearest_part(near: Mapping[str, Float], n: int) -> Float:
-    """The placement part (n,) from each object's distances to the placements shown (n, M):
-    the largest over the objects of the nearest one's."""
     if not near:
-        return np.zeros(n)
+        return np.zeros(len(placements))
     out: Float = np.max([d.min(axis=1) for d in near.values()], axis=0)
     return out
 
