@@ -345,37 +345,22 @@ def _stop_arm(arm: subprocess.Popen[str]) -> dict[str, Any]:
     return got
 
 
-#: The worst jerk (over the limit) a run's commands may reach through the sim arm's JTC
-#: without ``--latency`` (cli_sigint; the stamped cases have STAMPED_JERK_BOUND): a
-#: message sent while the arm moves starts when the JTC takes it (header stamp 0), some
-#: milliseconds off the sender's clock, and the segment to its first point absorbs that
-#: (pbdkit.ros._jtc.splice_lead; measured 2-3x, up to 7x with a second job on the machine,
-#: 14.7x in the round trip on a quiet clean-clone CI run of a day this machine ran ~1.5x
-#: slower, session 23). Velocity and acceleration stay within the limits.
-SPLICE_JERK_BOUND = 20.0
-#: ... and the acceleration (over the limit) it may reach there: the same splice, measured up to
-#: 1.004 over 20 placements (benchmarks/ros_coaster.py), 1.013 on a quiet clean-clone CI run of
-#: cli_sigint on a slow day (session 23), 1.073 once in the round trip. The velocity stays
-#: within its limit (checked alone).
-SPLICE_ACCEL_BOUND = 1.1
+#: The CLI cases that check the commands' limits run with ``--latency 0.3``: without it a
+#: message sent while the arm moves starts when the JTC takes it (header stamp 0), and the
+#: segment to its first point absorbs the graph's latency, which no bound holds on a loaded
+#: machine (docs/ros2.md: up to 1.97x the acceleration limit; cli_sigint unstamped reached
+#: 1.24x and 5.2x the jerk on a clean-clone CI run, session 25, after 1.01x before).
 #: With ``--latency 0.3`` the jerk (over the limit) a run's commands may reach: 0.60-0.75 with
 #: up to one busy loop beside the test, 1.0-1.8 with two on two cores (a message then taken
 #: after its hand-over, session 24); velocity and acceleration stay within the limits.
 STAMPED_JERK_BOUND = 2.0
 
 
-def _splice_ok(got: dict, stamped: bool = False) -> bool:
-    """The sim arm's commands (``_stop_arm``): velocity within the limits, acceleration
-    and jerk within the splice's bounds; ``stamped`` (`pbdkit ros run --latency`: each
-    message starts where the run planned it, whatever the graph's latency) velocity and
-    acceleration within the limits, the jerk within :data:`STAMPED_JERK_BOUND`."""
-    if stamped:
-        return bool(got["va"] <= 1.0 and got["worst"] <= STAMPED_JERK_BOUND)
-    found = re.search(r"MotionPeaks\(velocity=([0-9.e+-]+)", got["out"])
-    velocity = float(found.group(1)) if found else got["va"]
-    return bool(
-        velocity <= 1.0 and got["va"] <= SPLICE_ACCEL_BOUND and got["worst"] <= SPLICE_JERK_BOUND
-    )
+def _stamped_ok(got: dict) -> bool:
+    """The sim arm's commands (``_stop_arm``) of a run with ``--latency`` (each message starts
+    where the run planned it, whatever the graph's latency): velocity and acceleration within
+    the limits, the jerk within :data:`STAMPED_JERK_BOUND`."""
+    return bool(got["va"] <= 1.0 and got["worst"] <= STAMPED_JERK_BOUND)
 
 
 def _cli(skill_file: str, *args: str) -> subprocess.Popen[str]:
@@ -422,7 +407,7 @@ def cli_topics_renamed_gripper(skill_file: str) -> None:
     text = "".join(lines) + out
     assert cli.returncode == 0, (cli.returncode, text, err)
     assert "re-planned" in text and f"{moved[1]:.3f}"[:-1] in text, text
-    assert _splice_ok(got, stamped=True), got
+    assert _stamped_ok(got), got
     assert got.get("gripper") == 1.0, got
     print(f"OK: re-planned, gripper closed, worst v/a/j {got['worst']:.3f}")
 
@@ -431,7 +416,7 @@ def cli_sigint(skill_file: str) -> None:
     """SIGINT mid-run: the arm is brought to rest within its limits, then exit 130."""
     _, glass, q0 = _glass_setup(skill_file)
     arm = _start_katana_arm(60, q0)
-    cli = _cli(skill_file, "--object", f"glass={_csv(glass)}")
+    cli = _cli(skill_file, "--object", f"glass={_csv(glass)}", "--latency", "0.3")
     lines: list[str] = []
     _wait_for_line(cli, "running", lines)
     time.sleep(1.5)
@@ -441,7 +426,7 @@ def cli_sigint(skill_file: str) -> None:
     got = _stop_arm(arm)
     assert cli.returncode == 130, (cli.returncode, out, err)
     assert "braking" in out, out
-    assert _splice_ok(got), got
+    assert _stamped_ok(got), got
     assert got["last_speed"] < 1e-6, got
     print(f"OK: exit 130, at rest, worst v/a/j {got['worst']:.3f}")
 
