@@ -20,6 +20,7 @@ from pbdkit.datasets import reach_grasp_return
 from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
 from pbdkit.reproduction._avoid import (
+    ACROSS_SIGMA,
     SIGMA,
     TAPER,
     TAPER_DECADES,
@@ -273,18 +274,25 @@ def test_a_glass_inside_a_box_is_reported_infeasible(skill: Skill, plain: tuple)
     assert any("crate" in c for c in out.collisions)
 
 
-def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: tuple) -> None:
-    # One encounter with the box: at step k, r = e^T J_p for the point fixed in its body,
-    # against central differences of e . p(theta); the Gaussian is
-    # r theta ~ N(r q + ref_k + a w_k - e . p(q), SIGMA^2 / rho_k):
-    # Lambda = rho_k r^T r / SIGMA^2, information Lambda q + rho_k r (ref_k + a w_k - e . p(q))
-    # / SIGMA^2.
+def _through_the_box(skill: Skill, plain: tuple) -> tuple[CollisionChecker, np.ndarray, object]:
+    """A checker of a box at mid-carry, its grasps planned for the plain path (the path's
+    joints and gripper signal without the lead-in)."""
     objects, res = plain
     box = Scene([Box((0.06, 0.06, 0.06), _mid_carry(res), name="box")])
     checker = CollisionChecker(skill.robot, box, objects)
     own = ~res.lead_in
     joints, signal = res.joints[own], res.gripper_signal[own]
     checker.plan_grasps(joints, signal)
+    return checker, joints, signal
+
+
+def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: tuple) -> None:
+    # One encounter with the box: at step k, r = e^T J_p for the point fixed in its body,
+    # against central differences of e . p(theta); the Gaussian is
+    # r theta ~ N(r q + ref_k + a w_k - e . p(q), SIGMA^2 / rho_k):
+    # Lambda = rho_k r^T r / SIGMA^2, information Lambda q + rho_k r (ref_k + a w_k - e . p(q))
+    # / SIGMA^2.
+    checker, joints, signal = _through_the_box(skill, plain)
     avoid = Avoidance(checker, margin=0.02)
     assert avoid.update(joints, signal) > 0
     (enc,) = avoid.encounters
@@ -330,6 +338,45 @@ def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: 
     assert enc.weight(enc.lo) == enc.weight(enc.hi) == 1.0
     np.testing.assert_allclose(enc.weight(enc.lo - taper / 2), 0.5, atol=1e-12)
     assert enc.weight(enc.hi + taper) == 0.0 and avoid.terms(enc.hi + taper + 1) is None
+
+
+def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, plain: tuple) -> None:
+    # hold=True adds, at step k, P J_p theta ~ N(P (J_p q + q_k - p(q)), ACROSS_SIGMA^2 / rho_k)
+    # with P = I - e e^T and q_k the point on the path the encounter started on: against
+    # central differences of p, on top of the lift's Gaussian of the test above.
+    checker, joints, signal = _through_the_box(skill, plain)
+    lift, held = Avoidance(checker, margin=0.02), Avoidance(checker, margin=0.02, hold=True)
+    assert lift.update(joints, signal) == held.update(joints, signal) > 0
+    (enc,) = held.encounters
+    assert set(enc.across) == {enc.moving} and not lift.encounters[0].across
+
+    def point(q: np.ndarray) -> np.ndarray:
+        rots, origins = _chain_frames(q[None], checker._consts, checker._revolute)
+        return np.asarray(rots[0, enc.joint].dot(enc.local) + origins[0, enc.joint])
+
+    across = np.eye(3) - np.outer(enc.escape, enc.escape)
+    steps = (enc.lo - enc.taper // 2, (enc.lo + enc.hi) // 2, enc.hi + enc.taper // 3)
+    for k in steps:
+        np.testing.assert_allclose(enc.across[enc.moving][k], point(joints[k]), atol=1e-12)
+    # Linearized at another path (the next pass's): the point is asked back to q_k.
+    moved = joints + 0.02
+    for avoid in (lift, held):
+        avoid._linearize(moved, _chain_frames(moved, checker._consts, checker._revolute))
+    h = 1e-6
+    for k in steps:
+        q = moved[k]
+        jac = np.stack([(point(q + h * e) - point(q - h * e)) / (2 * h) for e in np.eye(len(q))], 1)
+        rho = 10.0 ** (-TAPER_DECADES * (1.0 - enc.weight(k, enc.moving))) / ACROSS_SIGMA**2
+        lam_lift, info_lift = lift.terms(k)  # type: ignore[misc]
+        lam, info = held.terms(k)  # type: ignore[misc]
+        extra = rho * jac.T @ across @ jac
+        np.testing.assert_allclose(
+            lam - lam_lift, extra, rtol=1e-5, atol=1e-6 * np.abs(extra).max()
+        )
+        want = extra @ q + rho * jac.T @ across @ (enc.across[enc.moving][k] - point(q))
+        np.testing.assert_allclose(
+            info - info_lift, want, rtol=1e-5, atol=1e-6 * np.abs(want).max()
+        )
 
 
 def test_the_passes_look_only_where_the_check_finds_the_scene_near(

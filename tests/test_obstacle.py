@@ -177,8 +177,9 @@ def test_a_box_that_cannot_be_passed_over_is_passed_beside(
     # The coaster skill of teach seed 1, evaluate's fourth placement: the path goes down to
     # the coaster just past the box. Lifted over it, the glass would land 20 mm off the
     # coaster where its constraint is tight, so the plan was refused (39 of 50 such plans with
-    # this skill, benchmarks/obstacle_plans.py --teach-seed 1); beside it, it keeps clear and
-    # puts the glass where the plain run does.
+    # this skill, benchmarks/obstacle_plans.py --teach-seed 1); beside it, or over it with the
+    # glass held along its way (HOLD), it keeps clear and puts the glass where the plain run
+    # does.
     import pbdkit.reproduction._probabilistic_ik as pik
     from pbdkit.sim._task_skill import learn_task
     from pbdkit.sim._trials import TrialConditions, trial_disturbance
@@ -197,7 +198,15 @@ def test_a_box_that_cannot_be_passed_over_is_passed_beside(
     release = np.flatnonzero(res.gripper[:-1] & ~res.gripper[1:])[0]
     kept = np.flatnonzero(plain.gripper[:-1] & ~plain.gripper[1:])[0]
     assert np.linalg.norm(res.positions[release] - plain.positions[kept]) < 0.005
-    # Over it only, as before: refused, and the message says why.
+    # Each fallback alone keeps clear too; over it only, as before both: refused, and the
+    # message says why.
+    for hold, beside in ((True, False), (False, True)):
+        monkeypatch.setattr(pik, "HOLD", hold)
+        monkeypatch.setattr(pik, "BESIDE", beside)
+        alone = ts.skill.reproduce(told, scene=scene, on_unreachable="warn")
+        assert not alone.collisions and alone.infeasible is None, (hold, beside)
+        assert alone.clearance is not None and alone.clearance.min() > 0.015, (hold, beside)
+    monkeypatch.setattr(pik, "HOLD", False)
     monkeypatch.setattr(pik, "BESIDE", False)
     with pytest.warns(pik.CollisionWarning):
         over = ts.skill.reproduce(told, scene=scene, on_unreachable="warn")

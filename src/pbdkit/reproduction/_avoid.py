@@ -29,12 +29,22 @@ last pass's posture theta'_k::
 
 with rho_k = 10^(-TAPER_DECADES (1 - w_k)): full precision where the bump is whole, four
 decades less at its ends. In information form it adds Lambda_c = rho_k r^T r / SIGMA^2 to the
-fused precision of step k, like the skill's own constraints. One direction per encounter and a
-lift that is a smooth envelope make the bend continuous along the steps: per-step directions
-(each posture's own shortest way out) switched sides mid-obstacle, and the path jumped past
-the box between two samples that were clear of it. Where the clearance acts, the fused step's
-trust region is ``CLEARANCE_STEP`` times ``max_step`` (:mod:`._steps`) and the timing gives
-its steps :data:`SLOWER` times their nominal duration (:meth:`Avoidance.slower`).
+fused precision of step k, like the skill's own constraints. With ``hold`` (passes run again
+where these fail: ``HOLD`` in :mod:`._probabilistic_ik`), across e (P = I - e e^T) the
+encounter's point is also held where it was on the path the encounter started on (q_k), with
+:data:`ACROSS_SIGMA`::
+
+    P J_p theta_k ~ N(P (J_p theta'_k + q_k - p(theta'_k)), ACROSS_SIGMA^2 / rho_k)
+
+adding rho_k J_p^T P J_p / ACROSS_SIGMA^2: the lift then moves it along e alone (one
+coordinate asked left the other two to the skill's loose phases, and the passes wandered).
+
+One direction per encounter and a lift that is a smooth envelope make the bend continuous along
+the steps: per-step directions (each posture's own shortest way out) switched sides mid-
+obstacle, and the path jumped past the box between two samples that were clear of it. Where the
+clearance acts, the fused step's trust region is ``CLEARANCE_STEP`` times ``max_step``
+(:mod:`._steps`) and the timing gives its steps :data:`SLOWER` times their nominal duration
+(:meth:`Avoidance.slower`).
 """
 
 from __future__ import annotations
@@ -49,7 +59,15 @@ from numpy.typing import NDArray
 
 from ..robots._chain import _chain_frames
 
-__all__ = ["DEFAULT_MARGIN", "MAX_PASSES", "SIGMA", "TAPER", "TOLERANCE", "Avoidance"]
+__all__ = [
+    "ACROSS_SIGMA",
+    "DEFAULT_MARGIN",
+    "MAX_PASSES",
+    "SIGMA",
+    "TAPER",
+    "TOLERANCE",
+    "Avoidance",
+]
 
 Float = NDArray[np.float64]
 
@@ -71,6 +89,14 @@ TOLERANCE = 2e-3
 TAPER = 0.04
 TAPER_MIN = 5
 TAPER_DECADES = 4.0
+
+#: With ``hold``, across its direction the encounter's point is held where it was on the path
+#: it joined at, with this standard deviation (m) where the bump is whole (tapered as the
+#: lift's precision). A lift of one coordinate alone leaves the other two to a carry's loose
+#: constraints: the hand swung back and forth along its way while it rose (a coaster plan went
+#: 10 cm back and ahead over eight passes, each meeting the box somewhere new), and the passes
+#: did not converge. ``HOLD`` in :mod:`._probabilistic_ik` says when it is used.
+ACROSS_SIGMA = 0.005
 
 #: A normal with less than this left across the path is replaced by up (:meth:`_escape`).
 ESCAPE_MIN = 0.3
@@ -106,6 +132,9 @@ class _Encounter:
     #: (and over the tapers around), not over the whole encounter. A hand that passed near the
     #: obstacle on its way is not held up at the grasp, where a link is still near it.
     spans: dict[str, list[int]] = field(default_factory=dict)
+    #: With ``hold``, the encounter's point's positions (T, 3) on the path where the encounter
+    #: started: across e, the bump holds it there (:data:`ACROSS_SIGMA`).
+    across: dict[str, Float] = field(default_factory=dict)
 
     @property
     def amplitude(self) -> float:
@@ -172,15 +201,21 @@ class Avoidance:
 
     :meth:`terms` is what the fused step adds at step j; :attr:`precisions` gives each step's
     Lambda_c for the covariance and the influence. ``beside``: each encounter's direction is
-    level first (:meth:`_escape`).
+    level first (:meth:`_escape`); ``hold``: its point is held across it (:data:`ACROSS_SIGMA`).
     """
 
     def __init__(
-        self, checker: Any, margin: float = DEFAULT_MARGIN, *, beside: bool = False
+        self,
+        checker: Any,
+        margin: float = DEFAULT_MARGIN,
+        *,
+        beside: bool = False,
+        hold: bool = False,
     ) -> None:
         self.checker = checker
         self.margin = float(margin)
         self.beside = bool(beside)
+        self.hold = bool(hold)
         self.n = int(checker._consts.shape[0])
         self.encounters: list[_Encounter] = []
         self.first = 0  # the skill's step of the path's first sample
@@ -332,6 +367,8 @@ class Avoidance:
             taper=max(TAPER_MIN, round(TAPER * joints.shape[0])),
             moving=prox.bodies[moving],
         )
+        if self.hold:
+            enc.across[enc.moving] = points
         own = [k for k, p in hits if p.bodies[_moving(p)] == enc.moving]
         enc.spans[enc.moving] = [min(own), max(own)]
         for k, p in hits:
@@ -388,6 +425,7 @@ class Avoidance:
         rots, origins = frames
         first, last = self.first, self.first + joints.shape[0] - 1
         for enc in self.encounters:
+            across = np.eye(3) - np.outer(enc.escape, enc.escape)
             points = {enc.moving: (enc.joint, enc.local, enc.ref), **enc.others}
             lo, hi = max(first, enc.lo - enc.taper), min(last, enc.hi + enc.taper)
             lifts = enc.lift(np.arange(lo, hi + 1)) if hi >= lo else np.zeros(0)
@@ -400,10 +438,19 @@ class Avoidance:
                     w = _taper_weight(gap, enc.taper)
                     rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
                     point = rots[k, joint].dot(local) + origins[k, joint]
-                    row = enc.escape.dot(self._point_rows(k, point, joint, frames))
+                    rows = self._point_rows(k, point, joint, frames)
+                    row = enc.escape.dot(rows)
                     push = ref[k] + lifts[step - lo] * w - float(enc.escape.dot(point))
                     lam = rho * np.outer(row, row)
                     info = rho * row * (row.dot(joints[k]) + push)
+                    if name in enc.across:
+                        # Across e: held where it was (P = I - e e^T, a projector).
+                        held = rho * (SIGMA / ACROSS_SIGMA) ** 2
+                        pr = across.dot(rows)
+                        lam = lam + held * rows.T.dot(pr)
+                        info = info + held * pr.T.dot(
+                            rows.dot(joints[k]) + enc.across[name][k] - point
+                        )
                     if step in self._terms:
                         old = self._terms[step]
                         lam, info = old[0] + lam, old[1] + info

@@ -73,6 +73,15 @@ LEFT_SIGMAS = 3.0
 #: too, and kept where they do neither. A path that goes down and away past a box (a coaster
 #: skill whose placement is near it) cannot be lifted over it without leaving the placement.
 BESIDE = True
+#: Where the passes still meet the obstacle or leave a tight constraint, passes that hold the
+#: encounter's point across the bump's direction (:class:`._avoid.Avoidance`'s ``hold``) are
+#: run too, over it and then beside it, and kept where they do neither. Asked for one
+#: coordinate, a carried glass was lifted by postures that also swung it back and forth along
+#: its way, and the passes met the box somewhere new each time (plans touching the box, teach
+#: seeds 0 / 1 / 2 of ``benchmarks/obstacle_plans.py``: 0 / 11 / 29 of 50 before). Not the
+#: first try: held along its way, an online re-plan's path took steps that its motion cut
+#: through (a test's box kept 2 mm where the passes without it keep 25).
+HOLD = True
 
 
 class CollisionWarning(UserWarning):
@@ -185,13 +194,13 @@ def _avoid_passes(
     report: CollisionReport,
     margin: float,
     remake: Remake,
-    *,
-    beside: bool = False,
+    **how: bool,
 ) -> tuple[ReproductionResult, CollisionReport]:
     """The passes of :mod:`._avoid`: Table II again (``remake``) with the encounters each
     pass meets, until the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the
-    largest smallest clearance) and its check (``report``: the check of ``res``)."""
-    avoidance = Avoidance(checker, margin, beside=beside)
+    largest smallest clearance) and its check (``report``: the check of ``res``). ``how``:
+    :class:`._avoid.Avoidance`'s ``beside`` and ``hold``."""
+    avoidance = Avoidance(checker, margin, **how)
     run = dataclasses.replace(run, avoid=avoidance)
     best: tuple[ReproductionResult, CollisionReport] | None = None
     for _ in range(MAX_PASSES):
@@ -211,6 +220,15 @@ def _avoid_passes(
             break
     assert best is not None
     return best
+
+
+def _fallbacks() -> list[dict[str, bool]]:
+    """The passes tried, in order, where the first ones still meet the obstacle or leave a
+    tight constraint (:data:`HOLD`, :data:`BESIDE`)."""
+    out = [{"hold": True}] if HOLD else []
+    if BESIDE:
+        out.append({"beside": True, "hold": HOLD})
+    return out
 
 
 def _leaves_tight(
@@ -289,16 +307,17 @@ def with_scene(
             # Where keeping the margin would leave a tight constraint of the skill, the plain
             # run stays, its contacts reported: the skill is not given up silently.
             left = _leaves_tight(run, res, avoided)
-            if BESIDE and (left is not None or avoided_report.collisions):
-                # Over the obstacle did not work: beside it.
-                side, side_report = _avoid_passes(
-                    run, res, checker, report, margin, remake, beside=True
+            for how in _fallbacks():
+                if left is None and not avoided_report.collisions:
+                    break
+                # Over the obstacle did not work: held across, then beside it.
+                again, again_report = _avoid_passes(
+                    run, res, checker, report, margin, remake, **how
                 )
-                side_left = _leaves_tight(run, res, side)
-                if side_left is None and (
-                    left is not None or _scene_min(side_report) > _scene_min(avoided_report)
+                if _leaves_tight(run, res, again) is None and (
+                    left is not None or _scene_min(again_report) > _scene_min(avoided_report)
                 ):
-                    avoided, avoided_report, left = side, side_report, None
+                    avoided, avoided_report, left = again, again_report, None
             if left is None:
                 res, report = avoided, avoided_report
         else:
