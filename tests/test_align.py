@@ -244,7 +244,8 @@ def test_the_arrival_at_an_object_is_aligned_to_the_millimetre(
     # Issue 34: the xArm7's pausing teacher on the 40 cm table. In metres (the default), a hand
     # 5 mm short of the box looks like one on it: the arrivals (the hand within 1 mm) spread
     # over 3.9 and 4.3 % of the aligned time (seeds 1, 3); stretched near the object
-    # (NEAR_SCALE 5 cm), 0.3 and 1.3 %.
+    # (NEAR_SCALE 5 cm), 0.3 and 1.3 %; with the hand's speed as a feature (HAND_SPEED),
+    # 0.3 and 0.7 %.
     from arm_zoo import ARMS
 
     from pbdkit.datasets import reach_grasp_return
@@ -262,6 +263,10 @@ def test_the_arrival_at_an_object_is_aligned_to_the_millimetre(
         return float(np.ptp(arrivals))
 
     in_metres = arrivals_spread()
+    monkeypatch.setattr(_align, "HAND_SPEED", True)
+    with_speed = arrivals_spread()
+    assert with_speed < 0.01 and in_metres > 3 * with_speed
+    monkeypatch.setattr(_align, "HAND_SPEED", False)
     monkeypatch.setattr(_align, "NEAR_SCALE", 0.05)
     stretched = arrivals_spread()
     assert stretched < 0.015 and in_metres > 0.035 and in_metres > 3 * stretched
