@@ -674,3 +674,37 @@ def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     q, r = np.linalg.qr(rng.normal(size=(3, 3)))
     q = q * np.sign(np.diag(r))
     return q if np.linalg.det(q) > 0 else -q
+
+
+def test_a_tight_constraint_is_left_by_more_than_5_mm_and_three_deviations() -> None:
+    # pik._leaves_tight on a made-up run of 100 steps: the glass constraint 1 mm wide at step
+    # 30 (the grasp), 4.7 mm just after it (40-60: under TIGHT), 30 mm elsewhere. The avoided
+    # run's hand error grows at one step; left where it grows by more than CONFLICT (5 mm) and
+    # more than LEFT_SIGMAS (3) deviations, at a tight step.
+    from types import SimpleNamespace
+
+    import pbdkit.reproduction._probabilistic_ik as pik
+
+    sd = np.full(100, 0.03)
+    sd[30], sd[40:61] = 0.001, 0.0047
+    cov = np.zeros((100, 3, 3))
+    cov[:, 0, 0] = cov[:, 1, 1] = cov[:, 2, 2] = sd**2
+    run = SimpleNamespace(tasks=["glass"], constraints=SimpleNamespace(task_cov={"glass": cov}))
+    t = np.arange(100, dtype=float)
+
+    def result(errors: np.ndarray) -> SimpleNamespace:
+        return SimpleNamespace(lead_in=None, t=t, task_errors={"glass": errors})
+
+    plain = result(np.full(100, 0.001))
+
+    def left(step: int, grown: float) -> object:
+        errors = np.full(100, 0.001)
+        errors[step] += grown
+        return pik._leaves_tight(run, plain, result(errors))  # type: ignore[arg-type]
+
+    assert left(50, 0.0058) is None  # 1.2 deviations of a 4.7 mm constraint
+    assert left(50, 0.0150) == (50, "glass", pytest.approx(0.016))  # 3.2 of them
+    assert left(30, 0.0045) is None  # 4.5 deviations, but under 5 mm
+    assert left(30, 0.0055) == (30, "glass", pytest.approx(0.0065))
+    assert left(80, 0.1) is None  # loose there
+    assert left(80, 0.0) is None and left(50, -0.001) is None
