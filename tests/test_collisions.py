@@ -348,7 +348,7 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
     lift, held = Avoidance(checker, margin=0.02), Avoidance(checker, margin=0.02, hold=True)
     assert lift.update(joints, signal) == held.update(joints, signal) > 0
     (enc,) = held.encounters
-    assert set(enc.across) == {enc.moving} and not lift.encounters[0].across
+    assert enc.held is not None and lift.encounters[0].held is None  # its point alone
 
     def point(q: np.ndarray) -> np.ndarray:
         rots, origins = _chain_frames(q[None], checker._consts, checker._revolute)
@@ -357,7 +357,7 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
     across = np.eye(3) - np.outer(enc.escape, enc.escape)
     steps = (enc.lo - enc.taper // 2, (enc.lo + enc.hi) // 2, enc.hi + enc.taper // 3)
     for k in steps:
-        np.testing.assert_allclose(enc.across[enc.moving][k], point(joints[k]), atol=1e-12)
+        np.testing.assert_allclose(enc.held[k], point(joints[k]), atol=1e-12)
     # Linearized at another path (the next pass's): the point is asked back to q_k.
     moved = joints + 0.02
     for avoid in (lift, held):
@@ -373,7 +373,7 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
         np.testing.assert_allclose(
             lam - lam_lift, extra, rtol=1e-5, atol=1e-6 * np.abs(extra).max()
         )
-        want = extra @ q + rho * jac.T @ across @ (enc.across[enc.moving][k] - point(q))
+        want = extra @ q + rho * jac.T @ across @ (enc.held[k] - point(q))
         np.testing.assert_allclose(
             info - info_lift, want, rtol=1e-5, atol=1e-6 * np.abs(want).max()
         )

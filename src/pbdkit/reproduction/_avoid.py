@@ -133,8 +133,8 @@ class _Encounter:
     #: obstacle on its way is not held up at the grasp, where a link is still near it.
     spans: dict[str, list[int]] = field(default_factory=dict)
     #: With ``hold``, the encounter's point's positions (T, 3) on the path where the encounter
-    #: started: across e, the bump holds it there (:data:`ACROSS_SIGMA`).
-    across: dict[str, Float] = field(default_factory=dict)
+    #: started: across e, the bump holds it there (:data:`ACROSS_SIGMA`); None without.
+    held: Float | None = None
 
     @property
     def amplitude(self) -> float:
@@ -368,7 +368,7 @@ class Avoidance:
             moving=prox.bodies[moving],
         )
         if self.hold:
-            enc.across[enc.moving] = points
+            enc.held = points
         own = [k for k, p in hits if p.bodies[_moving(p)] == enc.moving]
         enc.spans[enc.moving] = [min(own), max(own)]
         for k, p in hits:
@@ -425,7 +425,8 @@ class Avoidance:
         rots, origins = frames
         first, last = self.first, self.first + joints.shape[0] - 1
         for enc in self.encounters:
-            across = np.eye(3) - np.outer(enc.escape, enc.escape)
+            # Across e: P = I - e e^T, a projector (with ``hold``).
+            across = None if enc.held is None else np.eye(3) - np.outer(enc.escape, enc.escape)
             points = {enc.moving: (enc.joint, enc.local, enc.ref), **enc.others}
             lo, hi = max(first, enc.lo - enc.taper), min(last, enc.hi + enc.taper)
             lifts = enc.lift(np.arange(lo, hi + 1)) if hi >= lo else np.zeros(0)
@@ -443,14 +444,12 @@ class Avoidance:
                     push = ref[k] + lifts[step - lo] * w - float(enc.escape.dot(point))
                     lam = rho * np.outer(row, row)
                     info = rho * row * (row.dot(joints[k]) + push)
-                    if name in enc.across:
-                        # Across e: held where it was (P = I - e e^T, a projector).
+                    if across is not None and enc.held is not None and name == enc.moving:
+                        # Across e: held where it was.
                         held = rho * (SIGMA / ACROSS_SIGMA) ** 2
                         pr = across.dot(rows)
                         lam = lam + held * rows.T.dot(pr)
-                        info = info + held * pr.T.dot(
-                            rows.dot(joints[k]) + enc.across[name][k] - point
-                        )
+                        info = info + held * pr.T.dot(rows.dot(joints[k]) + enc.held[k] - point)
                     if step in self._terms:
                         old = self._terms[step]
                         lam, info = old[0] + lam, old[1] + info
