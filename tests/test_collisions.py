@@ -358,8 +358,10 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
     steps = (enc.lo - enc.taper // 2, (enc.lo + enc.hi) // 2, enc.hi + enc.taper // 3)
     for k in steps:
         np.testing.assert_allclose(enc.held[k], point(joints[k]), atol=1e-12)
-    # Linearized at another path (the next pass's): the point is asked back to q_k.
+    # Linearized at another posture (the fused step's theta_{k-1} of the next pass): the
+    # point is asked back to q_k. The same Gaussians as the pass's, made at that path.
     moved = joints + 0.02
+    at_moved = {k: (lift.terms(k, moved[k]), held.terms(k, moved[k])) for k in steps}
     for avoid in (lift, held):
         avoid._linearize(moved, _chain_frames(moved, checker._consts, checker._revolute))
     h = 1e-6
@@ -369,6 +371,14 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
         rho = 10.0 ** (-TAPER_DECADES * (1.0 - enc.weight(k, enc.moving))) / ACROSS_SIGMA**2
         lam_lift, info_lift = lift.terms(k)  # type: ignore[misc]
         lam, info = held.terms(k)  # type: ignore[misc]
+        for got, want in zip(at_moved[k], ((lam_lift, info_lift), (lam, info)), strict=True):
+            assert got is not None
+            np.testing.assert_allclose(
+                got[0], want[0], rtol=1e-12, atol=1e-9 * np.abs(want[0]).max()
+            )
+            np.testing.assert_allclose(
+                got[1], want[1], rtol=1e-12, atol=1e-9 * np.abs(want[1]).max()
+            )
         extra = rho * jac.T @ across @ jac
         np.testing.assert_allclose(
             lam - lam_lift, extra, rtol=1e-5, atol=1e-6 * np.abs(extra).max()
@@ -377,6 +387,30 @@ def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, pla
         np.testing.assert_allclose(
             info - info_lift, want, rtol=1e-5, atol=1e-6 * np.abs(want).max()
         )
+
+
+def test_a_bump_has_fallen_to_nothing_where_the_skill_is_tight(skill: Skill, plain: tuple) -> None:
+    # Tight steps up to 4 steps before the encounter (and none after it): the bump rises from
+    # there, over 4 steps instead of a taper (8), and asks nothing at it or before; after the
+    # encounter it falls over the whole taper.
+    checker, joints, signal = _through_the_box(skill, plain)
+    free = Avoidance(checker, margin=0.02)
+    free.update(joints, signal)
+    (enc,) = free.encounters
+    assert enc.lo > enc.taper > 5 and enc.before == enc.after == 0
+    tight = np.zeros(joints.shape[0], dtype=bool)
+    tight[: enc.lo - 4 + 1] = True
+    cut = Avoidance(checker, margin=0.02, tight=tight)
+    cut.update(joints, signal)
+    (near,) = cut.encounters
+    assert (near.lo, near.hi, near.needs) == (enc.lo, enc.hi, enc.needs)
+    assert near.before == 4 and near.after == 0
+    assert near.lift(enc.lo - 4)[0] == 0.0 and near.weight(enc.lo - 4) == 0.0
+    np.testing.assert_allclose(near.weight(enc.lo - 2), 0.5, atol=1e-12)
+    assert cut.terms(enc.lo - 5) is None and free.terms(enc.lo - 5) is not None
+    for k in (enc.hi + 1, enc.hi + enc.taper // 2, enc.hi + enc.taper - 1):
+        assert near.weight(k) == enc.weight(k) and near.lift(k)[0] == enc.lift(k)[0]
+        np.testing.assert_array_equal(cut.terms(k)[0], free.terms(k)[0])  # type: ignore[index]
 
 
 def test_the_passes_look_only_where_the_check_finds_the_scene_near(
@@ -604,7 +638,9 @@ def test_a_stream_never_streams_a_colliding_plan(skill: Skill, plain: tuple) -> 
 
     def run(stream: object) -> list[np.ndarray]:
         setpoints = []
-        while not stream.done and len(setpoints) < 20000:  # type: ignore[attr-defined]
+        # A refused plan runs every pass of every fallback first (3.6 s on this test's skill).
+        deadline = time.monotonic() + 60.0
+        while not stream.done and time.monotonic() < deadline:  # type: ignore[attr-defined]
             setpoints.append(stream.step(q0))  # type: ignore[attr-defined]
             if stream.fault is None:  # type: ignore[attr-defined]
                 time.sleep(1e-4)  # the planner process takes a while

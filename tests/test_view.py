@@ -478,9 +478,10 @@ def test_the_view_draws_a_scene_avoids_it_and_marks_where_the_arm_comes_near(
     # the step nearest the box (within the margin), not at the start.
     pytest.importorskip("viser")
     from pbdkit.apps._view import ViewApp
-    from pbdkit.apps._view_scene import CONTACT_RGB
+    from pbdkit.apps._view_scene import CONTACT_RGB, NEAR_RGB
     from pbdkit.apps._view_serve import served
     from pbdkit.collision import Box, Scene
+    from pbdkit.reproduction._avoid import TOLERANCE
 
     objects = typical_placements(skill)
     res = skill.reproduce(objects)
@@ -494,8 +495,14 @@ def test_the_view_draws_a_scene_avoids_it_and_marks_where_the_arm_comes_near(
         np.testing.assert_allclose(plan.result.joints, expected.joints, atol=1e-12)
         assert plan.result.collisions == [] and "Clearance at least" in view.ui_status.content
         assert view.scene.avoids and "/scene/box" in view.server.scene._handle_from_node_name
+        # Kept clear of it: the margin within the passes' tolerance, so at the nearest step the
+        # mark is orange (within the margin) or hidden, never red.
+        kept = float(np.min(plan.result.clearance))
+        assert kept > 0.02 - TOLERANCE
         view._show_step(int(np.argmin(plan.result.clearance)))
-        assert not view.scene.mark.visible  # kept clear of it by more than the margin
+        assert view.scene.mark.visible == (kept < 0.02)
+        if kept < 0.02:
+            assert tuple(view.scene.mark.color) == NEAR_RGB and "box" in view.scene.label.text
         # The joint-space controller does not avoid (checked only): it goes through the box,
         # and the mark shows red where it does, on the arm near the hand.
         view.ui_controller.value = "joint"

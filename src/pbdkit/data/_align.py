@@ -77,9 +77,11 @@ NEAR_SCALE: float | None = None
 #: features: a pause ends where the speed rises, and an arrival is where it falls, wherever the
 #: hand is. On the xArm7's 40 cm table it keeps the grasp where the features in metres lose it
 #: (teach seeds 0-4, fused hand's median at the box: pauses 0.07-0.19 mm against up to 4.51;
-#: postures and segments +-30 % 0.07-0.62 against up to 3.05). Not the default yet, for the
-#: reason NEAR_SCALE is not: the coaster skills it gives are refused past the obstacle more
-#: often (plans touching the box, teach seeds 0 / 1 / 2: 2 / 16 / 0 of 50, against 0 / 0 / 2).
+#: postures and segments +-30 % 0.07-0.62 against up to 3.05). Past the obstacle its coaster
+#: skills are avoided about as often as the default's (plans touching the box, teach seeds
+#: 0 / 1 / 2: 0 / 1 / 0 of 50, against 0 / 0 / 0; 2 / 16 / 0 before the avoidance's flanks were
+#: cut at the tight phases). Not the default yet: it changes every skill learned with a robot,
+#: and the figures measured with them are re-measured when it is switched (docs/alignment.md).
 HAND_SPEED = False
 #: At most this many samples of a series enter the DTW; a longer one is decimated (evenly, its
 #: first and last samples kept) and the warped times of the samples in between are interpolated.

@@ -16,13 +16,19 @@ along one direction, as one smooth bump:
 - **the bump**: at step k each point is asked to lie a_k * w_k further along e than on the
   path where the encounter was first met (ref_k; a point added later, where it lay less the
   bump the path already had), w_k being 1 over the point's own steps within the margin and
-  falling as a raised cosine over :data:`TAPER` of the path's steps on either side; the lift
+  falling as a raised cosine over :data:`TAPER` of the path's steps on either side, or fewer:
+  by the nearest step where the skill is tight (``tight``), before the encounter and after it,
+  the bump has fallen to nothing (:meth:`Avoidance._flanks`; a flank that reached back into a
+  coaster skill's lift-off lifted the glass 5 cm as it left the shelf); the lift
   a_k is the largest need_j c(k - j) over the steps met (:meth:`_Encounter.lift`), a step's
   need growing by its shortfall each pass that still meets it, and the bump widens to the
   steps it still meets the body at, until the margin holds (:meth:`Avoidance.update`).
 
 At every step k of a bump, one Gaussian per point on the posture theta_k, linearized at the
-last pass's posture theta'_k::
+posture the fused step starts from, theta'_k = theta_{k-1} of the run being made, as Table II
+linearizes the skill's constraints (:meth:`Avoidance.terms`; linearized once a pass at the last
+pass's path, the next pass asked for the lift at postures it no longer went through, and the
+passes swung instead of rising to the margin)::
 
     r = e^T J_p(theta'_k)                   (1, n): the point's motion along e per joint
     r theta_k ~ N(r theta'_k + ref_k + a_k w_k - e^T p(theta'_k), SIGMA^2 / rho_k)
@@ -51,7 +57,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -77,8 +83,10 @@ DEFAULT_MARGIN = 0.02
 #: The clearance constraint's standard deviation (m).
 SIGMA = 5e-4
 
-#: Passes at most (each a run of Table II and a check of its path).
-MAX_PASSES = 8
+#: Passes at most (each a run of Table II and a check of its path). A lift that grows by each
+#: pass's shortfall took 12-14 passes where 8 did not clear a 5 cm cube that a carried glass
+#: went through (7 of 50 coaster plans of one skill still touched it with 8, 1 with 14).
+MAX_PASSES = 14
 
 #: A path that keeps the margin within this (m) ends the passes.
 TOLERANCE = 2e-3
@@ -103,6 +111,20 @@ ESCAPE_MIN = 0.3
 
 #: Where the clearance acts, the steps take this many times their nominal duration.
 SLOWER = 3.0
+
+
+class _Ask(NamedTuple):
+    """What one step of a bump asks of one point (fixed in the frame of chain joint ``joint``
+    at ``local``): e . p = ``along`` with precision ``rho`` (m^-2), and with ``hold``, P p =
+    P ``held`` with precision ``held_rho``."""
+
+    joint: int
+    local: Float
+    escape: Float
+    along: float
+    rho: float
+    held: Float | None
+    held_rho: float
 
 
 @dataclass
@@ -135,6 +157,10 @@ class _Encounter:
     #: With ``hold``, the encounter's point's positions (T, 3) on the path where the encounter
     #: started: across e, the bump holds it there (:data:`ACROSS_SIGMA`); None without.
     held: Float | None = None
+    #: The bump's flanks (steps) before lo and after hi: ``taper``, or fewer where the skill is
+    #: tight nearer (:attr:`Avoidance.keep`); 0: ``taper``.
+    before: int = 0
+    after: int = 0
 
     @property
     def amplitude(self) -> float:
@@ -149,19 +175,24 @@ class _Encounter:
         k = np.atleast_1d(np.asarray(steps, dtype=np.float64))
         at = np.fromiter(self.needs.keys(), dtype=np.float64, count=len(self.needs))
         need = np.fromiter(self.needs.values(), dtype=np.float64, count=len(self.needs))
-        d = np.minimum(np.abs(k[:, None] - at[None, :]) / self.taper, 1.0)
+        before, after = self.before or self.taper, self.after or self.taper
+        off = k[:, None] - at[None, :]
+        d = np.minimum(np.where(off < 0, -off / before, off / after), 1.0)
         out: Float = (need * 0.5 * (1.0 + np.cos(np.pi * d))).max(axis=1)
         return out
 
     def weight(self, k: int, body: str | None = None) -> float:
         """w_k: 1 over lo .. hi (``body``'s own span, if given), a raised cosine to 0 over
         ``taper`` steps on either side."""
-        return _taper_weight(self._gap(k, body), self.taper)
+        return _taper_weight(*self._gap(k, body))
 
-    def _gap(self, k: int, body: str | None) -> int:
-        """How many steps k lies outside lo .. hi (``body``'s span, if given); <= 0 inside."""
+    def _gap(self, k: int, body: str | None) -> tuple[int, int]:
+        """How many steps k lies outside lo .. hi (``body``'s span, if given; <= 0 inside),
+        and the flank on that side (steps)."""
         lo, hi = self.spans.get(body, (self.lo, self.hi)) if body else (self.lo, self.hi)
-        return lo - k if k < lo else k - hi
+        if k < lo:
+            return lo - k, self.before or self.taper
+        return k - hi, self.after or self.taper
 
 
 def _taper_weight(gap: int, taper: int) -> float:
@@ -211,24 +242,34 @@ class Avoidance:
         *,
         beside: bool = False,
         hold: bool = False,
+        tight: NDArray[np.bool_] | None = None,
     ) -> None:
         self.checker = checker
         self.margin = float(margin)
         self.beside = bool(beside)
         self.hold = bool(hold)
+        self.tight = None if tight is None else np.asarray(tight, dtype=bool)
         self.n = int(checker._consts.shape[0])
         self.encounters: list[_Encounter] = []
         self.first = 0  # the skill's step of the path's first sample
+        self._asks: dict[int, list[_Ask]] = {}
         self._terms: dict[int, tuple[Float, Float]] = {}
 
     @property
     def precisions(self) -> dict[int, Float]:
-        """Lambda_c (n, n) of every step where the clearance acts."""
+        """Lambda_c (n, n) of every step where the clearance acts (at the last pass's path)."""
         return {j: lam for j, (lam, _) in self._terms.items()}
 
-    def terms(self, j: int) -> tuple[Float, Float] | None:
-        """(Lambda_c (n, n), its information (n,)) of step j, None where nothing acts."""
-        return self._terms.get(j)
+    def terms(self, j: int, theta: Float | None = None) -> tuple[Float, Float] | None:
+        """(Lambda_c (n, n), its information (n,)) of step j, None where nothing acts:
+        linearized at the posture ``theta`` (the fused step's theta_{j-1}, as it linearizes
+        the skill's own constraints), or at the last pass's path without it."""
+        asks = self._asks.get(j)
+        if theta is None or asks is None:
+            return self._terms.get(j)
+        theta = np.asarray(theta, dtype=np.float64)
+        frames = _chain_frames(theta[None, :], self.checker._consts, self.checker._revolute)
+        return self._gaussian(asks, theta, frames, 0)
 
     def update(
         self,
@@ -270,6 +311,7 @@ class Avoidance:
             enc = self._covering(body, min(steps), max(steps))
             if enc is None:
                 enc = self._start(body, hits, joints, frames)
+                self._flanks(enc)
                 self.encounters.append(enc)
                 self._join(enc, hits, frames, bumped=False)
                 continue
@@ -281,6 +323,7 @@ class Avoidance:
                 for a, (j, prox) in zip(lifted, hits, strict=True)
             ]
             enc.lo, enc.hi = min(enc.lo, *steps), max(enc.hi, *steps)
+            self._flanks(enc)
             self._join(enc, hits, frames, bumped=True)
             for j, need in zip(steps, needs, strict=True):
                 enc.needs[j] = max(enc.needs.get(j, 0.0), need)
@@ -319,6 +362,16 @@ class Avoidance:
                 steps = self.first + np.arange(len(ref))
                 ref = ref - enc.lift(steps) * np.array([enc.weight(int(k), name) for k in steps])
             enc.others[name] = (joint, local, ref)
+
+    def _flanks(self, enc: _Encounter) -> None:
+        """Shorten ``enc``'s flanks so that its bump has fallen to nothing by the nearest
+        step before lo and after hi where the skill is tight (:attr:`tight`)."""
+        if self.tight is None:
+            return
+        below = np.flatnonzero(self.tight[: max(enc.lo, 0)])
+        above = np.flatnonzero(self.tight[enc.hi + 1 :])
+        enc.before = min(max(enc.lo - int(below[-1]), 1), enc.taper) if below.size else 0
+        enc.after = min(max(int(above[0]) + 1, 1), enc.taper) if above.size else 0
 
     @staticmethod
     def _moved(enc: _Encounter, step: int, prox: Any) -> float:
@@ -409,51 +462,76 @@ class Avoidance:
         (1-based; the joints after it do not move it), per joint at step k of ``frames``."""
         rots, origins = frames
         consts, revolute = self.checker._consts, self.checker._revolute
+        # Joint i's world axis and the point's offset from its origin; a x r written out
+        # (np.cross cost 47 us a call: most of an avoided run's time).
+        a = np.matmul(rots[k, :joint], consts[:joint, :, 10, None])[:, :, 0]
+        r = point - origins[k, 1 : joint + 1]
         jac = np.zeros((3, self.n))
-        for i in range(joint):
-            axis = rots[k, i].dot(consts[i, :, 10])
-            if revolute[i]:
-                jac[:, i] = np.cross(axis, point - origins[k, i + 1])
-            else:
-                jac[:, i] = axis
+        jac[0, :joint] = a[:, 1] * r[:, 2] - a[:, 2] * r[:, 1]
+        jac[1, :joint] = a[:, 2] * r[:, 0] - a[:, 0] * r[:, 2]
+        jac[2, :joint] = a[:, 0] * r[:, 1] - a[:, 1] * r[:, 0]
+        slide = np.flatnonzero(~revolute[:joint])
+        jac[:, slide] = a[slide].T
         return jac
 
     def _linearize(self, joints: Float, frames: tuple[Float, Float]) -> None:
-        """Every encounter's Gaussians over its bump, at the path ``joints``, summed per step
-        (the skill's steps; the path's sample k is step ``first`` + k)."""
-        self._terms.clear()
-        rots, origins = frames
+        """Every encounter's asks over its bump (:class:`_Ask`, per step: the skill's steps;
+        the path's sample k is step ``first`` + k), and their Gaussians at the path
+        ``joints``, summed per step."""
+        self._asks.clear()
         first, last = self.first, self.first + joints.shape[0] - 1
         for enc in self.encounters:
-            # Across e: P = I - e e^T, a projector (with ``hold``).
-            across = None if enc.held is None else np.eye(3) - np.outer(enc.escape, enc.escape)
             points = {enc.moving: (enc.joint, enc.local, enc.ref), **enc.others}
-            lo, hi = max(first, enc.lo - enc.taper), min(last, enc.hi + enc.taper)
+            lo = max(first, enc.lo - (enc.before or enc.taper))
+            hi = min(last, enc.hi + (enc.after or enc.taper))
             lifts = enc.lift(np.arange(lo, hi + 1)) if hi >= lo else np.zeros(0)
             for step in range(lo, hi + 1):
                 k = step - first
                 for name, (joint, local, ref) in points.items():
-                    gap = enc._gap(step, name)
-                    if gap > enc.taper:
+                    gap, taper = enc._gap(step, name)
+                    if gap > taper:
                         continue  # this body is moved only around its own span
-                    w = _taper_weight(gap, enc.taper)
+                    w = _taper_weight(gap, taper)
                     rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
-                    point = rots[k, joint].dot(local) + origins[k, joint]
-                    rows = self._point_rows(k, point, joint, frames)
-                    row = enc.escape.dot(rows)
-                    push = ref[k] + lifts[step - lo] * w - float(enc.escape.dot(point))
-                    lam = rho * np.outer(row, row)
-                    info = rho * row * (row.dot(joints[k]) + push)
-                    if across is not None and enc.held is not None and name == enc.moving:
-                        # Across e: held where it was.
-                        held = rho * (SIGMA / ACROSS_SIGMA) ** 2
-                        pr = across.dot(rows)
-                        lam = lam + held * rows.T.dot(pr)
-                        info = info + held * pr.T.dot(rows.dot(joints[k]) + enc.held[k] - point)
-                    if step in self._terms:
-                        old = self._terms[step]
-                        lam, info = old[0] + lam, old[1] + info
-                    self._terms[step] = (lam, info)
+                    # Across e, held where it was (``hold``; the encounter's own point).
+                    held = enc.held is not None and name == enc.moving
+                    ask = _Ask(
+                        joint=joint,
+                        local=local,
+                        escape=enc.escape,
+                        along=float(ref[k] + lifts[step - lo] * w),
+                        rho=rho,
+                        held=enc.held[k] if held and enc.held is not None else None,
+                        held_rho=rho * (SIGMA / ACROSS_SIGMA) ** 2,
+                    )
+                    self._asks.setdefault(step, []).append(ask)
+        self._terms = {
+            step: self._gaussian(asks, joints[step - first], frames, step - first)
+            for step, asks in self._asks.items()
+        }
+
+    def _gaussian(
+        self, asks: list[_Ask], theta: Float, frames: tuple[Float, Float], k: int
+    ) -> tuple[Float, Float]:
+        """(Lambda_c, information) of one step's asks, linearized at the posture ``theta``
+        (entry k of ``frames``, its joints' frames)."""
+        rots, origins = frames
+        lam = np.zeros((self.n, self.n))
+        info = np.zeros(self.n)
+        for ask in asks:
+            point = rots[k, ask.joint].dot(ask.local) + origins[k, ask.joint]
+            rows = self._point_rows(k, point, ask.joint, frames)
+            row = ask.escape.dot(rows)
+            push = ask.along - float(ask.escape.dot(point))
+            lam += ask.rho * np.outer(row, row)
+            info += ask.rho * row * (row.dot(theta) + push)
+            if ask.held is not None:
+                # Across e: P = I - e e^T, a projector.
+                across = np.eye(3) - np.outer(ask.escape, ask.escape)
+                pr = across.dot(rows)
+                lam += ask.held_rho * rows.T.dot(pr)
+                info += ask.held_rho * pr.T.dot(rows.dot(theta) + ask.held - point)
+        return lam, info
 
     def slower(self, n_samples: int, n_lead: int) -> Float | None:
         """The factor on each step's nominal duration (n_samples - 1,) of a pass's timing, its

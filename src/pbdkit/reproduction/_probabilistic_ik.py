@@ -202,8 +202,15 @@ def _avoid_passes(
     """The passes of :mod:`._avoid`: Table II again (``remake``) with the encounters each
     pass meets, until the path keeps the margin or ``MAX_PASSES`` are run; the best pass (the
     largest smallest clearance) and its check (``report``: the check of ``res``). ``how``:
-    :class:`._avoid.Avoidance`'s ``beside`` and ``hold``."""
-    avoidance = Avoidance(checker, margin, **how)
+    :class:`._avoid.Avoidance`'s ``beside`` and ``hold``. A bump ends before the steps where
+    the skill is tight (:func:`_tightness`): there the clearance does not get to move the
+    hand."""
+    first = _path_steps(res)[1]
+    steps = np.arange(first, run.constraints.n_steps)
+    tight = np.zeros(run.constraints.n_steps, dtype=bool)
+    for _, at in _tightness(run, steps).values():
+        tight[steps] |= at
+    avoidance = Avoidance(checker, margin, tight=tight, **how)
     run = dataclasses.replace(run, avoid=avoidance)
     best: tuple[ReproductionResult, CollisionReport] | None = None
     for _ in range(MAX_PASSES):
@@ -234,6 +241,20 @@ def _fallbacks() -> list[dict[str, bool]]:
     return out
 
 
+def _tightness(
+    run: RunSetup, steps: NDArray[np.intp]
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.bool_]]]:
+    """Per task constraint, at the skill's ``steps`` (a run's, in order): the standard
+    deviation of its loosest direction (m), and where it is tight: under :data:`TIGHT`, or
+    within :data:`TIGHTEST` times its smallest over ``steps`` (its tightest phase)."""
+    out = {}
+    for name in run.tasks:
+        cov = run.constraints.task_cov[name][steps, :3, :3]
+        loosest = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
+        out[name] = (loosest, (loosest < TIGHT) | (loosest < TIGHTEST * loosest.min()))
+    return out
+
+
 def _leaves_tight(
     run: RunSetup, plain: ReproductionResult, avoided: ReproductionResult
 ) -> tuple[int, str, float] | None:
@@ -247,13 +268,10 @@ def _leaves_tight(
     # The plain run's samples by the skill's step: the two runs' lead-ins may differ in length.
     kept = np.flatnonzero(_path_steps(plain)[0])
     kept_steps = np.floor(plain.t[kept] + 1e-9).astype(int)
-    for name in run.tasks:
-        cov = run.constraints.task_cov[name][steps, :3, :3]
-        loosest = np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
+    for name, (loosest, tight) in _tightness(run, steps).items():
         before = np.full(max(int(steps.max()), int(kept_steps.max())) + 1, np.inf)
         before[kept_steps] = plain.task_errors[name][kept]
         grown = avoided.task_errors[name][own] - before[steps]
-        tight = (loosest < TIGHT) | (loosest < TIGHTEST * loosest.min())
         bad = np.flatnonzero(tight & (grown > np.maximum(CONFLICT, LEFT_SIGMAS * loosest)))
         if bad.size:
             sample = int(own[bad[0]])

@@ -307,7 +307,7 @@ class FusedStep(ControllerStep):
         rhs = self.eta_list[j] + m[:, 3] + a.dot(jac.dot(theta) - x)
         # The clearance, where a pass caught a pair at this step: one more Gaussian, whose
         # precision and information add (docs: "Collisions").
-        clearance = None if self.avoid is None else self.avoid.terms(j)
+        clearance = None if self.avoid is None else self.avoid.terms(j, theta)
         if clearance is not None:
             lam_j = lam_j + clearance[0]
             rhs = rhs + clearance[1]
