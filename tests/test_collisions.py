@@ -397,14 +397,14 @@ def test_a_bump_has_fallen_to_nothing_where_the_skill_is_tight(skill: Skill, pla
     free = Avoidance(checker, margin=0.02)
     free.update(joints, signal)
     (enc,) = free.encounters
-    assert enc.lo > enc.taper > 5 and enc.before == enc.after == 0
+    assert enc.lo > enc.taper > 5 and enc.before == enc.after == enc.taper
     tight = np.zeros(joints.shape[0], dtype=bool)
     tight[: enc.lo - 4 + 1] = True
     cut = Avoidance(checker, margin=0.02, tight=tight)
     cut.update(joints, signal)
     (near,) = cut.encounters
     assert (near.lo, near.hi, near.needs) == (enc.lo, enc.hi, enc.needs)
-    assert near.before == 4 and near.after == 0
+    assert near.before == 4 and near.after == enc.taper
     assert near.lift(enc.lo - 4)[0] == 0.0 and near.weight(enc.lo - 4) == 0.0
     np.testing.assert_allclose(near.weight(enc.lo - 2), 0.5, atol=1e-12)
     assert cut.terms(enc.lo - 5) is None and free.terms(enc.lo - 5) is not None

@@ -157,10 +157,14 @@ class _Encounter:
     #: With ``hold``, the encounter's point's positions (T, 3) on the path where the encounter
     #: started: across e, the bump holds it there (:data:`ACROSS_SIGMA`); None without.
     held: Float | None = None
-    #: The bump's flanks (steps) before lo and after hi: ``taper``, or fewer where the skill is
-    #: tight nearer (:attr:`Avoidance.keep`); 0: ``taper``.
+    #: The bump's flanks (steps) before lo and after hi: ``taper`` (given as 0), or fewer where
+    #: the skill is tight nearer (:meth:`Avoidance._flanks`).
     before: int = 0
     after: int = 0
+
+    def __post_init__(self) -> None:
+        self.before = self.before or self.taper
+        self.after = self.after or self.taper
 
     @property
     def amplitude(self) -> float:
@@ -175,9 +179,8 @@ class _Encounter:
         k = np.atleast_1d(np.asarray(steps, dtype=np.float64))
         at = np.fromiter(self.needs.keys(), dtype=np.float64, count=len(self.needs))
         need = np.fromiter(self.needs.values(), dtype=np.float64, count=len(self.needs))
-        before, after = self.before or self.taper, self.after or self.taper
         off = k[:, None] - at[None, :]
-        d = np.minimum(np.where(off < 0, -off / before, off / after), 1.0)
+        d = np.minimum(np.where(off < 0, -off / self.before, off / self.after), 1.0)
         out: Float = (need * 0.5 * (1.0 + np.cos(np.pi * d))).max(axis=1)
         return out
 
@@ -191,8 +194,8 @@ class _Encounter:
         and the flank on that side (steps)."""
         lo, hi = self.spans.get(body, (self.lo, self.hi)) if body else (self.lo, self.hi)
         if k < lo:
-            return lo - k, self.before or self.taper
-        return k - hi, self.after or self.taper
+            return lo - k, self.before
+        return k - hi, self.after
 
 
 def _taper_weight(gap: int, taper: int) -> float:
@@ -370,8 +373,8 @@ class Avoidance:
             return
         below = np.flatnonzero(self.tight[: max(enc.lo, 0)])
         above = np.flatnonzero(self.tight[enc.hi + 1 :])
-        enc.before = min(max(enc.lo - int(below[-1]), 1), enc.taper) if below.size else 0
-        enc.after = min(max(int(above[0]) + 1, 1), enc.taper) if above.size else 0
+        enc.before = min(max(enc.lo - int(below[-1]), 1), enc.taper) if below.size else enc.taper
+        enc.after = min(max(int(above[0]) + 1, 1), enc.taper) if above.size else enc.taper
 
     @staticmethod
     def _moved(enc: _Encounter, step: int, prox: Any) -> float:
@@ -482,8 +485,7 @@ class Avoidance:
         first, last = self.first, self.first + joints.shape[0] - 1
         for enc in self.encounters:
             points = {enc.moving: (enc.joint, enc.local, enc.ref), **enc.others}
-            lo = max(first, enc.lo - (enc.before or enc.taper))
-            hi = min(last, enc.hi + (enc.after or enc.taper))
+            lo, hi = max(first, enc.lo - enc.before), min(last, enc.hi + enc.after)
             lifts = enc.lift(np.arange(lo, hi + 1)) if hi >= lo else np.zeros(0)
             for step in range(lo, hi + 1):
                 k = step - first
@@ -494,14 +496,13 @@ class Avoidance:
                     w = _taper_weight(gap, taper)
                     rho = 10.0 ** (-TAPER_DECADES * (1.0 - w)) / (SIGMA * SIGMA)
                     # Across e, held where it was (``hold``; the encounter's own point).
-                    held = enc.held is not None and name == enc.moving
                     ask = _Ask(
                         joint=joint,
                         local=local,
                         escape=enc.escape,
                         along=float(ref[k] + lifts[step - lo] * w),
                         rho=rho,
-                        held=enc.held[k] if held and enc.held is not None else None,
+                        held=enc.held[k] if enc.held is not None and name == enc.moving else None,
                         held_rho=rho * (SIGMA / ACROSS_SIGMA) ** 2,
                     )
                     self._asks.setdefault(step, []).append(ask)
