@@ -134,7 +134,9 @@ def trajectory_to_sim_arm() -> None:
     # The trajectory lasts 1 s from its arrival; on a loaded machine it may arrive late, so the
     # wait ends when the arm is there (or after 6 s, and the assertion says where it stopped).
     sent = time.monotonic()
-    while time.monotonic() - sent < 6.0 and not np.allclose(listener.q, POSTURE, atol=1e-12):
+    while time.monotonic() - sent < 6.0 and not np.allclose(
+        listener.q, POSTURE, rtol=0.0, atol=1e-12
+    ):
         rclpy.spin_once(node, timeout_sec=0.02)
     np.testing.assert_allclose(listener.q, POSTURE, atol=1e-12)
     for _ in range(10):  # the arm holds the last point
