@@ -4,7 +4,10 @@ download does not work here)."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import socket
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,3 +35,18 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind((HOST, 0))
         return int(s.getsockname()[1])
+
+
+@contextlib.contextmanager
+def quiet_viser_server() -> Iterator[Any]:
+    """A viser server on 127.0.0.1 and a free port, its start and stop lines silenced (no
+    browser: the tests read the scene it holds)."""
+    import viser
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        srv = viser.ViserServer(host=HOST, port=free_port(), verbose=False)
+    try:
+        yield srv
+    finally:
+        with contextlib.redirect_stdout(io.StringIO()):
+            srv.stop()

@@ -20,7 +20,7 @@ CASES = Path(__file__).parent / "ros_cases.py"
 
 def needs_ros() -> None:
     if not ros_available():
-        pytest.skip("the ros extra is not installed (pip install 'pbdkit[ros]')")
+        pytest.skip("the ros extra is not installed (pip install -e '.[ros]')")
 
 
 def run_on_private_graph(

@@ -319,7 +319,11 @@ def test_pbdkit_ros_sim_without_the_ros_extra_is_a_one_line_error(
     monkeypatch.setattr(pbdkit.ros._graph, "ros_available", lambda: False)
     done = CliRunner().invoke(_sim_app(), [])
     assert done.exit_code == 2
-    assert "error: pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'" in done.output
+    # The hint names the checkout: pbdkit is not on a package index.
+    assert (
+        "error: pbdkit ros needs the ros extra: pip install -e '.[ros]' in the pbdkit"
+        in done.output
+    )
 
 
 @pytest.mark.parametrize(

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from browser import free_port
+from browser import free_port, quiet_viser_server
 from synthetic_teacher import bare_skill
 
 from pbdkit._rotations import matrix_from_quaternion, pose_matrix, yaw_of
@@ -46,11 +46,8 @@ def _yaw_pose(position: Any, degrees: float) -> np.ndarray:
 
 @pytest.fixture
 def server() -> Iterator[Any]:
-    with contextlib.redirect_stdout(io.StringIO()):
-        srv = viser.ViserServer(host=HOST, port=free_port(), verbose=False)
-    yield srv
-    with contextlib.redirect_stdout(io.StringIO()):
-        srv.stop()
+    with quiet_viser_server() as srv:
+        yield srv
 
 
 # ----------------------------------------------------------------------------- matching

@@ -10,3 +10,15 @@ MAX_COMPONENTS = 30
 #: larger count is refused at once (issue 36: --trials 1000000000 grew memory by 11 MB/s drawing
 #: the placements before the first trial).
 MAX_TRIALS = 100_000
+
+
+def install_hint(extra: str) -> str:
+    """How to install one of pbdkit's extras (``sim``, ``view``, ``ros``), for a message.
+
+    pbdkit is installed from its source tree, not from a package index, so the command names the
+    checkout (or the wheel ``make wheel`` builds), not a package on PyPI.
+    """
+    return (
+        f"pip install -e '.[{extra}]' in the pbdkit checkout, or "
+        f"pip install 'dist/pbdkit-*.whl[{extra}]' (make wheel)"
+    )

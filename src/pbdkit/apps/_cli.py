@@ -13,12 +13,12 @@ import gc
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 from rich.text import Text
 
-from .._defaults import MAX_COMPONENTS, MAX_TRIALS
+from .._defaults import MAX_COMPONENTS, MAX_TRIALS, install_hint
 from .._io import write_json
 from .._validation import check_int, short
 from ._cli_files import bag_extras, bag_timing, load_demos, timing_text
@@ -28,8 +28,8 @@ from ._cli_options import (
     ConstrainFixedOption,
     GroundTruthOption,
     OnlineOption,
-    PerturbHelp,
     PerturbOption,
+    RegistryHelp,
     SuggestRangeOption,
     check_bag_output,
     check_lasa_shape,
@@ -55,10 +55,8 @@ from ._cli_output import (
     print_study,
     progress_bar,
     reports_errors,
+    unwrap_help,
 )
-
-if TYPE_CHECKING:
-    pass
 
 app = typer.Typer(
     add_completion=False,
@@ -92,7 +90,7 @@ def _root() -> None:
 
 
 # ----------------------------------------------------------------------------- commands
-@app.command(cls=PerturbHelp)
+@app.command(cls=RegistryHelp)
 @reports_errors
 def demo(
     out: Annotated[Path, typer.Option(help="Folder for the results.")] = Path("demo-output"),
@@ -152,7 +150,7 @@ def demo(
     print_robot_demo(spec, robot_metrics, seed, out)
 
 
-@app.command()
+@app.command(cls=RegistryHelp)
 @reports_errors
 def teach(
     task: Annotated[str, typer.Option(help=f"{TASK_HELP}.")] = "coaster",
@@ -385,7 +383,7 @@ def reproduce(
         )
 
 
-@app.command(cls=PerturbHelp)
+@app.command(cls=RegistryHelp)
 @reports_errors
 def evaluate(
     task: Annotated[str, typer.Option(help=f"{TASK_HELP}.")] = "coaster",
@@ -472,7 +470,7 @@ def evaluate(
     print_evaluation(spec, result)
 
 
-@app.command()
+@app.command(cls=RegistryHelp)
 @reports_errors
 def study(
     task: Annotated[str, typer.Option(help=f"{TASK_HELP}.")] = "coaster",
@@ -579,7 +577,7 @@ def _study_active(
     console.print(f"wrote {out / 'study.json'} and {out / 'active.png'}")
 
 
-@app.command()
+@app.command(cls=RegistryHelp)
 @reports_errors
 def view(
     task: Annotated[
@@ -631,7 +629,7 @@ def view(
 ) -> None:
     """Serve a live 3-D view on http://127.0.0.1:PORT: drag an object and the plan follows
     (the hand path, the arm over time, the constraints' Gaussians and which one drives), run
-    it in physics, or online while you drag (needs the view extra: pip install 'pbdkit\\[view]')."""
+    it in physics, or online while you drag (needs the view extra: make test installs it)."""
     from ._cli_suggest import parse_range
     from ._view_serve import check_port, sigint_deferred
 
@@ -655,7 +653,7 @@ def view(
             import viser  # noqa: F401
             import yourdfpy  # noqa: F401
         except ImportError as exc:
-            fail(f"pbdkit view needs the view extra (pip install 'pbdkit[view]'): {exc}")
+            fail(f"pbdkit view needs the view extra ({install_hint('view')}): {exc}")
     from ._view import ViewApp
     from ._view_serve import serve
 
@@ -706,6 +704,9 @@ def view(
             return ViewApp(ts.skill, placement, server, task_skill=ts, title=f"task {spec.name}")
 
     serve(factory, port=port, open_browser=not no_browser, say=console.print)
+
+
+unwrap_help(app)
 
 
 def main() -> None:

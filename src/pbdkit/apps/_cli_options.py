@@ -22,12 +22,13 @@ if TYPE_CHECKING:
 __all__ = [
     "BAG_SUFFIXES",
     "PERTURBATIONS",
+    "TASKS",
     "TASK_HELP",
     "ConstrainFixedOption",
     "GroundTruthOption",
     "OnlineOption",
-    "PerturbHelp",
     "PerturbOption",
+    "RegistryHelp",
     "SuggestRangeOption",
     "check_bag_output",
     "check_lasa_shape",
@@ -142,7 +143,11 @@ def robot_task(task: str, *, also: tuple[str, ...] = ()) -> TaskSpec:
         ) from None
 
 
-TASK_HELP = "A robot task (coaster, basin, or any registered with pbdkit.sim.register_task)"
+# Placeholders of a help text that :class:`RegistryHelp` fills from the simulator's registries
+# when the help is shown: the registered tasks, and the perturbations with their help texts.
+TASKS = "{tasks}"
+PERTURBATIONS = "{perturbations}"
+TASK_HELP = f"A robot task: {TASKS} (more with pbdkit.sim.register_task)"
 
 # Shared by `demo` and `evaluate`.
 GroundTruthOption = Annotated[
@@ -181,24 +186,28 @@ SuggestRangeOption = Annotated[
         "half-width on each side.",
     ),
 ]
-# Where a --perturb help lists the registered perturbations (pbdkit.sim.register_perturbation).
-PERTURBATIONS = "{perturbations}"
 PerturbOption = Annotated[str, typer.Option(help=f"Disturbance: {PERTURBATIONS}.")]
 
 
-class PerturbHelp(TyperCommand):
-    """A command whose ``--perturb`` help lists the registered perturbations with their help
-    texts (:func:`pbdkit.sim._perturb.perturbation_help`). They are read when the help is shown:
-    the registry lives with the simulator, which the command line imports only to run a
-    command."""
+class RegistryHelp(TyperCommand):
+    """A command whose options' help lists what is registered: :data:`TASKS` becomes the
+    registered tasks (:func:`pbdkit.sim.task_names`), :data:`PERTURBATIONS` the perturbations
+    with their help texts (:func:`pbdkit.sim._perturb.perturbation_help`). They are read when
+    the help is shown: the registries live with the simulator, which the command line imports
+    only to run a command."""
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
         from ..sim._perturb import perturbation_help
+        from ..sim._task_registry import task_names
 
+        fill = {TASKS: lambda: ", ".join(task_names()), PERTURBATIONS: perturbation_help}
         for param in self.params:
             text = getattr(param, "help", None)
-            if param.name == "perturb" and isinstance(text, str):
-                cast(Any, param).help = text.replace(PERTURBATIONS, perturbation_help())
+            if isinstance(text, str):
+                for key, value in fill.items():
+                    if key in text:
+                        text = text.replace(key, value())
+                cast(Any, param).help = text
         super().format_help(ctx, formatter)
 
 

@@ -5,6 +5,8 @@ tables and summaries of the commands' results.
 from __future__ import annotations
 
 import functools
+import inspect
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar, cast
@@ -36,10 +38,15 @@ __all__ = [
     "print_tracking",
     "progress_bar",
     "reports_errors",
+    "unwrap_help",
 ]
 
 #: The console of every message (standard error: standard output stays for data).
 console = Console(stderr=True)
+if not console.is_terminal and "COLUMNS" not in os.environ:
+    # Piped or redirected: rich would fit every table into 80 columns and cut its headers
+    # ("controll…"); a log file has no width to fit.
+    console = Console(stderr=True, width=200)
 
 # Errors a command reports in one line with exit status 2 (bad input from the library, and the
 # file-system and memory failures a user can fix), instead of a traceback.
@@ -111,12 +118,11 @@ def print_lasa_demo(shape: str, metrics: dict[str, Any], out: Path) -> None:
 
 
 def _cell(value: Any, key: str) -> str:
-    """A metric in the demo's table: "-" where undefined, yes/no, the clearance in mm."""
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
+    """A metric of one run in the demo's table (:func:`metric_text`): a 0/1 share as yes/no."""
+    kind = metric_column(key)[1]
+    if isinstance(value, bool) or (kind == "share" and value is not None):
         return "yes" if value else "no"
-    return f"{1e3 * value if key == 'min_clearance_m' else value:.1f}"
+    return metric_text(value, kind)
 
 
 def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Path) -> None:
@@ -133,7 +139,7 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
     extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks, "contacts")
     keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
     for k in keys:
-        table.add_column("clearance mm" if k == "min_clearance_m" else k, justify="right")
+        table.add_column(metric_column(k)[0], justify="right")
     table.add_column("limits used", justify="right")
     for name, row in metrics["controllers"].items():
         cells = [("[green]yes" if row["success"] else "[red]no")]
@@ -141,7 +147,7 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
         worst = max(
             (row.get(f"peak_{k}_ratio") or 0.0) for k in ("velocity", "acceleration", "jerk")
         )
-        cells.append(f"{worst:.3f}")
+        cells.append(metric_text(worst, "worst"))
         table.add_row(name, *cells)
     console.print(table)
     console.print(
@@ -154,17 +160,17 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
         t2.add_column("run")
         t2.add_column("success")
         first = next(iter(k for k in on["online"] if k not in extra))
-        t2.add_column(first, justify="right")
-        t2.add_column("peak speed / limit", justify="right")
-        t2.add_column("following error (rad)", justify="right")
+        t2.add_column(metric_column(first)[0], justify="right")
+        t2.add_column(metric_column("peak_speed_ratio")[0], justify="right")
+        t2.add_column(metric_column("following_error_rad")[0], justify="right")
         for label in ("online", "offline"):
             row = on[label]
             t2.add_row(
                 label,
                 "[green]yes" if row["success"] else "[red]no",
-                "-" if row[first] is None else f"{row[first]:.1f}",
-                f"{row['peak_speed_ratio']:.2f}",
-                f"{row['following_error_rad']:.3f}",
+                _cell(row[first], first),
+                metric_text(row["peak_speed_ratio"], "worst"),
+                metric_text(row["following_error_rad"], "rad"),
             )
         console.print(t2)
     print_components(spec, metrics["n_components"])
@@ -183,21 +189,120 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
     console.print(f"open {out / 'report.html'} (video: {out / 'reproduction.mp4'})")
 
 
+#: How ``pbdkit evaluate``'s tables show a metric of the runs (:class:`pbdkit.sim.Evaluation`'s
+#: keys, which stay as they are in its JSON): the column's header, with its unit, and what is
+#: shown: the median over the trials in the key's unit, scaled ("m" to mm, "rad" to mrad), as a
+#: share of the trials ("share": the mean of a 0/1 metric, or the median of a fraction), or the
+#: worst trial ("worst": a peak over a limit, <= 1 within it). The task's own metrics go in the
+#: first table, the motion's in the second; a metric not named here (a registered task's own)
+#: shows as its key, median to 3 significant digits.
+METRIC_COLUMNS: dict[str, tuple[str, str]] = {
+    "placement_error_mm": ("placement (mm)", "mm"),
+    "pour_error_mm": ("pour from centre (mm)", "mm"),
+    "height_error_mm": ("height (mm)", "mm"),
+    "margin_mm": ("margin (mm)", "mm"),
+    "tilt_deg": ("tilt (deg)", "deg"),
+    "yaw_error_deg": ("yaw (deg)", "deg"),
+    "liquid_fraction": ("liquid in basin", "fraction"),
+    "held": ("held", "share"),
+    "released": ("released", "share"),
+    "min_clearance_m": ("clearance (mm)", "m"),
+}
+MOTION_COLUMNS: dict[str, tuple[str, str]] = {
+    "peak_speed_ratio": ("arm speed / limit", "worst"),
+    "following_error_rad": ("following error (mrad)", "rad"),
+    "peak_velocity_ratio": ("setpoint velocity / limit", "worst"),
+    "peak_acceleration_ratio": ("setpoint accel. / limit", "worst"),
+    "peak_jerk_ratio": ("setpoint jerk / limit", "worst"),
+}
+#: Shown in the JSON only: the setpoints' absolute peaks (rad/s, rad/s^2, rad/s^3).
+HIDDEN_METRICS = frozenset({"peak_velocity", "peak_acceleration", "peak_jerk"})
+
+
+def unwrap_help(app: typer.Typer) -> None:
+    """Join the lines of each paragraph of every command's docstring (``app``'s and its
+    groups'), in place. Typer's help keeps a docstring's single line breaks (in the list of
+    commands, and after a command's first paragraph), so the help showed the source's
+    100-column lines cut again at the terminal's width."""
+    for info in app.registered_commands:
+        callback = info.callback
+        if callback is not None and callback.__doc__:
+            paragraphs = inspect.cleandoc(callback.__doc__).split("\n\n")
+            callback.__doc__ = "\n\n".join(" ".join(p.split()) for p in paragraphs)
+    for group in app.registered_groups:
+        if group.typer_instance is not None:
+            unwrap_help(group.typer_instance)
+
+
+def metric_text(value: float | None, kind: str) -> str:
+    """One value of a metric as a table shows it (:data:`METRIC_COLUMNS`' kinds): "-" where
+    undefined, a percentage, a ratio to 2 decimals, a length or angle to 0.1 (mm, mrad, deg),
+    or 3 significant digits."""
+    if value is None:
+        return "-"
+    if kind in ("share", "fraction"):
+        return f"{100 * value:.0f}%"
+    if kind == "worst":
+        return f"{value:.2f}"
+    if kind in ("m", "rad"):
+        value *= 1e3
+    if kind in ("m", "rad", "mm", "deg"):
+        text = f"{value:.1f}"
+        return "0.0" if text == "-0.0" else text
+    return f"{value:.3g}"
+
+
+def metric_column(key: str) -> tuple[str, str]:
+    """A metric's column header (with its unit) and kind: :data:`METRIC_COLUMNS`,
+    :data:`MOTION_COLUMNS`, or the key itself for a metric they do not name."""
+    return METRIC_COLUMNS.get(key) or MOTION_COLUMNS.get(key) or (key, "")
+
+
+def metric_cell(stats: dict[str, float] | None, kind: str) -> str:
+    """A metric's statistics over trials (``{"mean", "median", "max"}``, or None where no
+    trial defines it) as a table shows it: the mean of a share, the worst of a peak ratio,
+    else the median (:data:`METRIC_COLUMNS`)."""
+    if stats is None:
+        return "-"
+    pick = {"share": "mean", "worst": "max"}.get(kind, "median")
+    return metric_text(stats[pick], kind)
+
+
 def print_evaluation(spec: TaskSpec, result: Evaluation) -> None:
-    """The table and lines of ``pbdkit evaluate`` for the task ``spec``."""
+    """The tables and lines of ``pbdkit evaluate`` for the task ``spec``: the outcome (success
+    and the task's metrics, medians over the trials) and the motion (the worst trial's peaks
+    over the arm's limits, the median following error)."""
     conditions = result.conditions
     task, trials = result.task, len(result.trials)
     seed, online, perturb = conditions.seed, conditions.online, conditions.perturb
     how = "online" if online else "offline"
+    rows = result.controllers
+    keys = [k for row in rows.values() for k in row.metrics]
+    outcome = [
+        k for k in dict.fromkeys(keys) if k not in MOTION_COLUMNS and k not in HIDDEN_METRICS
+    ]
+    motion = [k for k in MOTION_COLUMNS if k in keys]
     title = f"{task}: {trials} new placements (seed {seed}), {how}, perturb {perturb}"
-    table = Table(title=title)
-    table.add_column("controller")
-    table.add_column("success rate", justify="right")
-    table.add_column("median errors", justify="left")
-    for name, row in result.controllers.items():
-        med = ", ".join(f"{k} {v['median']:.1f}" for k, v in row.metrics.items() if v is not None)
-        table.add_row(name, f"{100 * row.success_rate:.0f}%", med)
-    console.print(table)
+    scene = any(row.collision_rate is not None for row in rows.values())
+    for heading, columns, first in (
+        (title, outcome, ["success", "touched"] if scene else ["success"]),
+        ("motion (worst trial over the limits; median following error)", motion, []),
+    ):
+        table = Table(title=heading)
+        table.add_column("controller")
+        for header in first:
+            table.add_column(header, justify="right")
+        for k in columns:
+            table.add_column(metric_column(k)[0], justify="right")
+        for name, row in rows.items():
+            cells = [f"{100 * row.success_rate:.0f}%"] if first else []
+            if first and scene:  # the share of trials that touched what they may not
+                rate = row.collision_rate
+                cells.append("-" if rate is None else f"{100 * rate:.0f}%")
+            for k in columns:
+                cells.append(metric_cell(row.metrics.get(k), metric_column(k)[1]))
+            table.add_row(name, *cells)
+        console.print(table)
     print_components(spec, result.n_components)
     print_tracking(result.vision, result.tracking_error_mm, result.tracking_error_deg)
     if result.tracking_failures:

@@ -1,6 +1,6 @@
 """``pbdkit ros``: a skill on a live ROS 2 graph (issue 37). ``pbdkit ros run`` runs a skill
 file on an arm behind a joint_trajectory_controller (:func:`pbdkit.ros._run.run_skill`); it
-needs the ``ros`` extra (``pip install 'pbdkit[ros]'``)."""
+needs the ``ros`` extra (:func:`pbdkit._defaults.install_hint`)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from typing import Annotated, Any
 
 import typer
 
+from .._defaults import install_hint
 from .._validation import short
-from ._cli_options import PerturbHelp, SuggestRangeOption, parse_objects
+from ._cli_options import RegistryHelp, SuggestRangeOption, parse_objects
 from ._cli_output import fail, reports_errors
 from ._cli_ros_node import run_node
 from ._cli_ros_sim import sim_command
@@ -20,7 +21,8 @@ from ._cli_ros_sim import sim_command
 ros_app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
-    help="A skill on a live ROS 2 graph: run it on an arm (pip install 'pbdkit\\[ros]').",
+    help="A skill on a live ROS 2 graph: run it on an arm (needs the ros extra: "
+    "pip install -e '.\\[ros]' in the pbdkit checkout).",
 )
 
 
@@ -99,7 +101,7 @@ def run(
     from ..ros._graph import ros_available
 
     if not ros_available():
-        fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
+        fail(f"pbdkit ros needs the ros extra: {install_hint('ros')}")
     from ..collision import Scene
     from ..ros._joints import parse_joint_map
     from ..ros._objects import check_sources
@@ -142,7 +144,7 @@ def run(
     raise typer.Exit(code)
 
 
-ros_app.command("sim", cls=PerturbHelp)(reports_errors(sim_command))
+ros_app.command("sim", cls=RegistryHelp)(reports_errors(sim_command))
 
 
 @ros_app.command()
@@ -194,7 +196,7 @@ def record(
         typer.Option(
             help="With --suggest: also show, in a browser on 127.0.0.1 (--port), where the "
             "next take's objects go, as ghosts that turn when an object is in place, with "
-            "the arm and the objects live (pip install 'pbdkit\\[view]').",
+            "the arm and the objects live (needs the view extra).",
         ),
     ] = False,
     port: Annotated[int, typer.Option(help="With --view: the page's port.")] = 8080,
@@ -217,7 +219,7 @@ def record(
         if parsed:
             teacher.ranges = ranges_from_options(teacher.skill, parsed)
     if not ros_available():
-        fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
+        fail(f"pbdkit ros needs the ros extra: {install_hint('ros')}")
     from ..data._demonstration import load_demonstrations, save_demonstrations
     from ..ros._joints import parse_joint_map
     from ..ros._objects import ObjectSources, check_sources
@@ -301,7 +303,7 @@ def _record_view(teacher: Any, robot: str, port: int) -> Any:
         import viser  # noqa: F401
         import yourdfpy  # noqa: F401
     except ImportError as exc:
-        fail(f"--view needs the view extra (pip install 'pbdkit[view]'): {exc}")
+        fail(f"--view needs the view extra ({install_hint('view')}): {exc}")
     from ._view_record import RecordView
     from ._view_urdf import arm_urdf
 

@@ -11,6 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
+from .._defaults import install_hint
 from ._cli_options import TASK_HELP, PerturbOption, check_output, check_perturb, check_seed
 from ._cli_output import fail
 from ._cli_ros_node import run_node
@@ -94,12 +95,12 @@ def sim_command(
     """The MuJoCo world of a task as a ROS 2 robot: joint states, the objects' poses, an arm
     and a gripper behind joint_trajectory_controllers; the run (from the first arm
     trajectory to 1 s after the last one's end) judged as pbdkit evaluate judges a trial.
-    Needs pbdkit\\[ros]. Exit codes: 0 success (or the takes done), 1 failure (with
+    Needs the ros extra. Exit codes: 0 success (or the takes done), 1 failure (with
     --exit-after-run), 2 usage, 130 SIGINT or SIGTERM."""
     from ..ros._graph import ros_available
 
     if not ros_available():
-        fail("pbdkit ros needs the ros extra: pip install 'pbdkit[ros]'")
+        fail(f"pbdkit ros needs the ros extra: {install_hint('ros')}")
     check_seed(seed)
     check_perturb(perturb)
     if report is not None:

@@ -702,9 +702,10 @@ def _write_html(demo: DemoRun) -> None:
                     "How K was chosen: each demonstration in turn is left out, the GMM of the "
                     "others predicts it (GMR mean), and the error is measured relative to the "
                     "demonstrations' own variability. The K kept is the smallest whose error is "
-                    f"within {100 * CV_TOLERANCE:g} % of the best K's: more components would only "
-                    "fit details the "
-                    "demonstrations do not repeat.",
+                    f"within {100 * CV_TOLERANCE:g} % of the level the K tried reach (the second "
+                    "lowest error, so that one lucky fit does not set it; the cap's while the "
+                    "errors still fall there): more components would only "
+                    "fit details the demonstrations do not repeat.",
                     "selection",
                 ),
             ],

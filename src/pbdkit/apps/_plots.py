@@ -99,8 +99,11 @@ def plot_gmm_ellipses(
     n_std: float = 1.0,
     color: str = "tab:orange",
     alpha: float = 0.35,
+    label: str | None = None,
+    centre_label: str | None = None,
 ) -> None:
-    """Draw each component's covariance ellipse (``n_std`` standard deviations) in two dims.
+    """Draw each component's covariance ellipse (``n_std`` standard deviations) in two dims,
+    and its centre (the component's mean) as a black dot.
 
     Parameters
     ----------
@@ -109,11 +112,14 @@ def plot_gmm_ellipses(
         A fitted mixture.
     dims : (int, int)
         The dimensions shown on the x and y axes.
+    label, centre_label : str, optional
+        Legend labels of the ellipses (given to the first one only, so that a legend lists it
+        once) and of the centres (one line of dots for all components).
     """
     from matplotlib.patches import Ellipse
 
     i, j = dims
-    for mean, cov in zip(gmm.means_, gmm.covariances_, strict=True):
+    for k, (mean, cov) in enumerate(zip(gmm.means_, gmm.covariances_, strict=True)):
         c = cov[np.ix_([i, j], [i, j])]
         w, v = np.linalg.eigh(c)
         w = np.maximum(w, 0.0)
@@ -127,9 +133,11 @@ def plot_gmm_ellipses(
             edgecolor="k",
             linewidth=0.6,
             alpha=alpha,
+            label=label if k == 0 else None,
         )
         ax.add_patch(ell)
-        ax.plot(mean[i], mean[j], "k.", markersize=4)
+    centres = np.asarray(gmm.means_, dtype=np.float64)
+    ax.plot(centres[:, i], centres[:, j], "k.", ls="none", markersize=4, label=centre_label)
 
 
 def plot_gmr_tube(
@@ -141,6 +149,7 @@ def plot_gmr_tube(
     color: str = "tab:blue",
     label: str | None = "GMR",
     n_std: float = 2.0,
+    band_label: str | None = None,
 ) -> None:
     """GMR mean over time with a band of +- ``n_std`` standard deviations.
 
@@ -149,8 +158,18 @@ def plot_gmr_tube(
     t : ndarray, shape (T,)
     mean : ndarray, shape (T,)
     std : ndarray, shape (T,)
+    label, band_label : str, optional
+        Legend labels of the mean and of the band.
     """
-    ax.fill_between(t, mean - n_std * std, mean + n_std * std, color=color, alpha=0.25, lw=0)
+    ax.fill_between(
+        t,
+        mean - n_std * std,
+        mean + n_std * std,
+        color=color,
+        alpha=0.25,
+        lw=0,
+        label=band_label,
+    )
     ax.plot(t, mean, color=color, lw=2, label=label)
 
 
@@ -181,7 +200,9 @@ def plot_lasa_summary(
     ax = axes[0]
     for k, d in enumerate(demos):
         ax.plot(d[:, 0], d[:, 1], color="0.55", lw=1, label="demonstrations" if k == 0 else None)
-    plot_gmm_ellipses(ax, gmm, (1, 2))
+    plot_gmm_ellipses(
+        ax, gmm, (1, 2), label="GMM component (1 sd)", centre_label="GMM component centre"
+    )
     ax.plot(mean[:, 0], mean[:, 1], color="tab:blue", lw=2, label="GMR mean")
     ax.plot(mean[-1, 0], mean[-1, 1], "k*", markersize=10, label="target")
     ax.set_title(f"LASA {name}: K = {gmm.n_components_} components")
@@ -191,9 +212,16 @@ def plot_lasa_summary(
     ax.legend(loc="best", fontsize=8)
     for dim in range(2):
         ax = axes[dim + 1]
-        for d in demos:
-            ax.plot(t, d[:, dim], color="0.6", lw=0.8)
-        plot_gmr_tube(ax, t, mean[:, dim], np.sqrt(cov[:, dim, dim]), label="GMR +- 2 sd")
+        for k, d in enumerate(demos):
+            ax.plot(t, d[:, dim], color="0.6", lw=0.8, label="demonstrations" if k == 0 else None)
+        plot_gmr_tube(
+            ax,
+            t,
+            mean[:, dim],
+            np.sqrt(cov[:, dim, dim]),
+            label="GMR mean",
+            band_label="GMR +- 2 sd",
+        )
         ax.set_xlabel("t")
         ax.set_ylabel(f"x{dim + 1}")
         ax.set_title(f"x{dim + 1} over time")
@@ -241,13 +269,24 @@ def plot_constraints(
     orientation (R^T R_hand = exp([r]x) M, object axes; rad), titled "orientation relative to
     the <object> (rad, tangent at the mean)". Position-only objects have three rows, x - o.
     """
+    import math
+
+    from matplotlib.legend_handler import HandlerTuple
+
     data = skill.training_data(demos)
     names = [*skill.object_names, "joint"]
-    n_rows = max(d.shape[2] - 1 for d in data.values())
-    fig = new_figure(figsize=(4.2 * len(names), 1.9 * n_rows))
-    axes = fig.subplots(n_rows, len(names), sharex=True, squeeze=False)
+    dims = [data[name].shape[2] - 1 for name in names]
+    n_rows = max(dims)
+    # Each column is split into its own number of panels, so a space with fewer dimensions has
+    # taller panels rather than empty cells below them: a grid of lcm(dims) rows, each panel
+    # spanning lcm / d of them.
+    n_grid = math.lcm(*dims)
+    fig = new_figure(figsize=(4.2 * len(names), 1.9 * n_rows + 0.5), layout="constrained")
+    grid = fig.add_gridspec(n_grid, len(names))
     t = np.arange(skill.n_steps, dtype=np.float64)
-    for col, name in enumerate(names):
+    first: Axes | None = None
+    tops: list[Axes] = []  # each column's first panel, whose artists the legend shows
+    for col, (name, d_out) in enumerate(zip(names, dims, strict=True)):
         gmm = skill.gmms[name]
         mean, cov = gmm.regress(t[:, None], in_dims=[0], covariance=covariance)  # type: ignore[arg-type]
         # The covariance the reproduction uses: widened by the calibration (not the gripper's).
@@ -255,18 +294,41 @@ def plot_constraints(
         cov[:, :n_scaled, :n_scaled] *= skill.calibration_[name][:, None, None]
         labels = _dim_labels(skill, name)
         color = _space_color(skill, name)
-        d_out = mean.shape[1]
-        for row in range(n_rows):
-            ax = axes[row, col]
-            if row >= d_out:
-                ax.set_visible(False)
-                continue
-            for demo in data[name]:
-                ax.plot(demo[:, 0], demo[:, row + 1], color="0.65", lw=0.7)
-            plot_gmm_ellipses(ax, gmm, (0, row + 1), color=color, alpha=0.25)
-            plot_gmr_tube(ax, t, mean[:, row], np.sqrt(cov[:, row, row]), color=color, label=None)
+        span = n_grid // d_out
+        for row in range(d_out):
+            ax = fig.add_subplot(grid[row * span : (row + 1) * span, col], sharex=first)
+            first = first or ax
+            if row == 0:
+                tops.append(ax)
+            # Every panel's artists are labelled, so a legend of any one panel is right too.
+            for k, demo in enumerate(data[name]):
+                ax.plot(
+                    demo[:, 0],
+                    demo[:, row + 1],
+                    color="0.65",
+                    lw=0.7,
+                    label="demonstrations" if k == 0 else None,
+                )
+            plot_gmm_ellipses(
+                ax,
+                gmm,
+                (0, row + 1),
+                color=color,
+                alpha=0.25,
+                label="GMM component (1 sd)",
+                centre_label="GMM component centre",
+            )
+            plot_gmr_tube(
+                ax,
+                t,
+                mean[:, row],
+                np.sqrt(cov[:, row, row]),
+                color=color,
+                label="GMR mean",
+                band_label="GMR mean +- 2 sd (calibrated)",
+            )
             ax.set_ylabel(labels[row], fontsize=7)
-            ax.tick_params(labelsize=7)
+            ax.tick_params(labelsize=7, labelbottom=row == d_out - 1)
             if row == 0:
                 title = "joint space" if name == "joint" else f"relative to the {name}"
                 ax.set_title(f"{title}: K = {gmm.n_components_}", fontsize=9)
@@ -276,10 +338,27 @@ def plot_constraints(
                 )
             if row == d_out - 1:
                 ax.set_xlabel("time step", fontsize=8)
-    fig.suptitle(
-        "Constraints extracted from the demonstrations (GMM, and GMR mean +- 2 sd, calibrated)"
+    # One legend for the figure. The ellipses, mean and band take each space's colour: their
+    # entries show the colours of all the columns side by side; the grey and black ones, once.
+    by_label: dict[str, list[Any]] = {}
+    for ax in tops:
+        for handle, text in zip(*ax.get_legend_handles_labels(), strict=True):
+            by_label.setdefault(text, []).append(handle)
+    shared = ("demonstrations", "GMM component centre")
+    order = ["demonstrations", "GMM component (1 sd)", "GMM component centre", "GMR mean"]
+    texts = sorted(by_label, key=lambda k: order.index(k) if k in order else len(order))
+    # A tuple of artists is a legend handle too (drawn by HandlerTuple), not in the stubs.
+    handles: list[Any] = [by_label[k][0] if k in shared else tuple(by_label[k]) for k in texts]
+    fig.legend(
+        handles,
+        texts,
+        loc="outside lower center",
+        ncols=len(texts) if len(names) > 1 else 2,  # one column is too narrow for one row
+        fontsize=8,
+        handlelength=1.2 * len(names),
+        handler_map={tuple: HandlerTuple(ndivide=None, pad=0.0)},
     )
-    fig.tight_layout()
+    fig.suptitle("Constraints extracted from the demonstrations (a narrow band: they agree)")
     figure: Figure = fig
     return figure
 
@@ -336,7 +415,7 @@ def plot_demonstrations_3d(
             lw=1,
             label="demonstrations" if k == 0 else None,
         )
-        ax.scatter(*x[0], color="k", s=12)
+        ax.scatter(*x[0], color="k", s=12, label="start" if k == 0 else None)
         for i, name in enumerate(shown):
             if name not in demo.objects:
                 continue
@@ -351,15 +430,16 @@ def plot_demonstrations_3d(
             if is_pose(where):
                 _draw_frame(ax, where, frame_length, OBJECT_FRAME_GID)
                 framed = True
-    frames = "; frames: x red, y green, z blue" if framed else ""
-    ax.set_title(f"{len(demos)} demonstrations (dots: start{frames})")
+    # The start dots are in the legend; the frames' colours are said here (three lines each).
+    frames = " (frames: x red, y green, z blue)" if framed else ""
+    ax.set_title(f"{len(demos)} demonstrations{frames}")
     _label_3d(ax)
     ax.legend(fontsize=8, loc="upper left")
     if reproduction is not None:
         ax2 = fig.add_subplot(1, 2, 2, projection="3d")
         p = reproduction.positions
         ax2.plot(p[:, 0], p[:, 1], p[:, 2], color="k", lw=2, label="reproduction")
-        ax2.scatter(*p[0], color="k", s=12)
+        ax2.scatter(*p[0], color="k", s=12, label="start")
         for i, name in enumerate(shown):
             if placed is not None and name in placed:
                 where = placed[name]
@@ -490,6 +570,7 @@ def plot_reproductions(
         ax.set_ylabel("[mm]", fontsize=8)
         ax.set_xlabel("time step", fontsize=8)
         ax.set_yscale("log")
+        _label_log_y(ax, max_ticks=4)  # a short panel: plain numbers, few of them
         angles = results["fused"].orientation_errors
         if angles:
             # Oriented objects: the angle to the orientation each expects, on a second axis.
@@ -504,6 +585,7 @@ def plot_reproductions(
                 )
             ax_deg.set_ylabel("[deg] (dashed)", fontsize=8)
             ax_deg.set_yscale("log")
+            _label_log_y(ax_deg, max_ticks=4)
             ax_deg.tick_params(labelsize=7)
             handles, labels = ax.get_legend_handles_labels()
             more = ax_deg.get_legend_handles_labels()
@@ -522,20 +604,83 @@ def plot_reproductions(
     return figure
 
 
+# The labelled ticks tried on a log axis, finest first: the mantissas labelled in each decade.
+_LOG_MANTISSAS = ((1.0, 1.2, 1.5, 2.0, 3.0, 5.0, 7.0), (1.0, 2.0, 5.0), (1.0, 3.0), (1.0,))
+
+
+def _log_ticks(lo: float, hi: float, *, max_ticks: int = 6) -> list[float]:
+    """Plain numbers to label a log axis from ``lo`` to ``hi``: at most ``max_ticks`` of them.
+
+    The finest series of :data:`_LOG_MANTISSAS` (1, 1.2, 1.5, 2, 3, 5, 7, 10, 12, ...; then
+    1, 2, 5, 10, 20, ...; then 1, 3, 10, 30, ...; then the decades) that gives no more than
+    ``max_ticks`` ticks in the range, then every n-th decade. A range too narrow to hold two of
+    them (less than a factor of about 1.3) gets evenly spaced plain steps instead (1.2, 1.25,
+    1.3). Never more than ``max_ticks``; two or more for ``max_ticks`` >= 2.
+
+    Parameters
+    ----------
+    lo, hi : float
+        The axis' limits, 0 < ``lo`` < ``hi``.
+    max_ticks : int
+
+    Returns
+    -------
+    list of float
+        Increasing, all in [``lo``, ``hi``].
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    decades = np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
+    ticks: list[float] = []
+    for mantissas in _LOG_MANTISSAS:
+        # Rounded to 12 digits: 3 * 10 ** -1 is 0.30000000000000004.
+        cand = [float(f"{m * 10.0**e:.12g}") for e in decades for m in mantissas]
+        ticks = [v for v in cand if lo <= v <= hi]
+        if len(ticks) <= max_ticks:
+            break
+    else:
+        step = int(np.ceil(len(decades) / max_ticks))
+        ticks = [v for v in (10.0**e for e in decades[::step]) if lo <= v <= hi]
+    if len(ticks) < 2:
+        plain = MaxNLocator(nbins=max(min(max_ticks, 5) - 1, 1), steps=[1, 2, 5, 10])
+        steps = [float(f"{v:.12g}") for v in plain.tick_values(lo, hi) if lo <= v <= hi]
+        ticks = steps[:: int(np.ceil(len(steps) / max_ticks))]
+    return ticks
+
+
+def _label_log_y(ax: Axes, *, max_ticks: int = 6) -> None:
+    """Label the log y axis of ``ax`` with :func:`_log_ticks` of its current limits, and none
+    of its minor ticks.
+
+    matplotlib labels the minor ticks of a log axis that spans few decades, 2 to 9 in each:
+    with a plain formatter they stack into an unreadable column (issue 40). Call it once the
+    axes is drawn on: the ticks are fixed for the limits it has then.
+    """
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
+
+    lo, hi = sorted(ax.get_ylim())
+    ax.yaxis.set_major_locator(FixedLocator(_log_ticks(lo, hi, max_ticks=max_ticks)))
+    ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
 def plot_selection(skill: Skill) -> Figure:
     """How K was chosen in every space: the cross-validated error of each K tried.
 
     One panel per space: the mean error over the left-out demonstrations (1 = the
-    demonstrations' own variability about their mean), the bound within which a K counts as
-    good as the best (:data:`pbdkit.prob._gmm.CV_TOLERANCE`), the best K and the K kept.
+    demonstrations' own variability about their mean, log scale), the best K, the bound under
+    which a K counts as good as the best (:data:`pbdkit.prob._selection.CV_TOLERANCE` above the
+    level the grid of K reaches, :func:`pbdkit.prob._selection.reached_level`) and the K kept,
+    the smallest under it; a legend below the panels names them.
     """
-    from matplotlib.ticker import FormatStrFormatter
+    from matplotlib.ticker import MaxNLocator
 
-    from ..prob._selection import CV_TOLERANCE
+    from ..prob._selection import CV_TOLERANCE, candidate_grid, reached_level
 
     names = [*skill.object_names, "joint"]
-    fig = new_figure(figsize=(3.6 * len(names), 2.8))
+    fig = new_figure(figsize=(3.6 * len(names), 3.2), layout="constrained")
     axes = fig.subplots(1, len(names), squeeze=False)
+    legend_from: Axes | None = None  # the first panel with a curve: its artists are listed
     for ax, name in zip(axes[0], names, strict=True):
         sel = skill.selection_[name]
         color = _space_color(skill, name)
@@ -546,22 +691,37 @@ def plot_selection(skill: Skill) -> Figure:
             ax.set_title(title, fontsize=9)
             continue
         ks = np.asarray(sel.candidates)
-        ax.plot(ks, sel.scores, "o-", color=color, ms=3, lw=1)
-        best = float(sel.scores[list(sel.candidates).index(sel.best)])
-        ax.axhline((1 + CV_TOLERANCE) * best, color="0.5", lw=0.8, ls="--")
-        ax.axvline(sel.chosen, color="k", lw=1)
+        ax.plot(ks, sel.scores, "o-", color=color, ms=3, lw=1, label="error of each K tried")
+        score = dict(zip(sel.candidates, sel.scores, strict=True))
+        ax.plot(sel.best, score[sel.best], "o", mfc="none", mec="k", ms=7, label="best K")
+        # The bound the choice used: above the level the grid reaches (the second lowest
+        # score), not above the best score, which one lucky EM run can set (reached_level).
+        # The K tried are that grid and the K between two of its points: the grid is the
+        # candidate_grid of the largest.
+        grid = [k for k in candidate_grid(max(sel.candidates)) if k in score]
+        bound = (1 + CV_TOLERANCE) * reached_level([score[k] for k in grid])
+        ax.axhline(
+            bound,
+            color="0.5",
+            lw=0.8,
+            ls="--",
+            label=f"bound: {100 * CV_TOLERANCE:.1f} % above the level reached",
+        )
+        ax.axvline(sel.chosen, color="k", lw=1, label="K kept: the smallest under the bound")
         ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+        _label_log_y(ax)
+        # K is a count: integer ticks.
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=6, steps=[1, 2, 5, 10], integer=True))
         ax.set_title(f"{title}: K = {sel.chosen} (best {sel.best})", fontsize=9)
         ax.set_xlabel("K", fontsize=8)
         ax.tick_params(labelsize=7)
+        legend_from = legend_from or ax
     axes[0, 0].set_ylabel("left-out demo error", fontsize=8)
-    fig.suptitle(
-        "Choosing K: error predicting a left-out demonstration (dashed: within "
-        f"{100 * CV_TOLERANCE:.1f} % of the best; line: K kept)",
-        fontsize=9,
-    )
-    fig.tight_layout()
+    if legend_from is not None:
+        handles, labels = legend_from.get_legend_handles_labels()
+        # One row under the panels; two columns of entries under a single narrow panel.
+        ncols = len(labels) if len(names) > 1 else 2
+        fig.legend(handles, labels, loc="outside lower center", ncols=ncols, fontsize=8)
+    fig.suptitle("Choosing K: error predicting a left-out demonstration", fontsize=9)
     figure: Figure = fig
     return figure

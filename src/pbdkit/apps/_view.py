@@ -20,7 +20,9 @@ a panel:
   planned (:class:`LatestWins`): the page shows the latest placement, never a backlog.
 - for a task: ``run in physics`` executes the plan in MuJoCo and replays it with the outcome;
   ``online`` runs the controller in the physics loop at the wall clock's pace, the objects still
-  draggable (an object in the hand stays there).
+  draggable (an object in the hand stays there). The outcome is only shown for the plan it ran:
+  a move the run does not see, or another controller, clears it
+  (:class:`pbdkit.apps._view_verdict.Verdict`).
 - with ``suggest``: where to demonstrate next, as ghosts of the objects to drag them to
   (:class:`pbdkit.apps._view_suggest.ViewSuggestions`).
 
@@ -70,6 +72,7 @@ from ._view_plan import (
 )
 from ._view_scene import SceneLayer
 from ._view_suggest import SuggestSettings, ViewSuggestions
+from ._view_verdict import Verdict
 
 if TYPE_CHECKING:
     import viser
@@ -78,7 +81,7 @@ if TYPE_CHECKING:
     from ..sim._task_skill import TaskSkill
     from ..skill._skill import Skill
     from ._view_urdf import UrdfArm
-    from ._view_world import Frame, SimDrawing
+    from ._view_world import SimDrawing
 
 __all__ = [
     "MIN_PREVIEW_STEPS",
@@ -199,6 +202,7 @@ class ViewApp:
         #: :class:`~pbdkit.sim._runs.OnlineControllerRun`) and its line in the panel.
         self.last_run: Any = None
         self.result_text = ""
+        self.verdict = Verdict(self._set_result)  # the outcome, kept to the plan it ran
         self._stop = threading.Event()
         self._updating_fields = False
         self._playing = threading.Event()
@@ -420,16 +424,18 @@ class ViewApp:
             )
         arrived = time.perf_counter() if arrived is None else arrived
         with self._lock:
-            self.objects[name] = value.copy()
+            old, self.objects[name] = self.objects[name], value.copy()
             if not from_handle:
                 handle = self.handles[name]
                 handle.position = np.asarray(position_of(value), dtype=np.float64)
                 handle.wxyz = wxyz_of(value)
             self._set_fields(name, value)
             live = self._live
-            if live is not None:
+            if live is not None:  # moved in the online run's physics too: its outcome holds
                 with live.lock:
                     live.moves[name] = value.copy()
+            elif not np.allclose(value, old, rtol=0.0, atol=1e-9):
+                self.verdict.changed()  # not for a handle grabbed and let go where it was
         self.request_plan(arrived, preview=preview)
         if self.suggestions is not None:
             self.suggestions.moved()
@@ -455,6 +461,7 @@ class ViewApp:
 
     def _controller_changed(self, event: Any) -> None:
         self.controller = str(self.ui_controller.value)
+        self.verdict.changed()
         self.request_plan()
 
     def request_plan(self, arrived: float | None = None, *, preview: bool = False) -> None:
@@ -701,9 +708,12 @@ class ViewApp:
                 raise ValueError("a run is going on")
             objects = {k: v.copy() for k, v in self.objects.items()}
             controller = self.controller
+            kind = "online" if online else "in physics"
+            # The token with the copy: a move from now on is one this run does not see.
+            token = self.verdict.start(f"running {kind} ({controller}) ...")
             thread = threading.Thread(
                 target=self._run_in_physics,
-                args=(objects, controller, online),
+                args=(objects, controller, online, token),
                 name="pbdkit-view-physics",
                 daemon=True,
             )
@@ -711,13 +721,14 @@ class ViewApp:
         thread.start()
         return thread
 
-    def _run_in_physics(self, objects: dict[str, Float], controller: str, online: bool) -> None:
+    def _run_in_physics(
+        self, objects: dict[str, Float], controller: str, online: bool, token: int
+    ) -> None:
         from ..sim._runs import run_controller, run_online
         from ._view_world import RunStopped, Sampler
 
         assert self.ts is not None and self._draw_world is not None
         world = self._draw_world
-        self._set_result(f"running {'online' if online else 'in physics'} ({controller}) ...")
         for b in (self.ui_run, self.ui_online):
             if b is not None:
                 b.disabled = True
@@ -733,38 +744,25 @@ class ViewApp:
                 run = run_controller(self.ts, objects, controller, disturbance=sampler)
             with self._lock:
                 self._live = None
+                if sampler.moves:  # dragged after the run's last step: the run did not see it
+                    self.verdict.changed()
             if not online:
-                self._replay(sampler.frames)
+                world.replay(sampler.frames, self._stop)
             self.last_run = run
             verdict = "**success**" if run.success else "**failure**"
-            metrics = run.execution.outcome.metrics
-            shown = metrics_text(metrics)
-            self._set_result(
-                f"{controller} {'online' if online else 'in physics'}: {verdict} ({shown})"
-            )
+            shown = metrics_text(run.execution.outcome.metrics)
+            kind = "online" if online else "in physics"
+            self.verdict.finish(token, f"{controller} {kind}: {verdict} ({shown})")
         except RunStopped:
-            self._set_result("run stopped")
+            self.verdict.finish(token, "run stopped", always=True)
         except Exception as exc:
-            self._set_result(f"run failed: {' '.join(str(exc).split())}")
+            self.verdict.finish(token, f"run failed: {' '.join(str(exc).split())}", always=True)
         finally:
             with self._lock:
                 self._live = None
             for b in (self.ui_run, self.ui_online):
                 if b is not None:
                     b.disabled = False
-
-    def _replay(self, frames: list[Frame]) -> None:
-        assert self._draw_world is not None
-        if not frames:
-            return
-        start = time.perf_counter() - frames[0].t
-        for frame in frames:
-            if self._stop.is_set():
-                return
-            wait = start + frame.t - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-            self._draw_world.show_frame(frame)
 
     def _set_result(self, text: str) -> None:
         if self.ui_result is not None:

@@ -1,7 +1,8 @@
 """The arm of ``pbdkit view --skill`` drawn from its URDF (:class:`UrdfArm`): yourdfpy's meshes
 through viser's ``ViserUrdf``, and a stick figure through the links (for a URDF without visual
-geometry); :func:`check_arm_urdf` checks a URDF given for it first. Imported only when the view
-runs (the ``view`` extra).
+geometry, or one whose mesh files are not found: one line says so, :func:`missing_meshes`);
+:func:`check_arm_urdf` checks a URDF given for it first. Imported only when the view runs (the
+``view`` extra).
 """
 
 from __future__ import annotations
@@ -9,8 +10,10 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import os
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Sequence
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,12 +26,14 @@ if TYPE_CHECKING:
     import viser
 
 
-__all__ = ["UrdfArm", "arm_urdf", "check_arm_urdf", "joint_order"]
+__all__ = ["UrdfArm", "arm_urdf", "check_arm_urdf", "joint_order", "missing_meshes"]
 
 Float = NDArray[np.float64]
 
 #: A URDF file larger than this is refused (its meshes are separate files).
 URDF_MAX_BYTES = 64 * 2**20
+
+_log = logging.getLogger(__name__)
 
 
 @contextlib.contextmanager
@@ -44,20 +49,74 @@ def _quiet_yourdfpy() -> Iterator[None]:
         logger.disabled = disabled
 
 
-def _load(urdf: Path | str, *, meshes: bool) -> Any:
-    """``urdf`` (a file, or URDF XML text) loaded with yourdfpy; meshes beside a file."""
-    from functools import partial
+class _Held(logging.Handler):
+    """Keeps the records it is given, for the caller to sort."""
 
+    def __init__(self) -> None:
+        super().__init__()
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+def _load(urdf: Path | str, *, meshes: bool, found: dict[str, bool] | None = None) -> Any:
+    """``urdf`` (a file, or URDF XML text) loaded with yourdfpy; meshes beside a file (for
+    text, from the working directory: yourdfpy's default). ``found``: filled with each mesh
+    file the URDF names (as it names it) and whether it was found."""
     import yourdfpy
 
-    if isinstance(urdf, Path):
-        return yourdfpy.URDF.load(
-            str(urdf),
-            build_scene_graph=meshes,
-            load_meshes=meshes,
-            filename_handler=partial(yourdfpy.filename_handler_magic, dir=urdf.parent),
-        )
-    return yourdfpy.URDF.load(io.StringIO(urdf), build_scene_graph=meshes, load_meshes=meshes)
+    lookup = partial(
+        yourdfpy.filename_handler_magic, dir=urdf.parent if isinstance(urdf, Path) else ""
+    )
+
+    def handler(fname: str) -> str:
+        path: str = lookup(fname=fname)  # the name itself when nothing is found
+        if found is not None:
+            found.setdefault(fname, os.path.isfile(path))
+        return path
+
+    source = str(urdf) if isinstance(urdf, Path) else io.StringIO(urdf)
+    return yourdfpy.URDF.load(
+        source, build_scene_graph=meshes, load_meshes=meshes, filename_handler=handler
+    )
+
+
+def missing_meshes(missing: Sequence[str], n_files: int, what: str) -> str:
+    """The line that says the mesh files ``missing`` (as the URDF names them, at least one; of
+    the ``n_files`` it names) of the URDF ``what`` were not found, and how the arm is drawn."""
+    n = len(missing)
+    named = short(missing[0]) if n == 1 else f"e.g. {short(missing[0])}"
+    if n == n_files:
+        count = "1 file:" if n == 1 else f"{n} files,"
+        return f"{what}: meshes not found ({count} {named}): the arm is drawn as a stick figure"
+    return (
+        f"{what}: {n} of its {n_files} mesh files not found ({named}): the arm is drawn "
+        "without them, and as a stick figure"
+    )
+
+
+def _load_drawn(urdf: Path | str, what: str) -> Any:
+    """``urdf`` (``what`` in a message) loaded with its meshes (:func:`_load`). yourdfpy logs
+    two lines for each mesh file it cannot find (a page of them for an arm's URDF copied without
+    its meshes) although the stick figure draws the arm without them: they become one line
+    (:func:`missing_meshes`, a warning of this module's logger); whatever else it logs goes out
+    as it came."""
+    logger = logging.getLogger("yourdfpy.urdf")
+    held = _Held()
+    handlers, propagate = logger.handlers, logger.propagate
+    found: dict[str, bool] = {}
+    logger.handlers, logger.propagate = [held], False
+    try:
+        return _load(urdf, meshes=True, found=found)
+    finally:
+        logger.handlers, logger.propagate = handlers, propagate
+        missing = [name for name, ok in found.items() if not ok]
+        for record in held.records:
+            if not any(name in record.getMessage() for name in missing):
+                logger.handle(record)
+        if missing:
+            _log.warning(missing_meshes(missing, len(found), what))
 
 
 def joint_order(
@@ -161,7 +220,10 @@ class UrdfArm:
     def __init__(self, server: viser.ViserServer, robot: Any, urdf: Path | str | None) -> None:
         from viser.extras import ViserUrdf
 
-        loaded = _load(robot.urdf if urdf is None else urdf, meshes=True)
+        if urdf is None:
+            loaded = _load_drawn(robot.urdf, "the skill's URDF")
+        else:
+            loaded = _load_drawn(urdf, short(str(urdf)) if isinstance(urdf, Path) else "the URDF")
         self.urdf = loaded
         self.viser_urdf = ViserUrdf(server, loaded, root_node_name="/arm")
         names = list(self.viser_urdf.get_actuated_joint_names())

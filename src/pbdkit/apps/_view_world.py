@@ -168,6 +168,20 @@ class SimDrawing:
         """A recorded instant of a run."""
         self._send(frame.xpos, frame.xquat, liquid=True)
 
+    def replay(self, frames: list[Frame], stop: threading.Event) -> None:
+        """Show a recorded run's ``frames`` at the pace they were taken, until ``stop`` is
+        set."""
+        if not frames:
+            return
+        start = time.perf_counter() - frames[0].t
+        for frame in frames:
+            if stop.is_set():
+                return
+            wait = start + frame.t - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            self.show_frame(frame)
+
     def _send(self, xpos: Float, xquat: Float, *, liquid: bool) -> None:
         with self._server.atomic():
             for b, node in self._nodes.items():

@@ -1,6 +1,6 @@
 """The simulated world of the experiment (MuJoCo): tasks, scene, cameras, execution, teacher.
 
-The only part of pbdkit that imports MuJoCo (the ``sim`` extra: ``pip install pbdkit[sim]``);
+The only part of pbdkit that imports MuJoCo (the ``sim`` extra: ``pip install -e '.[sim]'``);
 learning and reproduction never depend on it. Names are imported on first use, MuJoCo with the
 first that needs it (``import pbdkit.sim`` imports none of it).
 

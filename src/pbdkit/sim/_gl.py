@@ -20,6 +20,8 @@ import os
 import sys
 from typing import Any
 
+from .._defaults import install_hint
+
 
 def _choose_backend() -> str:
     if ctypes.util.find_library("EGL") is not None:
@@ -55,7 +57,7 @@ try:
     import mujoco
 except ImportError as exc:  # pragma: no cover - depends on the environment
     raise ImportError(
-        "pbdkit.sim needs MuJoCo: install the 'sim' extra, e.g. pip install 'pbdkit[sim]'"
+        f"pbdkit.sim needs MuJoCo: install the 'sim' extra ({install_hint('sim')})"
     ) from exc
 
 __all__ = ["BACKEND", "mujoco"]
