@@ -51,6 +51,14 @@ def test_demo_writes_every_artefact(coaster_demo: Path) -> None:
     video = (coaster_demo / "reproduction.mp4").read_bytes()
     assert len(video) > 10_000
     assert video[4:8] == b"ftyp"  # an MP4 container
+    # Two runs side by side (issue 40): the fused one and a single-space one, 320 px each.
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(coaster_demo / "reproduction.mp4"))
+    assert next(reader)["size"] == (640, 240)
+    reader.close()
+    html = (coaster_demo / "report.html").read_text()
+    assert "the fused controller on the left, the joint controller on the right" in html
     assert (coaster_demo / "demos.npz").exists()
     assert (coaster_demo / "skill.npz").exists()
 

@@ -1,7 +1,7 @@
 """The scripts in examples/ run as a user runs them (a fresh interpreter, an output folder) and
 do what they print: bags read back by rosbags' own reader, a trajectory for the new objects
-within the arm's limits, the Panda's grasps of turned mugs (its pose skill's and its
-position-only skill's, recomputed) and its 1 kHz setpoints within Franka's."""
+within the arm's limits (the quickstart's too), the Panda's grasps of turned mugs (its pose
+skill's and its position-only skill's, recomputed) and its 1 kHz setpoints within Franka's."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
+import pbdkit
 from pbdkit import Skill, demonstration_from_csv, read_bag
 from pbdkit.motion._limits import DefaultLimitsWarning, MotionLimits, count_reversals, motion_peaks
 from pbdkit.reproduction._result import ReproductionResult
@@ -32,7 +33,7 @@ from pbdkit.robots._robot import Robot
 pytestmark = pytest.mark.slow
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-SCRIPTS = ("panda_from_bags.py", "your_arm.py")
+SCRIPTS = ("panda_from_bags.py", "your_arm.py", "quickstart.py")
 TS = get_typestore(Stores.ROS2_HUMBLE)
 
 
@@ -327,3 +328,25 @@ def test_your_arm(runs: dict[str, tuple[Path, str]]) -> None:
     assert (
         abs(_number(r"commands every .* \((\d+\.\d+) s\)", text) - traj.t[-1]) < 0.01 * traj.t[-1]
     )
+
+
+def test_quickstart(runs: dict[str, tuple[Path, str]]) -> None:
+    # The docs' quickstart (docs/quickstart.md includes its main()): the bag holds the
+    # reproduction the saved skill makes for the box it names, recomputed here, within the
+    # Katana's limits, and the hand reaches the new box.
+    tmp_path, text = runs["quickstart.py"]
+    skill = Skill.load(tmp_path / "skill.npz")
+    assert f"K per space: {skill.n_components}" in text
+    robot = skill.robot
+    data = pbdkit.datasets.reach_grasp_return(
+        robot, center=[0.3, 0.0, 0.05], home=[0, 1.7, -1.9, -1.2, 0]
+    )
+    res = skill.reproduce({"box": data.placements(1, seed=1)[0]})
+    traj = _trajectory(tmp_path / "trajectory")
+    assert traj.names == robot.joint_names  # type: ignore[attr-defined]
+    _assert_is_reproduction(traj, res)
+    assert traj.gripper == [False, True]  # the box is brought back, held
+    limits = skill.motion_limits()
+    assert limits is not None and motion_peaks(traj.t, traj.q, limits).worst <= 1.0
+    closest = _number(r"within (\d+\.\d+) mm of the new box", text)
+    assert closest == round(1000 * float(res.task_errors["box"].min()), 2) and closest < 1.0

@@ -303,9 +303,11 @@ def test_a_plan_with_a_nan_is_refused_not_shown_as_nan(
 
 def test_a_run_metric_the_run_has_no_value_for_is_not_shown_as_a_number() -> None:
     """The basin's pour error when nothing was poured is NaN: "n/a", never "nan"."""
-    from pbdkit.apps._view import NOT_A_NUMBER, metrics_text
+    from pbdkit.apps._cli_output import NOT_A_NUMBER, metrics_text
 
     metrics = {"liquid_fraction": 0.0, "held": 1.0, "pour_error_mm": math.nan, "tilt": math.inf}
     text = metrics_text(metrics)
-    assert text == f"liquid_fraction 0.0, held 1.0, pour_error_mm {NOT_A_NUMBER}, tilt n/a"
+    # The names and formats of evaluate's tables (issue 40): the unit in the name, yes/no.
+    expected = f"liquid in basin 0%, held yes, pour from centre (mm) {NOT_A_NUMBER}, tilt n/a"
+    assert text == expected
     assert "nan" not in text and "inf" not in text

@@ -35,7 +35,7 @@ from pbdkit.apps._view_verdict import STALE, Verdict  # noqa: E402
 
 # A run's metrics, as the coaster task's outcome has them.
 METRICS = {"placement_error_mm": 0.4, "released": 1.0}
-SUCCESS = "fused in physics: **success** (placement_error_mm 0.4, released 1.0)"
+SUCCESS = "fused in physics: **success** (placement (mm) 0.4, released yes)"
 
 
 # ----------------------------------------------------------------------------- the verdict

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, TypeVar, cast
 
@@ -24,11 +25,19 @@ if TYPE_CHECKING:
     from ..skill._skill import Skill
 
 __all__ = [
+    "HIDDEN_METRICS",
+    "METRIC_COLUMNS",
+    "MOTION_COLUMNS",
+    "NOT_A_NUMBER",
     "USER_ERRORS",
     "closest_approach_text",
     "console",
     "error_message",
     "fail",
+    "metric_cell",
+    "metric_column",
+    "metric_text",
+    "metrics_text",
     "print_components",
     "print_evaluation",
     "print_lasa_demo",
@@ -390,3 +399,27 @@ def closest_approach_text(res: ReproductionResult) -> str:
     if res.orientation_errors:
         what += " (distance, and the angle to the expected orientation there)"
     return f"{what}: {', '.join(parts)}"
+
+
+#: Shown for a value a run has none of (a NaN or an infinity), instead of a number.
+NOT_A_NUMBER = "n/a"
+
+
+def metrics_text(metrics: Mapping[str, Any]) -> str:
+    """A run's numeric metrics as ``"name value, ..."``, with the names and formats of
+    ``pbdkit evaluate``'s tables (:func:`metric_column`: the unit in
+    the name, a 0/1 share as yes/no); a value the run has none of (NaN or infinite: the basin's
+    pour error when nothing was poured) reads :data:`NOT_A_NUMBER`, never ``nan``."""
+    parts = []
+    for key, value in metrics.items():
+        if not isinstance(value, (int, float)):
+            continue
+        name, kind = metric_column(key)
+        if not math.isfinite(value):
+            text = NOT_A_NUMBER
+        elif kind == "share":
+            text = "yes" if value else "no"
+        else:
+            text = metric_text(float(value), kind)
+        parts.append(f"{name} {text}")
+    return ", ".join(parts)

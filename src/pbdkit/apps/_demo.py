@@ -22,6 +22,7 @@ from .._validation import check_int
 from ..data._demonstration import save_demonstrations
 from ..data._placement import position_of
 from ..prob._selection import CV_TOLERANCE
+from ..sim._video import beside_caption, verdict_label, video_partner
 from ._plots import (
     figure_png,
     plot_constraints,
@@ -119,7 +120,8 @@ def run_robot_demo(
 
     Writes ``demos.npz``, ``skill.npz``, ``fig3_cartesian.png``, ``fig45_constraints.png``,
     ``fig6_controllers.png``, ``fig_limits.png`` (one joint of the fused run's servo stream
-    against the arm's velocity, acceleration and jerk limits), ``reproduction.mp4``,
+    against the arm's velocity, acceleration and jerk limits), ``reproduction.mp4`` (the left
+    camera: the fused run beside the first single-space run that fails),
     ``report.html`` and ``metrics.json`` (with the arm's ``"motion_limits"``; every
     controller's summary has the servo stream's peaks over them).
 
@@ -196,7 +198,7 @@ def _run_robot_demo(
     from ..sim._runs import run_controller, run_online
     from ..sim._sensing import calibrate_tracker, observe
     from ..sim._trials import trial_disturbance
-    from ..sim._video import save_video
+    from ..sim._video import save_video, side_by_side
 
     seed, perturb = conditions.seed, conditions.perturb
 
@@ -242,12 +244,21 @@ def _run_robot_demo(
     runs = {}
     for name in ts.controllers:
         say(f"reproducing and executing the {name} controller ...")
-        camera = "cam_left" if name == "fused" else None
-        runs[name] = run_controller(ts, objects, name, camera=camera, sim_objects=truth)
+        runs[name] = run_controller(ts, objects, name, camera="cam_left", sim_objects=truth)
     fused = runs["fused"]
     video_path = out / "reproduction.mp4"
+    beside = video_partner(runs)
     if fused.execution.frames is not None and len(fused.execution.frames):
-        save_video(fused.execution.frames, video_path, fps=15.0)
+        frames = fused.execution.frames
+        other = None if beside is None else runs[beside].execution.frames
+        if beside is not None and other is not None:
+            # The paper's point: where a single-space controller fails.
+            labels = (
+                verdict_label("fused", fused.success),
+                verdict_label(beside, runs[beside].success),
+            )
+            frames = side_by_side(frames, other, labels)
+        save_video(frames, video_path, fps=15.0)
     online_runs: dict[str, Any] = {}
     if conditions.online:
         say(f"running the fused controller online (perturb: {perturb}) ...")
@@ -744,8 +755,8 @@ def _write_html(demo: DemoRun) -> None:
             "The run",
             html_paragraphs=[
                 f'<video controls width="640" src="{video_path.name}"></video>'
-                f'<p>File: <a href="{video_path.name}">{video_path.name}</a> (fused controller, '
-                "left camera).</p>"
+                f'<p>File: <a href="{video_path.name}">{video_path.name}</a> (left camera: '
+                f"the fused controller{beside_caption(runs)}).</p>"
                 if video_path.exists()
                 else "<p>No video was recorded.</p>"
             ],

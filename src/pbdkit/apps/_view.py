@@ -51,6 +51,7 @@ from ..data._placement import check_placements, position_of
 from ..reproduction._constraints import JOINT
 from ..robots._protocols import PoseKinematicModel
 from ..skill._naming import controller_names, controller_use
+from ._cli_output import metrics_text
 from ._view_plan import (
     COLOR_NAMES,
     JOINT_RGB,
@@ -85,12 +86,10 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MIN_PREVIEW_STEPS",
-    "NOT_A_NUMBER",
     "PATH_SEGMENTS",
     "PREVIEW_BUDGET",
     "PREVIEW_STEPS",
     "ViewApp",
-    "metrics_text",
 ]
 
 Float = NDArray[np.float64]
@@ -104,19 +103,6 @@ PREVIEW_BUDGET = 0.030
 MIN_PREVIEW_STEPS = 100
 #: At most this many segments in the drawn path.
 PATH_SEGMENTS = 400
-#: Shown for a value a run has none of (a NaN or an infinity), instead of a number.
-NOT_A_NUMBER = "n/a"
-
-
-def metrics_text(metrics: Mapping[str, Any]) -> str:
-    """A run's numeric metrics as ``"name value, ..."`` (one decimal); a value the run has none
-    of (NaN or infinite: the basin's pour error when nothing was poured) reads
-    :data:`NOT_A_NUMBER`, never ``nan``."""
-    return ", ".join(
-        f"{k} {float(v):.1f}" if math.isfinite(v) else f"{k} {NOT_A_NUMBER}"
-        for k, v in metrics.items()
-        if isinstance(v, (int, float))
-    )
 
 
 class ViewApp:
