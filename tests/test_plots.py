@@ -108,7 +108,8 @@ def test_figures_are_drawn_with_one_panel_per_dimension(coaster: tuple[Skill, li
     for k in skill.object_names:
         runs[k] = skill.reproduce(objects, use=[k])
     fig6 = plot_reproductions(skill, runs)
-    assert len(fig6.axes) == 2 * (5 + 1)  # positions only: no axis of angles (issue 23)
+    # 5 joints, the hand's x1-x3, the bottom row: positions only, no axis of angles (issue 23)
+    assert len(fig6.axes) == 5 + 3 + 2
     labels = fig6.axes[0].get_legend_handles_labels()[1]
     assert labels == [
         "fused (all constraints)",
@@ -339,8 +340,8 @@ def test_3d_figure_draws_the_frames_of_posed_objects_and_of_the_hand(
 def test_controllers_figure_shows_the_angle_to_an_oriented_target(mug: dict[str, Any]) -> None:
     skill, res = mug["posed"], mug["posed_res"]
     fig = plot_reproductions(skill, {"fused": res})
-    rows = skill.robot.n_joints + 1
-    assert len(fig.axes) == 2 * rows + 1  # and the right axis of the error panel
+    # The joints, the hand's x1-x3, the bottom row, and the right axis of the error panel.
+    assert len(fig.axes) == skill.robot.n_joints + 3 + 2 + 1
     twin = fig.axes[-1]
     assert twin.get_ylabel() == "[deg] (dashed)"
     (line,) = twin.get_lines()

@@ -273,3 +273,65 @@ def test_lasa_figure_names_the_ellipses_and_their_centres() -> None:
     for ax in fig.axes[1:]:
         texts = [t.get_text() for t in ax.get_legend().get_texts()]
         assert texts == ["demonstrations", "GMR +- 2 sd", "GMR mean"]
+
+
+# ----------------------------------------------------------------------------- controllers
+@pytest.fixture(scope="module")
+def panda_mug() -> tuple[Skill, dict[str, Any]]:
+    """A Panda (7 joints) grasping a mug by its handle, one oriented object, and the mug's pose
+    for a reproduction (x, y, z, qw, qx, qy, qz)."""
+    import pose_teacher
+
+    from pbdkit._rotations import quaternion_from_matrix
+    from pbdkit.robots import panda
+
+    robot = panda()
+    skill = Skill.learn(pose_teacher.demonstrations(robot), robot, n_steps=40, n_components=3)
+    pose = pose_teacher.mug_pose(0.6, 0.5, 0.05)
+    return skill, {"mug": np.r_[pose[:3, 3], quaternion_from_matrix(pose[:3, :3])]}
+
+
+@pytest.mark.parametrize("arm", ["katana", "panda"])
+@pytest.mark.parametrize("with_fused", [True, False])
+def test_controllers_figure_has_no_empty_panel(
+    request: pytest.FixtureRequest, arm: str, with_fused: bool
+) -> None:
+    if arm == "katana":  # 5 joints, two objects
+        skill, demos, _, _ = request.getfixturevalue("constraints")
+        objects = {k: v + np.array([0.01, -0.01, 0.0]) for k, v in demos[0].objects.items()}
+    else:  # 7 joints, one oriented object
+        skill, objects = request.getfixturevalue("panda_mug")
+    runs = {"joint": skill.reproduce(objects, use=["joint"])}
+    for k in skill.object_names:
+        runs[k] = skill.reproduce(objects, use=[k])
+    if with_fused:
+        runs["fused"] = skill.reproduce(objects)
+    fig = plot_reproductions(skill, runs)
+    _drawn(fig)
+    n = skill.robot.n_joints
+    twins = 1 if with_fused and skill.oriented else 0  # the error panel's axis of angles
+    assert len(fig.axes) == n + 3 + (2 if with_fused else 0) + twins
+    for ax in fig.axes:
+        assert ax.get_visible()
+        assert ax.get_lines() or ax.collections  # data drawn: lines, or the influence's areas
+    # The joints' column (left) and the hand's (right) span the same height above the bottom
+    # row: no empty cell under the hand's three panels.
+    columns: dict[float, list[Any]] = {}
+    for ax in fig.axes[: n + 3]:
+        columns.setdefault(round(ax.get_position().x0, 3), []).append(ax)
+    assert sorted(len(c) for c in columns.values()) == [3, n]
+    for column in columns.values():
+        assert all(ax.get_lines() for ax in column)
+    tops = [max(ax.get_position().y1 for ax in c) for c in columns.values()]
+    bottoms = [min(ax.get_position().y0 for ax in c) for c in columns.values()]
+    assert max(tops) - min(tops) < 0.01
+    assert max(bottoms) - min(bottoms) < 0.01
+    for column in columns.values():  # each column's bottom panel shows the time steps
+        bottom = min(column, key=lambda ax: ax.get_position().y0)
+        assert len(_tick_labels(bottom.xaxis)) >= 2
+    if with_fused:  # the bottom row under both columns, its panels level with each other
+        row = fig.axes[n + 3 : n + 5]
+        assert [ax.get_xlabel() for ax in row] == ["time step"] * 2
+        assert max(ax.get_position().y1 for ax in row) < min(bottoms)
+        assert abs(row[0].get_position().y0 - row[1].get_position().y0) < 0.01
+        assert len(row[0].collections) == len(skill.object_names) + 1  # the influence's areas

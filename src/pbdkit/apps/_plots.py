@@ -515,12 +515,24 @@ def plot_reproductions(
     controller) to its reproduction. Line styles follow the paper: fused solid, task-only
     dash-dot (first object) and dotted (second), joint-only dashed. For a skill with oriented
     constraints, the fused controller's angle to each oriented object's expected orientation
-    (degrees, dashed) shares the bottom-right panel, on its right axis.
+    (degrees, dashed) shares the bottom-right panel, on its right axis. The joints' panels (left)
+    and the hand's three (right) fill the same height, whatever the number of joints.
     """
+    import math
+
     n = skill.robot.n_joints
-    rows = max(n, 3) + 1
-    fig = new_figure(figsize=(11, 1.7 * rows))
-    axes = fig.subplots(rows, 2, squeeze=False)
+    fused = "fused" in results
+    # The joint angles (left) and the hand's three coordinates (right) share the height above
+    # the bottom row: a grid of lcm(n, 3) rows, each panel spanning lcm / n or lcm / 3 of them,
+    # so neither column has empty cells (as plot_constraints). The bottom row (the fused
+    # controller only) is as tall as a joint panel.
+    n_grid = math.lcm(n, 3)
+    span = n_grid // n
+    fig = new_figure(figsize=(11, 1.7 * (max(n, 3) + (1 if fused else 0))), layout="constrained")
+    grid = fig.add_gridspec(n_grid + (span if fused else 0), 2)
+    joint_axes = [fig.add_subplot(grid[j * span : (j + 1) * span, 0]) for j in range(n)]
+    h = n_grid // 3
+    hand_axes = [fig.add_subplot(grid[i * h : (i + 1) * h, 1]) for i in range(3)]
 
     def style(name: str) -> Any:
         if name in CONTROLLER_STYLES:
@@ -537,8 +549,8 @@ def plot_reproductions(
     for name, res in results.items():
         color = "k" if name == "fused" else _space_color(skill, name)
         lw = 2.0 if name == "fused" else 1.2
-        for j in range(n):
-            axes[j, 0].plot(
+        for j, ax in enumerate(joint_axes):
+            ax.plot(
                 res.t,
                 res.joints[:, j],
                 linestyle=style(name),
@@ -546,20 +558,16 @@ def plot_reproductions(
                 lw=lw,
                 label=label(name) if j == 0 else None,
             )
-            axes[j, 0].set_ylabel(f"theta{j + 1} [rad]", fontsize=8)
-        for i in range(3):
-            axes[i, 1].plot(res.t, res.positions[:, i], linestyle=style(name), color=color, lw=lw)
-            axes[i, 1].set_ylabel(f"x{i + 1} [m]", fontsize=8)
-    for j in range(n, rows - 1):
-        axes[j, 0].set_visible(False)
-    for i in range(3, rows - 1):
-        axes[i, 1].set_visible(False)
-    axes[0, 0].legend(fontsize=7, loc="best")
-    axes[0, 0].set_title("joint angles", fontsize=9)
-    axes[0, 1].set_title("hand position (base frame)", fontsize=9)
-    if "fused" in results:
-        plot_influence(axes[rows - 1, 0], skill, results["fused"])
-        ax = axes[rows - 1, 1]
+            ax.set_ylabel(f"theta{j + 1} [rad]", fontsize=8)
+        for i, ax in enumerate(hand_axes):
+            ax.plot(res.t, res.positions[:, i], linestyle=style(name), color=color, lw=lw)
+            ax.set_ylabel(f"x{i + 1} [m]", fontsize=8)
+    joint_axes[0].legend(fontsize=7, loc="best")
+    joint_axes[0].set_title("joint angles", fontsize=9)
+    hand_axes[0].set_title("hand position (base frame)", fontsize=9)
+    if fused:
+        plot_influence(fig.add_subplot(grid[n_grid:, 0]), skill, results["fused"])
+        ax = fig.add_subplot(grid[n_grid:, 1])
         for name, err in results["fused"].task_errors.items():
             ax.plot(
                 results["fused"].t,
@@ -594,12 +602,8 @@ def plot_reproductions(
         else:
             ax.legend(fontsize=7)
             ax.set_title("fused: hand to each object's expected position", fontsize=9)
-    else:
-        axes[rows - 1, 0].set_visible(False)
-        axes[rows - 1, 1].set_visible(False)
-    for ax in axes.ravel():
+    for ax in fig.axes:
         ax.tick_params(labelsize=7)
-    fig.tight_layout()
     figure: Figure = fig
     return figure
 
