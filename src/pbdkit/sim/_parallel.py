@@ -8,7 +8,8 @@ the others; every worker needs pbdkit installed with its ``sim`` extra).
 This module is a pure executor: :func:`run_fanout` runs the functions it is given on the
 payloads it is given, and knows nothing of what they do (the trials of an evaluation,
 :func:`pbdkit.sim._trials.run_trials`, are its user). What is sent: the shared payload once per
-run (scattered to every worker), then per item one job of the first stage and, per key, one job
+run (a task's result, fetched by each worker that needs it, and recomputed if the worker
+holding it dies), then per item one job of the first stage and, per key, one job
 of the second stage that depends on it; the results come back in the items' order. A worker that
 dies loses only the jobs it was running (and the results it held): the scheduler runs them again
 on another worker (up to three times, Dask's ``distributed.scheduler.allowed-failures``). An
@@ -81,6 +82,11 @@ def _own_copy(shared: S) -> S:
         _LOCAL.shared = held
     mine: S = held.copy
     return mine
+
+
+def _held(shared: S) -> S:
+    """The payload every job of a :func:`run_fanout` shares, held as a task's result."""
+    return shared
 
 
 def _first(fn: Callable[[S, int, Item], H], shared: S, index: int, item: Item) -> H:
@@ -460,7 +466,7 @@ def run_fanout(
         Module-level functions (the workers import them by reference); each gets its own
         thread's copy of ``shared``.
     shared : object
-        Sent once to every worker (picklable).
+        Sent once per run, held as a task's result (picklable).
     items : sequence
         One first-stage job each (picklable).
     keys : sequence
@@ -485,9 +491,14 @@ def run_fanout(
     opened = session(workers, scheduler) if client is None else nullcontext(client)
     with opened as run:
         client = run.client if isinstance(run, Session) else run
-        # A key of its own: the same payload scattered again on this client (a study's second
-        # map) must not share a key with the last one's, which Dask may be releasing.
-        sent = client.scatter(shared, broadcast=True, hash=False)
+        # The payload as a task's result, not scattered: a worker killed while holding the
+        # only copy of scattered data loses it for good (Dask cannot recompute it) and every
+        # job waiting on it is cancelled; a task's result is recomputed on another worker
+        # (CI: "Removing worker ... caused the cluster to lose scattered data"). The other
+        # workers fetch it from the first that has it. pure=False: a key of its own, so that
+        # the same payload sent again (a study's second map) does not share a key with the
+        # last one's, which Dask may be releasing.
+        sent = client.submit(_held, shared, pure=False)
         heads, rows = [], []
         for i, item in enumerate(items):
             head = client.submit(_first, first, sent, i, item, pure=False)
