@@ -47,6 +47,7 @@ __all__ = [
     "print_tracking",
     "progress_bar",
     "reports_errors",
+    "run_metric_text",
     "unwrap_help",
 ]
 
@@ -126,12 +127,21 @@ def print_lasa_demo(shape: str, metrics: dict[str, Any], out: Path) -> None:
     console.print(f"wrote {out / f'lasa_{shape}.png'} and {out / 'metrics.json'}")
 
 
-def _cell(value: Any, key: str) -> str:
-    """A metric of one run in the demo's table (:func:`metric_text`): a 0/1 share as yes/no."""
+def run_metric_text(value: Any, key: str) -> str:
+    """A metric of one run (the demo's table, the view's run line): :func:`metric_text` in its
+    kind (:func:`metric_column`), but a 0/1 share or a bool as yes/no, and a value the run has
+    none of (NaN or infinite: the basin's pour error when nothing was poured) as
+    :data:`NOT_A_NUMBER`, never ``nan``."""
     kind = metric_column(key)[1]
-    if isinstance(value, bool) or (kind == "share" and value is not None):
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
         return "yes" if value else "no"
-    return metric_text(value, kind)
+    if not math.isfinite(value):
+        return NOT_A_NUMBER
+    if kind == "share":
+        return "yes" if value else "no"
+    return metric_text(float(value), kind)
 
 
 def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Path) -> None:
@@ -140,19 +150,16 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
     table = Table(title=f"pbdkit demo: {spec.name} task, new situation (seed {seed})")
     table.add_column("controller")
     table.add_column("success")
-    # In metrics.json and the report: the measured speed and following error, and the servo
-    # stream's peaks (here one column: the worst of the three ratios to the limits).
-    peaks = tuple(
-        f"peak_{k}{s}" for k in ("velocity", "acceleration", "jerk") for s in ("", "_ratio")
-    )
-    extra = ("success", "peak_speed_ratio", "following_error_rad", *peaks, "contacts")
+    # In metrics.json and the report: the motion's metrics (here one column: the worst of the
+    # servo stream's three ratios to the limits).
+    extra = ("success", "contacts", *MOTION_COLUMNS, *HIDDEN_METRICS)
     keys = [k for k in metrics["controllers"]["fused"] if k not in extra]
     for k in keys:
         table.add_column(metric_column(k)[0], justify="right")
     table.add_column("limits used", justify="right")
     for name, row in metrics["controllers"].items():
         cells = [("[green]yes" if row["success"] else "[red]no")]
-        cells += [_cell(row[k], k) for k in keys]
+        cells += [run_metric_text(row[k], k) for k in keys]
         worst = max(
             (row.get(f"peak_{k}_ratio") or 0.0) for k in ("velocity", "acceleration", "jerk")
         )
@@ -177,7 +184,7 @@ def print_robot_demo(spec: TaskSpec, metrics: dict[str, Any], seed: int, out: Pa
             t2.add_row(
                 label,
                 "[green]yes" if row["success"] else "[red]no",
-                _cell(row[first], first),
+                run_metric_text(row[first], first),
                 metric_text(row["peak_speed_ratio"], "worst"),
                 metric_text(row["following_error_rad"], "rad"),
             )
@@ -410,16 +417,8 @@ def metrics_text(metrics: Mapping[str, Any]) -> str:
     ``pbdkit evaluate``'s tables (:func:`metric_column`: the unit in
     the name, a 0/1 share as yes/no); a value the run has none of (NaN or infinite: the basin's
     pour error when nothing was poured) reads :data:`NOT_A_NUMBER`, never ``nan``."""
-    parts = []
-    for key, value in metrics.items():
-        if not isinstance(value, (int, float)):
-            continue
-        name, kind = metric_column(key)
-        if not math.isfinite(value):
-            text = NOT_A_NUMBER
-        elif kind == "share":
-            text = "yes" if value else "no"
-        else:
-            text = metric_text(float(value), kind)
-        parts.append(f"{name} {text}")
-    return ", ".join(parts)
+    return ", ".join(
+        f"{metric_column(key)[0]} {run_metric_text(value, key)}"
+        for key, value in metrics.items()
+        if isinstance(value, (int, float))
+    )

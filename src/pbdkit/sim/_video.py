@@ -14,6 +14,17 @@ from numpy.typing import NDArray
 from .._io import atomic_write_bytes
 
 
+def _frames(frames: npt.ArrayLike) -> NDArray[np.uint8]:
+    """``frames`` as an array, refused unless a non-empty uint8 array of RGB frames."""
+    arr = np.asarray(frames)
+    if arr.dtype != np.uint8 or arr.ndim != 4 or arr.shape[0] == 0 or arr.shape[3] != 3:
+        raise ValueError(
+            f"frames must be a non-empty uint8 array of shape (F, H, W, 3), got "
+            f"{arr.dtype} {arr.shape}"
+        )
+    return arr
+
+
 def save_video(frames: npt.ArrayLike, path: str | os.PathLike[str], fps: float = 15.0) -> Path:
     """Encode RGB frames as an MP4 video, atomically (a temporary file renamed at the end).
 
@@ -40,12 +51,7 @@ def save_video(frames: npt.ArrayLike, path: str | os.PathLike[str], fps: float =
     """
     import imageio_ffmpeg  # the sim extra; imported here so that the rest works without it
 
-    arr = np.asarray(frames)
-    if arr.dtype != np.uint8 or arr.ndim != 4 or arr.shape[0] == 0 or arr.shape[3] != 3:
-        raise ValueError(
-            f"frames must be a non-empty uint8 array of shape (F, H, W, 3), got "
-            f"{arr.dtype} {arr.shape}"
-        )
+    arr = _frames(frames)
     if arr.shape[1] % 2 or arr.shape[2] % 2:
         raise ValueError(f"frames: height and width must be even, got {arr.shape[1:3]}")
     if not fps > 0:
@@ -89,13 +95,7 @@ def side_by_side(
     """
     import cv2  # the sim extra, as the cameras
 
-    halves = [np.asarray(x) for x in (left, right)]
-    for x in halves:
-        if x.dtype != np.uint8 or x.ndim != 4 or x.shape[0] == 0 or x.shape[3] != 3:
-            raise ValueError(
-                f"frames must be non-empty uint8 arrays of shape (F, H, W, 3), got "
-                f"{x.dtype} {x.shape}"
-            )
+    halves = [_frames(left), _frames(right)]
     if halves[0].shape[1] != halves[1].shape[1]:
         raise ValueError(f"frames of different heights: {halves[0].shape[1]}, {halves[1].shape[1]}")
     n = max(x.shape[0] for x in halves)
@@ -117,8 +117,11 @@ def side_by_side(
 def video_partner(runs: dict[str, Any]) -> str | None:
     """The single-space controller the report's video shows beside the fused one: the first
     that fails (the paper's point), else the first; None without one, or without frames."""
-    others = [n for n in runs if n != "fused" and runs[n].execution.frames is not None]
-    others = [n for n in others if len(runs[n].execution.frames)]
+    others = [
+        n
+        for n, run in runs.items()
+        if n != "fused" and run.execution.frames is not None and len(run.execution.frames)
+    ]
     failing = [n for n in others if not runs[n].success]
     chosen = failing or others
     return chosen[0] if chosen else None
