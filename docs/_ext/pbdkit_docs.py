@@ -1,9 +1,5 @@
-"""Sphinx glue for pbdkit's docs: the README's sections as pages, and references by public name.
+"""Sphinx glue for pbdkit's docs: references by public name, tables of names and commands.
 
-- ``% readme-section: HEADING`` on a line of its own in a Markdown page is replaced by the body of
-  the README's section of that heading (up to the next heading of any level), its links
-  rewritten for the docs tree. The README stays the one source of the walkthroughs; a heading
-  renamed there fails the build instead of leaving a stale copy.
 - References by the names users write resolve to where an object is documented, its defining
   module: ``pbdkit.Skill`` to ``pbdkit.skill._skill.Skill``, ``pbdkit.sim.register_task`` to
   ``pbdkit.sim._task_registry.register_task``, and a short name to what the current module imports.
@@ -59,95 +55,7 @@ PUBLIC_PACKAGES = (
     "pbdkit.apps",
 )
 
-README = Path(__file__).resolve().parents[2] / "README.md"
-SRC = README.parent / "src"
-_MARKER = re.compile(r"^% readme-section: (?P<heading>.+?)\s*$", re.MULTILINE)
-_HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*$")
-_LINK = re.compile(r"(\]\()([^)\s]+)(\))")
-# README links to files that are pages here; any other relative link fails the build, so that a
-# new one gets a page (or an absolute address) rather than a dead link.
-_LINK_PAGES = {"benchmarks/README.md": "benchmarks.md", "examples/README.md": "examples.md"}
-
-
-# ---------------------------------------------------------------------------------------------
-# README sections
-
-
-def readme_section(text: str, heading: str) -> list[str]:
-    """The body of the README section titled ``heading``, up to the next heading.
-
-    Parameters
-    ----------
-    text : str
-        The README.
-    heading : str
-        The heading's text, without the leading ``#``.
-
-    Returns
-    -------
-    lines : list of str
-
-    Raises
-    ------
-    ValueError
-        If no heading, or more than one, has that text.
-    """
-    lines = text.splitlines()
-    fenced = False
-    starts: list[int] = []
-    headings: list[int] = []
-    for i, line in enumerate(lines):
-        if line.startswith("```"):
-            fenced = not fenced
-            continue
-        m = None if fenced else _HEADING.match(line)
-        if m:
-            headings.append(i)
-            if m.group(2) == heading:
-                starts.append(i)
-    if len(starts) != 1:
-        raise ValueError(f"README.md has {len(starts)} headings {heading!r}, expected 1")
-    end = next((h for h in headings if h > starts[0]), len(lines))
-    return lines[starts[0] + 1 : end]
-
-
-def _rewrite_link(match: re.Match[str], docname: str) -> str:
-    target = match.group(2)
-    path, _, anchor = target.partition("#")
-    if "://" in target or target.startswith(("#", "mailto:")):
-        return match.group(0)
-    if path.startswith("docs/"):
-        new = path.removeprefix("docs/")
-    elif path in _LINK_PAGES:
-        new = _LINK_PAGES[path]
-    else:
-        logger.warning(
-            "README link %r has no page in the docs (add it to _LINK_PAGES in %s)",
-            target,
-            Path(__file__).name,
-            location=docname,
-        )
-        return match.group(0)
-    return f"{match.group(1)}{new}{'#' + anchor if anchor else ''}{match.group(3)}"
-
-
-def _include_readme(app: Sphinx, docname: str, source: list[str]) -> None:
-    if not _MARKER.search(source[0]):
-        return
-    app.env.note_dependency(str(README))
-    text = README.read_text(encoding="utf-8")
-
-    def section(m: re.Match[str]) -> str:
-        try:
-            body = readme_section(text, m.group("heading"))
-        except ValueError as exc:
-            logger.warning("%s", exc, location=docname)
-            return ""
-        joined = "\n".join(body)
-        return _LINK.sub(lambda link: _rewrite_link(link, docname), joined)
-
-    source[0] = _MARKER.sub(section, source[0])
-
+SRC = Path(__file__).resolve().parents[2] / "src"
 
 # ---------------------------------------------------------------------------------------------
 # Public names -> where they are documented
@@ -542,7 +450,6 @@ def setup(app: Sphinx) -> dict[str, Any]:
             app.disconnect(listener.id)
             app.connect("autodoc-process-docstring", _napoleon_except_attributes, listener.priority)
     app.connect("builder-inited", _generate_pages)
-    app.connect("source-read", _include_readme)
     app.connect("autodoc-skip-member", _skip_member)
     # before napoleon (priority 500) turns the section into directives
     app.connect("autodoc-process-docstring", _strip_documented_attributes, priority=400)
