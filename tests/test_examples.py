@@ -13,13 +13,12 @@ import sys
 from pathlib import Path
 from subprocess import PIPE
 from types import ModuleType
-from typing import NamedTuple
 
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
+from trajectory_bag import TS, Trajectory, read_trajectory
 
 import pbdkit
 from pbdkit import Skill, demonstration_from_csv, read_bag
@@ -34,7 +33,6 @@ pytestmark = pytest.mark.slow
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCRIPTS = ("panda_from_bags.py", "your_arm.py", "quickstart.py")
-TS = get_typestore(Stores.ROS2_HUMBLE)
 
 
 @pytest.fixture(scope="module")
@@ -55,34 +53,6 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, str]
         assert proc.returncode == 0, f"{script} failed:\n{stdout}{stderr}"
         results[script] = (out, stdout + stderr)  # warnings included
     return results
-
-
-class Trajectory(NamedTuple):
-    """A trajectory bag as a controller receives it."""
-
-    names: list[str]
-    q: np.ndarray  # (T, n) positions
-    t: np.ndarray  # (T,) time_from_start, s
-    v: np.ndarray  # (T, n) velocities of the points
-    a: np.ndarray  # (T, n) accelerations of the points
-    gripper: list[bool]  # the /gripper messages
-
-
-def _trajectory(path: Path) -> Trajectory:
-    with AnyReader([path], default_typestore=TS) as reader:
-        msgs = {
-            c.topic: [reader.deserialize(raw, c.msgtype) for _, _, raw in reader.messages([c])]
-            for c in reader.connections
-        }
-    (traj,) = msgs["/joint_trajectory"]
-    return Trajectory(
-        list(traj.joint_names),
-        np.stack([p.positions for p in traj.points]),
-        np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in traj.points]),
-        np.stack([p.velocities for p in traj.points]),
-        np.stack([p.accelerations for p in traj.points]),
-        [m.data for m in msgs["/gripper"]],
-    )
 
 
 def _assert_is_reproduction(traj: Trajectory, res: ReproductionResult) -> None:
@@ -236,7 +206,7 @@ def test_panda_from_bags(runs: dict[str, tuple[Path, str]]) -> None:
 
     # Offline: the saved skill's reproduction for that mug from the same start, in the bag:
     # the lead-in's samples and then one per step, at the reproduction's times.
-    traj = _trajectory(tmp_path / "trajectory")
+    traj = read_trajectory(tmp_path / "trajectory")
     res = skill.reproduce({"mug": mug}, q0=q_set[0])
     n_lead = int(np.count_nonzero(res.lead_in))
     assert n_lead == _number(r"offline: (\d+) lead-in points", text) > 0
@@ -304,7 +274,7 @@ def test_your_arm(runs: dict[str, tuple[Path, str]]) -> None:
     np.testing.assert_allclose(limits.acceleration, declared.velocity / 0.25)
     np.testing.assert_allclose(limits.jerk, declared.velocity / 0.025)
 
-    traj = _trajectory(tmp_path / "trajectory")
+    traj = read_trajectory(tmp_path / "trajectory")
     with pytest.warns(DefaultLimitsWarning):
         res = skill.reproduce(_example("your_arm").new_places(robot))
     n_lead = int(np.count_nonzero(res.lead_in))
@@ -342,7 +312,7 @@ def test_quickstart(runs: dict[str, tuple[Path, str]]) -> None:
         robot, center=[0.3, 0.0, 0.05], home=[0, 1.7, -1.9, -1.2, 0]
     )
     res = skill.reproduce({"box": data.placements(1, seed=1)[0]})
-    traj = _trajectory(tmp_path / "trajectory")
+    traj = read_trajectory(tmp_path / "trajectory")
     assert traj.names == robot.joint_names  # type: ignore[attr-defined]
     _assert_is_reproduction(traj, res)
     assert traj.gripper == [False, True]  # the box is brought back, held

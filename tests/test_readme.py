@@ -26,8 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 import pytest
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
+from trajectory_bag import read_trajectory
 from typer.testing import CliRunner
 
 import pbdkit
@@ -72,7 +71,7 @@ def code_blocks(text: str, page: str) -> list[Block]:
 
 def commands(code: str) -> list[list[str]]:
     """The shell commands of a block: one per line, comments dropped."""
-    return [shlex.split(line, comments=True) for line in code.splitlines() if line.split("#")[0]]
+    return [c for c in (shlex.split(line, comments=True) for line in code.splitlines()) if c]
 
 
 def prose_commands(text: str) -> list[list[str]]:
@@ -135,18 +134,11 @@ def test_the_python_blocks_run_and_write_what_they_say(block: Block, tmp_path: P
         assert skill.n_components == printed
     if (tmp_path / "trajectory").exists():
         # A joint trajectory for the skill's arm: its joints by name, in time order, in limits.
-        store = get_typestore(Stores.ROS2_HUMBLE)
-        with AnyReader([tmp_path / "trajectory"], default_typestore=store) as reader:
-            (conn,) = [c for c in reader.connections if c.topic == "/joint_trajectory"]
-            (traj,) = [reader.deserialize(raw, conn.msgtype) for *_, raw in reader.messages([conn])]
+        traj = read_trajectory(tmp_path / "trajectory")
         robot = skill.robot
-        q = np.stack([p.positions for p in traj.points])
-        t = np.array(
-            [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in traj.points]
-        )
-        assert list(traj.joint_names) == list(robot.joint_names)
-        assert len(t) > 100 and np.all(np.diff(t) > 0)
-        assert np.all(q >= robot.lower - 1e-9) and np.all(q <= robot.upper + 1e-9)
+        assert traj.names == list(robot.joint_names)
+        assert len(traj.t) > 100 and np.all(np.diff(traj.t) > 0)
+        assert np.all(traj.q >= robot.lower - 1e-9) and np.all(traj.q <= robot.upper + 1e-9)
 
 
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.kind == "make"], ids=_id)
