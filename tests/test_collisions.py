@@ -19,8 +19,10 @@ from pbdkit.data._demonstration import Demonstration
 from pbdkit.datasets import reach_grasp_return
 from pbdkit.motion import motion_peaks
 from pbdkit.motion._limits import MotionLimits
+from pbdkit.reproduction import _avoid as avoid_module
 from pbdkit.reproduction._avoid import (
     ACROSS_SIGMA,
+    ALONG_MIN,
     SIGMA,
     TAPER,
     TAPER_DECADES,
@@ -338,6 +340,39 @@ def test_the_clearance_gaussian_is_the_bumps_linearization(skill: Skill, plain: 
     assert enc.weight(enc.lo) == enc.weight(enc.hi) == 1.0
     np.testing.assert_allclose(enc.weight(enc.lo - taper / 2), 0.5, atol=1e-12)
     assert enc.weight(enc.hi + taper) == 0.0 and avoid.terms(enc.hi + taper + 1) is None
+
+
+def test_a_path_that_dwells_by_the_box_is_passed_over_along_its_way(
+    skill: Skill, plain: tuple, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The path's direction at an encounter is the point's motion over the steps around its
+    # nearest one, widened until it moves ALONG_MIN. Here the path dwells in the box where it
+    # came nearest: 20 samples that go 4 mm down and out, then part of the way back. Over one
+    # step either side the hand moved 0.2 mm, down and out, and "up without the motion along
+    # the path" tilted the bump 55 degrees outward (a coaster plan so lifted the glass 14 cm
+    # and did not come back to the coaster); widened, the bump is the one of the path alone.
+    checker, joints, signal = _through_the_box(skill, plain)
+    alone = Avoidance(checker, margin=0.02)
+    alone.update(joints, signal)
+    report = checker.check(joints, signal, margin=0.02)
+    assert report.scene_clearance is not None
+    j = int(np.argmin(report.scene_clearance))
+    q, robot, h = joints[j], skill.robot, 1e-6
+    jac = np.array([(robot.fk(q + h * e) - robot.fk(q - h * e)) / (2 * h) for e in np.eye(q.size)])
+    dq = np.linalg.lstsq(jac.T, np.array([0.6, 0.0, -0.8]) * 2e-4, rcond=None)[0]
+    depth = np.r_[2.0 * np.arange(10), 18.0 - np.arange(10)]  # 0.4 mm a sample, back at 0.2
+    path = np.concatenate([joints[:j], q + depth[:, None] * dq, joints[j + 1 :]])
+    held = np.concatenate([signal[:j], np.repeat(signal[j], depth.size), signal[j + 1 :]])
+    checker.plan_grasps(path, held)
+    escapes = {}
+    for along in (ALONG_MIN, 0.0):
+        monkeypatch.setattr(avoid_module, "ALONG_MIN", along)
+        dwell = Avoidance(checker, margin=0.02)
+        dwell.update(path, held)
+        escapes[along] = dwell.encounters[0].escape
+    (enc,) = alone.encounters
+    assert escapes[ALONG_MIN].dot(enc.escape) > 0.99  # measured: 0.9997
+    assert escapes[0.0].dot(enc.escape) < 0.7  # one step either side: 0.55
 
 
 def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, plain: tuple) -> None:
