@@ -357,9 +357,8 @@ def test_a_path_that_dwells_by_the_box_is_passed_over_along_its_way(
     report = checker.check(joints, signal, margin=0.02)
     assert report.scene_clearance is not None
     j = int(np.argmin(report.scene_clearance))
-    q, robot, h = joints[j], skill.robot, 1e-6
-    jac = np.array([(robot.fk(q + h * e) - robot.fk(q - h * e)) / (2 * h) for e in np.eye(q.size)])
-    dq = np.linalg.lstsq(jac.T, np.array([0.6, 0.0, -0.8]) * 2e-4, rcond=None)[0]
+    q = joints[j]
+    dq = np.linalg.lstsq(skill.robot.jacobian(q), np.array([0.6, 0.0, -0.8]) * 2e-4, rcond=None)[0]
     depth = np.r_[2.0 * np.arange(10), 18.0 - np.arange(10)]  # 0.4 mm a sample, back at 0.2
     path = np.concatenate([joints[:j], q + depth[:, None] * dq, joints[j + 1 :]])
     held = np.concatenate([signal[:j], np.repeat(signal[j], depth.size), signal[j + 1 :]])

@@ -212,6 +212,20 @@ def _taper_weight(gap: int, taper: int) -> float:
     return 0.5 * (1.0 + math.cos(math.pi * min(gap, taper) / taper))
 
 
+def _motion(points: Float, j: int) -> tuple[Float, float]:
+    """The motion of a point along a path (``points``, (T, 3)) from step j - w to j + w, w
+    widened from 1 until it moves :data:`ALONG_MIN` or spans the path, and its length."""
+    last = points.shape[0] - 1
+    w = 1
+    while True:
+        lo, hi = max(j - w, 0), min(j + w, last)
+        motion = points[hi] - points[lo]
+        speed = float(np.linalg.norm(motion))
+        if speed >= ALONG_MIN or (lo == 0 and hi == last):
+            return motion, speed
+        w += 1
+
+
 def _moving(prox: Any) -> int:
     """Which of a pair's two bodies moves with the arm (0 or 1)."""
     return 0 if prox.joints[0] > 0 else 1
@@ -416,8 +430,8 @@ class Avoidance:
         joint = int(prox.joints[moving])
         rots, origins = frames
         local = rots[j, joint].T.dot(prox.points[moving] - origins[j, joint])
-        escape = self._escape(joints, j, prox, frames)
         points = np.einsum("kab,b->ka", rots[:, joint], local) + origins[:, joint]
+        escape = self._escape(points, j, prox)
         enc = _Encounter(
             body=body,
             lo=min(k for k, _ in hits),
@@ -438,17 +452,18 @@ class Avoidance:
             enc.needs[k] = max(enc.needs.get(k, 0.0), self._shortfall(p))
         return enc
 
-    def _escape(self, joints: Float, j: int, prox: Any, frames: tuple[Float, Float]) -> Float:
-        """The direction the moving body of ``prox`` (caught nearest at step j) is moved
+    def _escape(self, points: Float, j: int, prox: Any) -> Float:
+        """The direction the moving body of ``prox`` (caught nearest at step j; ``points``
+        (T, 3): its point, fixed to its joint, at every step of the path) is moved
         along: away from the other body (the contact normal's sense) without the component
-        along the path (the moving point's motion around step j: :meth:`_motion`), so that an
+        along the path (the moving point's motion around step j: :func:`_motion`), so that an
         obstacle met head-on is passed, not backed away from: up (the base frame's z) without
         it, unless the other body is above; where that leaves less than :data:`ESCAPE_MIN`, the
         contact normal without it. With :attr:`beside`, the contact normal made level (without its
         vertical component) is tried first."""
         moving = _moving(prox)
         away = -np.asarray(prox.normal) if moving == 0 else np.asarray(prox.normal)
-        motion, speed = self._motion(joints, j, prox, frames)
+        motion, speed = _motion(points, j)
         if speed < 1e-12:
             return np.asarray(away / np.linalg.norm(away))
         along = motion / speed
@@ -463,27 +478,6 @@ class Avoidance:
             if size >= ESCAPE_MIN:
                 return np.asarray(side / size)
         return np.asarray(away / np.linalg.norm(away))
-
-    def _motion(
-        self, joints: Float, j: int, prox: Any, frames: tuple[Float, Float]
-    ) -> tuple[Float, float]:
-        """The motion of ``prox``'s moving point (fixed to its joint at step j) from step
-        j - w to j + w of the path ``joints``, w widened from 1 until it moves
-        :data:`ALONG_MIN` or spans the path, and its length."""
-        moving = _moving(prox)
-        joint = int(prox.joints[moving])
-        rots, origins = frames
-        local = rots[j, joint].T.dot(prox.points[moving] - origins[j, joint])
-        points = np.einsum("kab,b->ka", rots[:, joint], local) + origins[:, joint]
-        last = joints.shape[0] - 1
-        w = 1
-        while True:
-            lo, hi = max(j - w, 0), min(j + w, last)
-            motion = points[hi] - points[lo]
-            speed = float(np.linalg.norm(motion))
-            if speed >= ALONG_MIN or (lo == 0 and hi == last):
-                return motion, speed
-            w += 1
 
     def _point_rows(self, k: int, point: Float, joint: int, frames: tuple[Float, Float]) -> Float:
         """J_p (3, n): the motion of ``point`` (base frame), fixed to chain joint ``joint``
