@@ -228,8 +228,9 @@ def test_the_hand_relative_to_fixed_objects_changes_nothing(robot: Robot) -> Non
         demos.append(Demonstration(2.0 + 6.0 * v, joints(PHASES[name](v)), objects))
     plain = align(demos)
     hand = align(demos, robot)
+    # Within a step or three: the hand's speed (SPEED_WEIGHT) differs where the timing does.
     for a, b in zip(plain, hand, strict=True):
-        assert np.abs(normalized(a.t) - normalized(b.t)).max() <= 0.01
+        assert np.abs(normalized(a.t) - normalized(b.t)).max() <= 0.011
     # Joints already aligned: the same warped times, with or without the robot, exactly.
     same = [Demonstration(d.t, joints(np.linspace(0, 1, d.n_steps)), objects) for d in demos]
     for a, b in zip(align(same), align(same, robot), strict=True):
@@ -243,9 +244,9 @@ def test_the_arrival_at_an_object_is_aligned_to_the_millimetre(
 ) -> None:
     # Issue 34: the xArm7's pausing teacher on the 40 cm table. In metres (the default), a hand
     # 5 mm short of the box looks like one on it: the arrivals (the hand within 1 mm) spread
-    # over 3.9 and 4.3 % of the aligned time (seeds 1, 3); stretched near the object
-    # (NEAR_SCALE 5 cm), 0.3 and 1.3 %; with the hand's speed as a feature (HAND_SPEED),
-    # 0.3 and 0.7 %.
+    # over 3.9 and 4.7 % of the aligned time (seeds 1, 3); stretched near the object
+    # (NEAR_SCALE 5 cm), 0.3 and 1.3 %; with the hand's speed as a feature at a quarter weight
+    # (SPEED_WEIGHT, the default), 0.7 and 1.3 % (at a full weight, 0.3 and 0.7 %).
     from arm_zoo import ARMS
 
     from pbdkit.datasets import reach_grasp_return
@@ -262,11 +263,10 @@ def test_the_arrival_at_an_object_is_aligned_to_the_millimetre(
             arrivals.append((d.t[np.argmax(near)] - d.t[0]) / (d.t[-1] - d.t[0]))
         return float(np.ptp(arrivals))
 
-    in_metres = arrivals_spread()
-    monkeypatch.setattr(_align, "HAND_SPEED", True)
     with_speed = arrivals_spread()
-    assert with_speed < 0.01 and in_metres > 3 * with_speed
-    monkeypatch.setattr(_align, "HAND_SPEED", False)
+    monkeypatch.setattr(_align, "SPEED_WEIGHT", 0.0)
+    in_metres = arrivals_spread()
+    assert with_speed < 0.015 and in_metres > 3 * with_speed
     monkeypatch.setattr(_align, "NEAR_SCALE", 0.05)
     stretched = arrivals_spread()
     assert stretched < 0.015 and in_metres > 0.035 and in_metres > 3 * stretched

@@ -9,6 +9,7 @@ from mixture_data import piecewise_demos
 from scipy.stats import multivariate_normal
 
 from pbdkit import GMM, Skill
+from pbdkit.data import _align
 from pbdkit.datasets import lasa, reach_grasp_return
 from pbdkit.prob._em import (
     EM_LOG_FLOOR,
@@ -124,11 +125,16 @@ def test_max_time_spread_caps_each_components_time_spread() -> None:
             GMM(3, max_time_spread=bad).fit(x)
 
 
-def test_the_time_ceiling_keeps_a_hover_out_of_the_grasp() -> None:
+def test_the_time_ceiling_keeps_a_hover_out_of_the_grasp(monkeypatch: pytest.MonkeyPatch) -> None:
     # The SO-100 teacher whose segments vary by +-30 % (seed 3): the hand hovers 10 cm above
     # the box, goes down and holds at it while the gripper closes. Without the ceiling the
     # component of the hover (time SD 1.7 spacings) lends it 4 % of the weight at the grasp:
     # the GMR mean is 3-4 mm above the box where every demonstration is within 0.1 mm of it.
+    # Aligned as when the ceiling was made (without the hand's speed): with the speed (the
+    # default since) the hold comes out 97 steps long, and at this K the mean misses by 0.72
+    # mm without the ceiling and by 1.08 mm with it (the zoo's skill of these
+    # demonstrations, K chosen: benchmarks/README.md).
+    monkeypatch.setattr(_align, "SPEED_WEIGHT", 0.0)
     arm = ARMS["so100"]
     robot = arm.robot()
     data = reach_grasp_return(

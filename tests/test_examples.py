@@ -291,12 +291,16 @@ def test_your_arm(runs: dict[str, tuple[Path, str]]) -> None:
     assert _number(r"hand at grasp (\d+\.\d) mm from the cup", text) < 5.0
     assert _number(r"at release (\d+\.\d) mm", text) < 5.0
     # Online, one command per ctrl.dt (= step_seconds) until the arm is at rest at the end: the
-    # commands take the trajectory's time, to 1 % (the jerk-limited motion through its samples
-    # ends 0.14 s after the last: the default acceleration and jerk limits, issue 35).
+    # commands take the trajectory's time, to 3 %. The jerk-limited motion through its samples
+    # ends 0.14 s after the last (the default acceleration and jerk limits, issue 35), and
+    # falls 0.3 s behind at one kink of the path (its step 188, where the spline through the
+    # samples asks a jerk past the limit: Ruckig's late move takes 0.41 s for 8 samples of
+    # 0.11 s): 15.97 s against 15.53 (15.30 against 15.16 before the hand's speed entered the
+    # alignment).
     commands = _number(r"online: (\d+) commands", text)
-    assert abs(commands * skill.step_seconds - traj.t[-1]) <= 0.01 * traj.t[-1]
+    assert abs(commands * skill.step_seconds - traj.t[-1]) <= 0.03 * traj.t[-1]
     assert (
-        abs(_number(r"commands every .* \((\d+\.\d+) s\)", text) - traj.t[-1]) < 0.01 * traj.t[-1]
+        abs(_number(r"commands every .* \((\d+\.\d+) s\)", text) - traj.t[-1]) < 0.03 * traj.t[-1]
     )
 
 

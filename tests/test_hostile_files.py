@@ -204,6 +204,22 @@ def test_a_complex_array_in_a_skill_file_is_refused(
 
 
 # ----------------------------------------------------------------------------- item 17: K
+@pytest.mark.parametrize("start", ["bogus", "segments" * 40])
+def test_a_skill_file_of_an_unknown_start_of_em_is_refused(
+    stored: dict[str, Any], tmp_path: Path, start: str
+) -> None:
+    assert str(stored["sel_joint_start"]) == "equal counts"
+    path = _tampered(stored, tmp_path, sel_joint_start=np.array(start))
+    _refused(
+        lambda: Skill.load(path),
+        r"bad\.npz is not a valid pbdkit-skill file: the model selection stored for 'joint' "
+        r"is inconsistent$",
+    )
+    # Files written before the start was recorded load, as started from equal counts.
+    older = _tampered({k: v for k, v in stored.items() if k != "sel_joint_start"}, tmp_path)
+    assert Skill.load(older).selection_["joint"].start == "equal counts"
+
+
 def test_a_skill_file_of_too_many_components_is_refused_from_its_headers(
     stored: dict[str, Any], tmp_path: Path
 ) -> None:

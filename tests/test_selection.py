@@ -238,9 +238,14 @@ def test_a_k_at_the_cap_is_said_with_what_to_do() -> None:
     # Five sharp segments need about eight components; capped at 3, every K below the cap
     # scores worse than it by more than the tolerance: K = 3 is chosen and a warning says so.
     x = piecewise_demos(np.random.default_rng(21))
-    with pytest.warns(SelectionWarning, match=r"K is at the cap, max_components=3: .*larger"):
+    with pytest.warns(
+        SelectionWarning,
+        match=r"K is at the cap, max_components=3: .*apart, from both starts of EM\), .*larger",
+    ):
         capped = GMM("auto", max_components=3).fit(x)
     assert capped.selection_.chosen == 3 == max(capped.selection_.candidates)
+    # Equal counts ended at the cap, and so did the segments: the second start is recorded.
+    assert capped.selection_.start == "segments"
     # Without a cap in the way, no warning.
     with warnings.catch_warnings():
         warnings.simplefilter("error", SelectionWarning)

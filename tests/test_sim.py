@@ -882,7 +882,10 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         assert all(set(d.objects) == {"cup", "coaster"} for d in demos)
         objects = constrained_objects(CUP)
         assert objects == ["cup", "coaster"]
-        skill = Skill.learn(demos, katana(), n_steps=200, max_components=5, task_objects=objects)
+        # At most 10 components (5 before the hand's speed entered the alignment). Three fast
+        # demonstrations on a 200-step grid make a skill sensitive to K: the cup stays in the
+        # gripper at 5, is put down 32 mm off at 8, 4 mm at 10, tipped 13 degrees at 12.
+        skill = Skill.learn(demos, katana(), n_steps=200, max_components=10, task_objects=objects)
         ts = TaskSkill(task=CUP, demos=demos, skill=skill, learn_seconds=0.0, teach_seconds=0.0)
         with Simulation.from_task(CUP) as sim:
             assert set(sim.object_positions()) == {"cup", "coaster"}
@@ -892,7 +895,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
         # (a name changes no physics).
         glass = [d.__class__(d.t, d.joints, {"glass": d.objects["cup"],
                  "coaster": d.objects["coaster"]}, d.gripper) for d in demos]  # fmt: skip
-        skill = Skill.learn(glass, katana(), n_steps=200, max_components=5,
+        skill = Skill.learn(glass, katana(), n_steps=200, max_components=10,
                             task_objects=["glass", "coaster"])  # fmt: skip
         ts_glass = TaskSkill(
             task=C.SPEC, demos=glass, skill=skill, learn_seconds=0.0, teach_seconds=0.0
@@ -906,8 +909,7 @@ def test_a_task_whose_grasped_object_is_not_called_glass_runs_a_trial() -> None:
             k: v for k, v in same.trials[0].runs["fused"].items() if k not in checked
         }
         run = cup.trials[0].runs["fused"]
-        # Carried and set down upright on the coaster, released (3 fast demonstrations on a
-        # 200-step grid: placed 23 mm off centre, beyond the task's 15 mm).
+        # Carried and set down upright on the coaster, released (placed 4.4 mm off centre).
         assert run["released"] == 1.0 and abs(run["height_error_mm"]) < 5.0
         assert run["tilt_deg"] < 10.0
         online = evaluate(CUP, 1, 0, task_skill=ts, controllers=["fused"], online=True,

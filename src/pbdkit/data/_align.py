@@ -43,13 +43,13 @@ from ._demonstration import Demonstration, check_demonstrations
 from ._placement import position_of
 
 __all__ = [
-    "HAND_SPEED",
     "MAX_SAMPLES",
     "MEAN_ITERATIONS",
     "MEAN_TOLERANCE",
     "MEDOID_POINTS",
     "NEAR_SCALE",
     "REFERENCES",
+    "SPEED_WEIGHT",
     "SPREAD_FLOOR",
     "align",
     "align_trajectories",
@@ -74,15 +74,13 @@ SPREAD_FLOOR = 0.1
 #: changed which obstacles the avoidance can keep clear of (docs/alignment.md).
 NEAR_SCALE: float | None = None
 #: With a robot, the hand's speed (|d fk / du|, u the normalized time) is one more group of the
-#: features: a pause ends where the speed rises, and an arrival is where it falls, wherever the
-#: hand is. On the xArm7's 40 cm table it keeps the grasp where the features in metres lose it
-#: (teach seeds 0-4, fused hand's median at the box: pauses 0.07-0.19 mm against up to 4.51;
-#: postures and segments +-30 % 0.07-0.62 against up to 3.05). Past the obstacle its coaster
-#: skills are avoided about as often as the default's (plans touching the box, teach seeds
-#: 0 / 1 / 2: 0 / 1 / 0 of 50, against 0 / 0 / 0; 2 / 16 / 0 before the avoidance's flanks were
-#: cut at the tight phases). Not the default yet: it changes every skill learned with a robot,
-#: and the figures measured with them are re-measured when it is switched (docs/alignment.md).
-HAND_SPEED = False
+#: features, weighed by this fraction of the others (0: left out): a pause ends where the speed
+#: rises, and an arrival is where it falls, wherever the hand is. In metres alone, a hand 5 mm
+#: short of a box looks like one on it, and the xArm7's pausing teacher on the 40 cm table lost
+#: its grasp (the fused hand's median at the box up to 4.5 mm over teach seeds 0-4). At a full
+#: weight the speed outvotes the positions where a teacher merely slows down; a quarter keeps
+#: the arrivals and leaves the rest to the positions (docs/alignment.md).
+SPEED_WEIGHT = 0.25
 #: At most this many samples of a series enter the DTW; a longer one is decimated (evenly, its
 #: first and last samples kept) and the warped times of the samples in between are interpolated.
 #: The DTW's cost grows with the square of it: 500 aligns five demonstrations of 1000 samples in
@@ -230,7 +228,7 @@ def _demo_features(demos: list[Demonstration], robot: KinematicModel | None) -> 
     if demos[0].gripper is not None:
         groups.append(1)
     if robot is not None:
-        groups += [3] * len(names) + ([1] if HAND_SPEED else [])
+        groups += [3] * len(names) + ([1] if SPEED_WEIGHT > 0.0 else [])
     for d in demos:
         cols = [d.joints]
         if d.gripper is not None:
@@ -238,11 +236,15 @@ def _demo_features(demos: list[Demonstration], robot: KinematicModel | None) -> 
         if robot is not None:
             hand = np.asarray(robot.fk(d.joints), dtype=np.float64).reshape(d.n_steps, 3)
             cols += [_near(hand - position_of(d.objects[k])) for k in names]
-            if HAND_SPEED:
+            if SPEED_WEIGHT > 0.0:
                 speed = np.gradient(hand, _normalized(d.t), axis=0)
                 cols.append(np.linalg.norm(speed, axis=1)[:, None])
         parts.append(np.hstack(cols))
-    return _normalize(parts, groups)
+    out = _normalize(parts, groups)
+    if robot is not None and SPEED_WEIGHT > 0.0:
+        for p in out:
+            p[:, -1] *= SPEED_WEIGHT
+    return out
 
 
 def _near(p: Float) -> Float:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
@@ -44,6 +45,7 @@ from ._em import (
     scale_aware_floor,
 )
 from ._gmr import CovarianceMode, GMRModel, gmr_batch, gmr_precompute, gmr_step, gmr_step_1d
+from ._segments import TimeSegments
 from ._selection import (
     SWEEP_TOL,
     FitRows,
@@ -134,7 +136,10 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         as the input of the GMR that ``"auto"`` cross-validates. ``None`` falls back to k-means
         initialisation.
     init : {"time", "kmeans"}
-        Initialisation of EM.
+        Initialisation of EM. ``"time"``: K consecutive bins of equal count along time; where
+        ``"auto"``'s score still falls at the cap from there, the sweep runs again from the K
+        consecutive segments the data change least within (:class:`TimeSegments`: a long hold
+        is one segment, not many), and the cap's warning comes only if that too ends there.
     score_dims : sequence of int, optional
         Dimensions whose GMR error ``"auto"`` scores (default: every dimension but time).
     bic_samples_per_sequence : float
@@ -371,9 +376,12 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         # Screening fits of a sweep stop at a looser tolerance; the kept one is refined below.
         sweep_tol = tol if method == "fixed" else max(tol, SWEEP_TOL)
 
+        segments: list[TimeSegments] = []  # the start of a second sweep, if any
+
         def fit_k(k: int) -> _Fit:
             if k not in fits:
-                fits[k] = _em(x, self._initial_resp(x, k, center), floor, max_iter, sweep_tol)
+                resp = segments[0].resp(k) if segments else self._initial_resp(x, k, center)
+                fits[k] = _em(x, resp, floor, max_iter, sweep_tol)
             return fits[k]
 
         n_eff = float("nan")
@@ -391,6 +399,14 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
 
                 self.selection_ = _select_by_cv(candidates, cv, n_seq)
                 message = cap_warning(self.selection_, max(candidates))
+                if message is not None and self.init == "time":
+                    # Still falling at the cap from equal counts: the sweep again from the
+                    # segments the data change least within (a hold is one, not many).
+                    fits.clear()
+                    segments.append(TimeSegments(x, td))
+                    again = _select_by_cv(candidates, cv, n_seq)
+                    self.selection_ = replace(again, start="segments")
+                    message = cap_warning(self.selection_, max(candidates))
                 if message is not None:
                     warnings.warn(message, SelectionWarning, stacklevel=2)
             elif method == "bic":

@@ -85,11 +85,12 @@ def cap_warning(selection: ModelSelection, max_components: int) -> str | None:
         return None
     scores = dict(zip(selection.candidates, selection.scores.tolist(), strict=True))
     below = max((k for k in scores if k < top), default=top)
+    both = ", from both starts of EM" if selection.start == "segments" else ""
     return (
         f"K is at the cap, max_components={top}: the cross-validated error is still falling "
         f"there (K={below}: {scores[below]:.3g}, K={top}: {scores[top]:.3g}, more than "
-        f"{CV_TOLERANCE:.0%} apart), so a larger K may model the demonstrations better: pass a "
-        "larger max_components, or, if the demonstrations differ in timing, align them "
+        f"{CV_TOLERANCE:.0%} apart{both}), so a larger K may model the demonstrations better: "
+        "pass a larger max_components, or, if the demonstrations differ in timing, align them "
         "(pbdkit.align)"
     )
 
@@ -214,6 +215,10 @@ class ModelSelection:
         the best's; otherwise the best.
     n_folds : int
         Sequences left out one at a time (``"cv"``), else 0.
+    start : {"equal counts", "segments"}
+        Where EM started each K's fit: K bins of equal count along time, or (``"cv"`` only,
+        after a sweep from equal counts ended at the cap with the score still falling) the K
+        segments the data change least within (:class:`pbdkit.prob._segments.TimeSegments`).
     """
 
     method: str
@@ -223,6 +228,7 @@ class ModelSelection:
     best: int
     chosen: int
     n_folds: int
+    start: str = "equal counts"
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready copy."""
@@ -234,6 +240,7 @@ class ModelSelection:
             "best": self.best,
             "chosen": self.chosen,
             "n_folds": self.n_folds,
+            "start": self.start,
         }
 
 

@@ -63,7 +63,7 @@ TIGHT = 0.005
 #: ... by more than this (m) further from it than the plain run, nor by more than LEFT_SIGMAS
 #: of that deviation (a constraint 4.7 mm wide just after the grasp is not left by 5.8 mm: a
 #: plan lifted over the box was refused so, on 3 of 50 coaster placements of one skill:
-#: HAND_SPEED's, docs/alignment.md).
+#: the hand's speed at a full weight, docs/alignment.md).
 CONFLICT = 0.005
 #: In a constraint's tightest phase (its loosest direction's standard deviation within
 #: TIGHTEST times its smallest along the path), a hand moved further than LEFT_SIGMAS of those

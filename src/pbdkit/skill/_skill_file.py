@@ -168,6 +168,7 @@ def skill_arrays(skill: SkillState) -> dict[str, Any]:
         arrays[f"sel_{key}_scores"] = np.asarray(sel.scores, dtype=np.float64)
         arrays[f"sel_{key}_fold_scores"] = np.asarray(sel.fold_scores, dtype=np.float64)
         arrays[f"sel_{key}_best_chosen"] = np.array([sel.best, sel.chosen], dtype=np.int64)
+        arrays[f"sel_{key}_start"] = np.array(sel.start)
         if k in rotation_base:
             arrays[f"rot_base_{key}"] = rotation_base[k]
         if k in calibration and np.any(calibration[k] != 1.0):  # optional: ones without it
@@ -538,7 +539,7 @@ _DEMOS_KEY = re.compile(
 # gmm_{space}_{array} and sel_{space}_{array}: space "joint", or an object's index.
 _SPACE_KEY = re.compile(
     r"(?:gmm_(?:joint|(0|[1-9][0-9]{0,8}))_(?:weights|means|covariances)"
-    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen)"
+    r"|sel_(?:joint|(0|[1-9][0-9]{0,8}))_(?:method|candidates|scores|fold_scores|best_chosen|start)"
     r"|rot_base_(0|[1-9][0-9]{0,8})"
     r"|calib_(?:joint|(0|[1-9][0-9]{0,8})))"
 )
@@ -576,6 +577,8 @@ def _selection_from_arrays(data: Mapping[str, Any], key: str, name: str) -> Mode
     scores = np.asarray(data[f"sel_{key}_scores"], dtype=np.float64).reshape(-1)
     folds = np.asarray(data[f"sel_{key}_fold_scores"], dtype=np.float64)
     best, chosen = (int(v) for v in np.asarray(data[f"sel_{key}_best_chosen"]).reshape(-1)[:2])
+    # Files before the second start was recorded lack it: their sweeps all began at equal counts.
+    start = str(data[f"sel_{key}_start"]) if f"sel_{key}_start" in data else "equal counts"
     if (
         method not in ("cv", "bic", "fixed")
         or cand.dtype.kind not in "iu"
@@ -584,7 +587,9 @@ def _selection_from_arrays(data: Mapping[str, Any], key: str, name: str) -> Mode
         or (folds.size and folds.shape[0] != cand.shape[0])
         or best not in cand
         or chosen not in cand
+        or start not in ("equal counts", "segments")
     ):
         raise ValueError(f"the model selection stored for {short(name)} is inconsistent")
     n_folds = folds.shape[1] if method == "cv" else 0
-    return ModelSelection(method, tuple(int(k) for k in cand), scores, folds, best, chosen, n_folds)
+    cands = tuple(int(k) for k in cand)
+    return ModelSelection(method, cands, scores, folds, best, chosen, n_folds, start)
