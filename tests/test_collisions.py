@@ -24,6 +24,7 @@ from pbdkit.reproduction._avoid import (
     ACROSS_SIGMA,
     ALONG_MIN,
     SIGMA,
+    STEEP,
     TAPER,
     TAPER_DECADES,
     TAPER_MIN,
@@ -372,6 +373,31 @@ def test_a_path_that_dwells_by_the_box_is_passed_over_along_its_way(
     (enc,) = alone.encounters
     assert escapes[ALONG_MIN].dot(enc.escape) > 0.99  # measured: 0.9997
     assert escapes[0.0].dot(enc.escape) < 0.7  # one step either side: 0.55
+
+
+@pytest.mark.parametrize("slope_deg", [10.0, 25.0, 40.0, 70.0])
+def test_a_path_less_steep_than_steep_is_passed_straight_up(
+    skill: Skill, plain: tuple, slope_deg: float
+) -> None:
+    # A point going down at slope_deg onto a box below it (the normal pointing up and back):
+    # less steep than STEEP (30 degrees), the bump goes straight up; steeper, up without the
+    # path's component, which tilts forward, into the direction of the motion, by the slope.
+    checker, _, _ = _through_the_box(skill, plain)
+    avoidance = Avoidance(checker, margin=0.02)
+    slope = np.radians(slope_deg)
+    along = np.array([np.cos(slope), 0.0, -np.sin(slope)])
+    points = np.outer(np.linspace(-0.1, 0.1, 41), along)
+    away = np.array([-0.3, 0.0, 0.95]) / np.linalg.norm([-0.3, 0.0, 0.95])
+    # The moving body first (its joint > 0); the pair's normal points from it to the box.
+    prox = type("Prox", (), {"joints": (3, 0), "normal": -away})()
+    e = avoidance._escape(points, 20, prox)
+    up = np.array([0.0, 0.0, 1.0])
+    if np.sin(slope) < STEEP:
+        np.testing.assert_allclose(e, up, atol=1e-12)
+    else:
+        tilted = up - up.dot(along) * along
+        np.testing.assert_allclose(e, tilted / np.linalg.norm(tilted), atol=1e-12)
+        assert e.dot(along) == pytest.approx(0.0, abs=1e-12) and e[0] > 0.3  # forward
 
 
 def test_the_hold_keeps_the_point_where_it_was_across_the_bump(skill: Skill, plain: tuple) -> None:

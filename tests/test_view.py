@@ -494,6 +494,9 @@ def test_the_view_draws_a_scene_avoids_it_and_marks_where_the_arm_comes_near(
         expected = skill.reproduce(objects, scene=box)
         np.testing.assert_allclose(plan.result.joints, expected.joints, atol=1e-12)
         assert plan.result.collisions == [] and "Clearance at least" in view.ui_status.content
+        # The clearance drives some steps of the path: drawn in its own colour (it had none,
+        # and the plan was not drawn: KeyError 'clearance').
+        assert "clearance" in plan.driving and view.colors["clearance"] == (127, 127, 127)
         assert view.scene.avoids and "/scene/box" in view.server.scene._handle_from_node_name
         # Kept clear of it: the margin within the passes' tolerance, so at the nearest step the
         # mark is orange (within the margin) or hidden, never red.

@@ -49,10 +49,12 @@ from .._rotations import exp_map, matrix_from_quaternion, pose_matrix
 from .._validation import short
 from ..data._placement import check_placements, position_of
 from ..reproduction._constraints import JOINT
+from ..reproduction._steps import CLEARANCE
 from ..robots._protocols import PoseKinematicModel
 from ..skill._naming import controller_names, controller_use
 from ._cli_output import metrics_text
 from ._view_plan import (
+    CLEARANCE_RGB,
     COLOR_NAMES,
     JOINT_RGB,
     N_SD,
@@ -178,6 +180,8 @@ class ViewApp:
         self.controllers = controller_names(skill.object_names, has_oriented=oriented)
         self.controller = "fused"
         self.colors = constraint_colors([JOINT, *skill.object_names])
+        if scene is not None:  # kept clear of (the fused controller): the clearance may drive
+            self.colors[CLEARANCE] = CLEARANCE_RGB
         self.plan: Plan | None = None
         self.suggestions: ViewSuggestions | None = None  # set last: moves may come before
         self.step = 0
@@ -276,7 +280,11 @@ class ViewApp:
     def _build_panel(self, title: str) -> None:
         gui = self.server.gui
         gui.add_markdown(f"**{title}**: drag an object; the plan follows.")
-        names = {JOINT_RGB: "green", **dict(zip(OBJECT_RGBS, COLOR_NAMES, strict=True))}
+        names = {
+            JOINT_RGB: "green",
+            CLEARANCE_RGB: "grey",
+            **dict(zip(OBJECT_RGBS, COLOR_NAMES, strict=True)),
+        }
         legend = ", ".join(f"{k} {names[c]}" for k, c in self.colors.items())
         gui.add_markdown(
             f"Path and dot at the hand: the constraint that drives ({legend}); ellipsoids: "

@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from ..skill._skill import Skill
 
 __all__ = [
+    "CLEARANCE_RGB",
     "COLOR_NAMES",
     "JOINT_RGB",
     "N_SD",
@@ -71,6 +72,8 @@ N_SD = 2.0
 HISTORY = 100_000
 #: Fig. 6's colors (:mod:`pbdkit.apps._plots`), as RGB 0-255: the joint space, then the objects.
 JOINT_RGB = (44, 160, 44)
+#: The clearance constraint (a scene kept clear of) where it drives the step.
+CLEARANCE_RGB = (127, 127, 127)
 OBJECT_RGBS = ((214, 39, 40), (31, 119, 180), (148, 103, 189), (140, 86, 75))
 COLOR_NAMES = ("red", "blue", "purple", "brown")
 
