@@ -108,7 +108,8 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
     Parameters
     ----------
     n_components : int, "auto" or "bic"
-        Number of components K; ``"auto"`` chooses K in 1..``max_components`` by
+        Number of components K; ``"auto"`` chooses K in 12..``max_components`` (from 1 for
+        a cap of 12 or less; :data:`~pbdkit.prob._selection.MIN_COMPONENTS`) by
         cross-validation over the sequences (``docs/math.md``, "Choosing K"; needs a time
         column and at least 2 sequences); ``"bic"`` by the effective-sample-size BIC.
     max_components : int or None

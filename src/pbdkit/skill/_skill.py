@@ -287,7 +287,8 @@ class Skill(ActiveMixin):
         n_steps : int
             Steps of the time grid (the paper: 1000), 2 .. :data:`~pbdkit.skill._spaces.MAX_STEPS`.
         n_components : int, "auto" or "bic"
-            K of every GMM; ``"auto"`` (default) chooses it per space in 1..``max_components``
+            K of every GMM; ``"auto"`` (default) chooses it per space in 12..``max_components``
+            (1.. for a cap of 12 or less; :data:`pbdkit.prob._selection.MIN_COMPONENTS`)
             by leaving one demonstration out at a time (``docs/math.md``, "Choosing K"): the
             smallest K whose generalized trajectory predicts a left-out demonstration as well
             as the K tried do (within :data:`pbdkit.prob._selection.CV_TOLERANCE` of the level
