@@ -227,8 +227,10 @@ def _demo_features(demos: list[Demonstration], robot: KinematicModel | None) -> 
     groups = [n]
     if demos[0].gripper is not None:
         groups.append(1)
+    speed_group = robot is not None and SPEED_WEIGHT > 0.0
     if robot is not None:
-        groups += [3] * len(names) + ([1] if SPEED_WEIGHT > 0.0 else [])
+        groups += [3] * len(names) + ([1] if speed_group else [])
+    weights = [1.0] * (len(groups) - 1) + [SPEED_WEIGHT if speed_group else 1.0]
     for d in demos:
         cols = [d.joints]
         if d.gripper is not None:
@@ -236,15 +238,11 @@ def _demo_features(demos: list[Demonstration], robot: KinematicModel | None) -> 
         if robot is not None:
             hand = np.asarray(robot.fk(d.joints), dtype=np.float64).reshape(d.n_steps, 3)
             cols += [_near(hand - position_of(d.objects[k])) for k in names]
-            if SPEED_WEIGHT > 0.0:
+            if speed_group:
                 speed = np.gradient(hand, _normalized(d.t), axis=0)
                 cols.append(np.linalg.norm(speed, axis=1)[:, None])
         parts.append(np.hstack(cols))
-    out = _normalize(parts, groups)
-    if robot is not None and SPEED_WEIGHT > 0.0:
-        for p in out:
-            p[:, -1] *= SPEED_WEIGHT
-    return out
+    return _normalize(parts, groups, weights)
 
 
 def _near(p: Float) -> Float:
@@ -256,11 +254,14 @@ def _near(p: Float) -> Float:
     return out
 
 
-def _normalize(parts: list[Float], groups: list[int]) -> list[Float]:
+def _normalize(
+    parts: list[Float], groups: list[int], weights: list[float] | None = None
+) -> list[Float]:
     """Each feature centred and divided by its spread over all samples of all series, floored
     at SPREAD_FLOOR times the largest spread of its group (and at a tiny absolute value), and
     by the square root of its group's size: each group (the joints, the gripper, the hand
-    relative to one object) weighs in the distance as much as one feature."""
+    relative to one object) weighs in the distance as much as one feature, times its weight in
+    ``weights`` (one per group; default 1: the hand's speed weighs :data:`SPEED_WEIGHT`)."""
     stacked = np.concatenate(parts)
     mean = stacked.mean(axis=0)
     spread = stacked.std(axis=0)
@@ -277,7 +278,12 @@ def _normalize(parts: list[Float], groups: list[int]) -> list[Float]:
     for size in groups:
         scale[start : start + size] *= np.sqrt(size)
         start += size
-    return [np.ascontiguousarray((p - mean) / scale) for p in parts]
+    out = [np.ascontiguousarray((p - mean) / scale) for p in parts]
+    if weights is not None and any(w != 1.0 for w in weights):
+        column = np.repeat(np.asarray(weights, dtype=np.float64), groups)
+        for p in out:
+            p *= column
+    return out
 
 
 def _normalized(t: Float) -> Float:

@@ -377,12 +377,12 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
         # Screening fits of a sweep stop at a looser tolerance; the kept one is refined below.
         sweep_tol = tol if method == "fixed" else max(tol, SWEEP_TOL)
 
-        segments: list[TimeSegments] = []  # the start of a second sweep, if any
+        segments: TimeSegments | None = None  # the start of a second sweep, if any
 
         def fit_k(k: int) -> _Fit:
             if k not in fits:
-                resp = segments[0].resp(k) if segments else self._initial_resp(x, k, center)
-                fits[k] = _em(x, resp, floor, max_iter, sweep_tol)
+                start = segments.resp(k) if segments else self._initial_resp(x, k, center)
+                fits[k] = _em(x, start, floor, max_iter, sweep_tol)
             return fits[k]
 
         n_eff = float("nan")
@@ -404,7 +404,7 @@ class GMM(DensityMixin, BaseEstimator):  # type: ignore[misc]  # scikit-learn is
                     # Still falling at the cap from equal counts: the sweep again from the
                     # segments the data change least within (a hold is one, not many).
                     fits.clear()
-                    segments.append(TimeSegments(x, td))
+                    segments = TimeSegments(x, td)
                     again = _select_by_cv(candidates, cv, n_seq)
                     self.selection_ = replace(again, start="segments")
                     message = cap_warning(self.selection_, max(candidates))
