@@ -3,13 +3,19 @@ skill's covariances widened by them, step by step (pbdkit.skill._calibration).""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from pbdkit import GMM, Demonstration, Robot, Skill
-from pbdkit.skill._calibration import CALIBRATION_MAX, CALIBRATION_WINDOW, step_factors
+from pbdkit.skill._calibration import (
+    CALIBRATION_MAX,
+    CALIBRATION_WINDOW,
+    space_factors,
+    step_factors,
+)
 
 
 def offset_sequences(seed: int, n_seq: int, n_dims: int, offset: float, noise: float) -> np.ndarray:
@@ -112,7 +118,8 @@ def test_a_calibrated_skill_widens_its_covariances_by_its_factors_and_keeps_its_
         rtol=1e-12,
     )  # fmt: skip
     assert float(cal.calibration_["joint"].max()) > 2.0
-    assert np.all(cal.calibration_["glass"] == 1.0)  # the objects' spaces are kept as fitted
+    # The glass's space widened only where it is further off than the joints, never both.
+    assert np.all(np.minimum(cal.calibration_["joint"], cal.calibration_["glass"]) == 1.0)
     path = tmp_path / "cal.npz"
     cal.save(path)
     back = Skill.load(path)
@@ -158,3 +165,63 @@ def test_a_skill_refuses_factors_for_a_space_it_does_not_have(
         Skill(robot, skill.gmms, calibration={"cup": np.ones(200)}, **kwargs)
     with pytest.raises(ValueError, match=r"calibration\['joint'\] must be in \[1, 10000\]"):
         Skill(robot, skill.gmms, calibration={"joint": np.zeros(200)}, **kwargs)
+
+
+def test_space_factors_weigh_the_joints_against_the_best_described_object() -> None:
+    rng = np.random.default_rng(7)
+    joint = 1.0 + rng.gamma(1.0, 5.0, size=300)
+    objects = {k: 1.0 + rng.gamma(1.0, 5.0, size=300) for k in ("glass", "coaster", "tray")}
+    objects["coaster"][:10] = 1.0  # a tight phase of one object: the joints as if alone there
+    got = space_factors(joint, objects)
+    assert sorted(got) == ["coaster", "glass", "joint", "tray"]
+    # Brute force, step by step: the ratio to the best object goes to the joints where it is
+    # above 1, its inverse to every object where it is below.
+    for t in range(300):
+        ratio = joint[t] / min(o[t] for o in objects.values())
+        assert got["joint"][t] == pytest.approx(max(ratio, 1.0), rel=1e-12)
+        for k in objects:
+            assert got[k][t] == pytest.approx(max(1.0 / ratio, 1.0), rel=1e-12)
+    np.testing.assert_array_equal(got["joint"][:10], joint[:10])
+    assert np.any(got["joint"] > 1.0) and np.any(got["glass"] > 1.0)
+    # Never narrowed; one of the two is 1 at every step: the product of Gaussians' mean sees
+    # their ratio only.
+    assert all(np.all(c >= 1.0) for c in got.values())
+    assert np.all(np.minimum(got["joint"], got["glass"]) == 1.0)
+    assert space_factors(joint, {}) == {"joint": joint}  # no object: the joints' own
+    big = np.full(300, CALIBRATION_MAX)
+    np.testing.assert_array_equal(space_factors(big, {"box": np.ones(300)})["joint"], big)
+    np.testing.assert_array_equal(space_factors(np.ones(300), {"box": big})["box"], big)
+
+
+def test_the_basin_pour_stays_the_demonstrated_posture(
+    fast_demos: Callable[..., list[Demonstration]],
+) -> None:
+    # At the pour the hand relative to where the glass stood differs with the glass's
+    # placement, the posture only with the teacher: the glass's constraint is further off for
+    # a left-out demonstration than the joints' (z about 14 and 8 on this seed at 1000 steps),
+    # so the joints lead there and the pour stays the posture demonstrated, wherever the glass
+    # stood. Measured here: the hand 6.5 mm from the demonstrated pour (median; the teacher's
+    # own pours 14.4 mm from their mean), 9.0 mm with the covariances EM fitted; the joints'
+    # share of the fused precision at the end 0.70 (0.62). Widened by their own z (pbdkit
+    # until 2026-12-07) the joints gave the pour to the glass: 19.6 mm, following the glass.
+    from pbdkit.robots import katana
+    from pbdkit.sim import get_task
+
+    demos = fast_demos("basin", 5, seed=0)
+    robot = katana()
+    skill = Skill.learn(demos, robot, n_steps=300, task_objects=["glass"])
+    plain = Skill.learn(demos, robot, n_steps=300, task_objects=["glass"], calibrate=False)
+    pour = np.mean([robot.fk(d.joints[-1]) for d in demos], axis=0)
+    spread = np.median([np.linalg.norm(robot.fk(d.joints[-1]) - pour) for d in demos])
+    rng = np.random.default_rng([0, 1])
+    spec = get_task("basin")
+    miss, miss_plain, share = [], [], []
+    for _ in range(8):
+        glass = {"glass": spec.sample_objects(rng)["glass"]}
+        res = skill.reproduce(glass)
+        miss.append(np.linalg.norm(robot.fk(res.joints[-1]) - pour))
+        miss_plain.append(np.linalg.norm(robot.fk(plain.reproduce(glass).joints[-1]) - pour))
+        share.append(res.influence["joint"][-1])
+    assert np.median(miss) < 0.75 * spread
+    assert np.median(miss) <= np.median(miss_plain)
+    assert np.median(share) > 0.65

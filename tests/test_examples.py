@@ -292,11 +292,11 @@ def test_your_arm(runs: dict[str, tuple[Path, str]]) -> None:
     assert _number(r"at release (\d+\.\d) mm", text) < 5.0
     # Online, one command per ctrl.dt (= step_seconds) until the arm is at rest at the end: the
     # commands take the trajectory's time, to 3 %. The jerk-limited motion through its samples
-    # ends 0.14 s after the last (the default acceleration and jerk limits, issue 35), and
-    # falls 0.3 s behind at one kink of the path (its step 188, where the spline through the
-    # samples asks a jerk past the limit: Ruckig's late move takes 0.41 s for 8 samples of
-    # 0.11 s): 15.97 s against 15.53 (15.30 against 15.16 before the hand's speed entered the
-    # alignment).
+    # ends 0.14 s after the last (the default acceleration and jerk limits, issue 35): 15.80 s
+    # against 15.66. Before the joints were calibrated against the objects, 15.97 against
+    # 15.53: it fell 0.3 s behind at one kink of that skill's path (where the spline through
+    # the samples asked a jerk past the limit, Ruckig's late move took 0.41 s for 8 samples of
+    # 0.11 s).
     commands = _number(r"online: (\d+) commands", text)
     assert abs(commands * skill.step_seconds - traj.t[-1]) <= 0.03 * traj.t[-1]
     assert (

@@ -149,9 +149,9 @@ def test_the_newton_term_removes_the_limit_cycle_of_gauss_newton(
             reach=skill.reach,
         )
     flips = {k: count_reversals(r.joints, skill.step_seconds, vmax) for k, r in runs.items()}
-    # Measured: 363 (Gauss-Newton), 78 (Newton), 7 (Newton and the damping: single reversals
-    # of joint 4, and one of joint 2, at steps 886-919, 4-11 steps apart: no cycle). Before
-    # the hand's speed entered the alignment: 335, 36, 2.
+    # Measured: 230 (Gauss-Newton), 0 (Newton), 0 (Newton and the damping). With the joints
+    # widened by their own z, before they were calibrated against the objects: 363, 78, 7
+    # (single reversals of joint 4, and one of joint 2, 4-11 steps apart: no cycle).
     assert flips[False, False] > 50 and flips[True, False] < 0.25 * flips[False, False]
     assert flips[True, True] <= 10
     q = runs[True, True].joints
@@ -170,18 +170,21 @@ def test_the_newton_term_removes_the_limit_cycle_of_gauss_newton(
 def test_the_reversal_damping_breaks_the_cycle_of_conflicting_constraints(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # Issue 34: teach seed 7, the placement 4 cm off at 0.3 rad, the skill aligned with the
-    # hand's offset stretched near the objects (NEAR_SCALE 5 cm). There the glass's constraint
-    # (2-3.5 mm off) and the coaster's pull apart on bounded steps, and the fused loop (with
-    # the Newton term) fell into a period-2 cycle of joints 2 and 4 (+-55-62 mrad a step, 16
-    # reversals). A fast step in which a joint reverses now lands between the two postures.
-    # (With the default alignment none of the 80 reproductions above cycles, damped or not.)
+    # Issue 34: the placement 4 cm off at 0.3 rad, the skill aligned with the hand's offset
+    # stretched near the objects (NEAR_SCALE 5 cm). There the glass's constraint (2-3.5 mm
+    # off) and the coaster's pull apart on bounded steps, and the fused loop (with the Newton
+    # term) fell into a period-2 cycle of joints 2 and 4 (+-55-62 mrad a step, 16 reversals,
+    # on teach seed 7). A fast step in which a joint reverses now lands between the two
+    # postures. With the joints calibrated against the objects, teach seed 7 no longer cycles
+    # (2 reversals); of teach seeds 0-9 at four such placements, 3 cycle undamped (20-42
+    # reversals), none damped: seed 2 here. (With the default alignment none of the 80
+    # reproductions above cycles, damped or not.)
     from pbdkit.data import _align
 
     monkeypatch.setattr(_align, "NEAR_SCALE", 0.05)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        demos = teach("coaster", 5, seed=7)
+        demos = teach("coaster", 5, seed=2)
         skill = Skill.learn(demos, katana(), task_objects=constrained_objects(get_task("coaster")))
     mean = {k: np.mean([d.objects[k] for d in demos], axis=0) for k in skill.object_names}
     objects = {k: v + 0.04 * np.array([np.cos(0.3), np.sin(0.3), 0.0]) for k, v in mean.items()}
@@ -197,5 +200,5 @@ def test_the_reversal_damping_breaks_the_cycle_of_conflicting_constraints(
     damped, damped_error = reproduce()
     monkeypatch.setattr(_steps, "REVERSAL_FRACTION", math.inf)
     cycling, cycling_error = reproduce()
-    assert cycling > 10 and damped == 0  # measured: 16 and 0
+    assert cycling > 10 and damped == 0  # measured: 42 and 0
     assert damped_error <= cycling_error + 1e-4

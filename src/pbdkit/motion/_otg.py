@@ -406,6 +406,7 @@ def join(
             continue
         if abs(float(traj.duration) - d) > 1e-9 * max(1.0, d):
             continue  # it cannot arrive then (too soon, or a blocked duration)
+        rows, traj = _onto_target(rows, traj, d, limits)
         if bounds is not None and any(
             e.min < bounds[0][k] - BOUNDS_TOL or e.max > bounds[1][k] + BOUNDS_TOL
             for k, e in enumerate(traj.position_extrema)
@@ -415,6 +416,31 @@ def join(
         motion.append(traj, (rows, d, 0))
         return motion
     return None
+
+
+def _onto_target(rows: Float, traj: Any, d: float, limits: MotionLimits) -> tuple[Float, Any]:
+    """A Ruckig segment of duration ``d`` planned from ``rows`` again, its target position
+    moved by the error it ended with, where that one ends nearer: (its rows, it).
+
+    Ruckig reaches a target position within about 1e-8 rad. Where a segment hands over to
+    another motion (:func:`join`), that error is a step: 5.5e-9 rad is 5.5 rad/s^3 of jerk in
+    1 kHz commands, 9 % of the Katana's limit. One step against it ends within 1e-11.
+    """
+    err = rows[3] - np.asarray(traj.at_time(d)[0], dtype=np.float64)
+    if not np.any(err):
+        return rows, traj
+    again = rows.copy()
+    again[3] = rows[3] + err
+    try:
+        better = _ruckig_plan(again, d, 0, limits.velocity, limits.acceleration, limits.jerk)
+    except RuntimeError:
+        return rows, traj
+    if abs(float(better.duration) - d) > 1e-9 * max(1.0, d):
+        return rows, traj
+    left = rows[3] - np.asarray(better.at_time(d)[0], dtype=np.float64)
+    if float(np.abs(left).max()) >= float(np.abs(err).max()):
+        return rows, traj
+    return again, better
 
 
 def _quintics_within(

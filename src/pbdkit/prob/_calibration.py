@@ -10,7 +10,8 @@ the mean mu(t) and covariance S(t) of the scored dimensions; each row of m gets
 
 whose expectation is 1 where the model's covariance describes demonstrations it has not seen.
 ``GMM(loo_residuals=True)`` keeps them (``loo_residuals_``); :meth:`pbdkit.Skill.learn` widens
-the joint space's covariance by them, moment by moment (``docs/math.md``, "Calibration").
+the spaces' covariances, moment by moment, by the joints' z against the best object's
+(``docs/math.md``, "Calibration").
 """
 
 from __future__ import annotations

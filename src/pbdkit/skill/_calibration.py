@@ -1,17 +1,26 @@
-"""The joint space's covariance widened where left-out demonstrations fall outside it, per moment.
+"""The covariances widened where left-out demonstrations fall further outside one than another.
 
 The product of Gaussians weighs every space by its precision, so a joint model confident where
-the demonstrated postures were not wins where it should yield to the objects' constraints
-(``docs/math.md``, "Calibration"). Learning measures it: the joint space's GMM keeps, for every
-fitted row, the normalized residual z of its demonstration against the model fitted without it
-(:mod:`pbdkit.prob._calibration`). Per step of the skill's grid,
+the demonstrated postures were not wins where it should yield to the objects' constraints, and
+an object's model confident where the placements made the demonstrations disagree wins where
+the posture should (``docs/math.md``, "Calibration"). Learning measures it: every space's GMM
+keeps, for every fitted row, the normalized residual z of its demonstration against the model
+fitted without it (:mod:`pbdkit.prob._calibration`). Per space and step of the skill's grid,
 
-    c(t) = clip(smooth(mean over demonstrations of z(t)), 1, CALIBRATION_MAX)
+    z_s(t) = clip(smooth(mean over demonstrations of z(t)), 1, CALIBRATION_MAX)
 
 (a moving average over :data:`CALIBRATION_WINDOW` of the duration, linear in between the fitted
-steps) and the GMR covariance of the joints at step t is c(t) times the fitted one: its mean is
-unchanged. A model is widened, never narrowed. A skill file may hold factors for any space
-(:func:`check_calibration`); learning writes the joints' only.
+steps). The fused mean depends on the spaces' precisions relative to each other only. With
+r(t) = z_joint(t) / min over objects of z_o(t) (the joints against the best-described object),
+
+    c_joint(t) = clip(r(t), 1, CALIBRATION_MAX)          c_o(t) = clip(1 / r(t), 1, CALIBRATION_MAX)
+
+the same c_o for every object, and the GMR covariance of each space at step t is c(t) times the
+fitted one: its mean is unchanged. Where an object describes its left-out demonstrations
+(z_o = 1) the joints are widened by their own z, as if alone; where every object is further off
+than the joints, the objects are widened together, their balance among themselves kept. Nothing
+is narrowed. A skill without objects: c_joint = z_joint. A skill file may hold factors for any
+space (:func:`check_calibration`).
 """
 
 from __future__ import annotations
@@ -24,11 +33,13 @@ from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
 from .._validation import check_array, short
+from ..reproduction._constraints import JOINT
 
 __all__ = [
     "CALIBRATION_MAX",
     "CALIBRATION_WINDOW",
     "check_calibration",
+    "space_factors",
     "step_factors",
 ]
 
@@ -44,7 +55,7 @@ CALIBRATION_WINDOW = 0.05
 
 
 def step_factors(z: Float, steps: NDArray[np.intp], n_demos: int, n_steps: int) -> Float:
-    """c(t) on the whole grid (module docstring): (n_steps,).
+    """One space's z_s(t) on the whole grid (module docstring): (n_steps,).
 
     Parameters
     ----------
@@ -59,6 +70,27 @@ def step_factors(z: Float, steps: NDArray[np.intp], n_demos: int, n_steps: int) 
     smooth = uniform_filter1d(per_step, width, mode="nearest")
     grid = np.interp(np.arange(n_steps, dtype=np.float64), steps.astype(np.float64), smooth)
     return np.asarray(np.clip(grid, 1.0, CALIBRATION_MAX), dtype=np.float64)
+
+
+def space_factors(joint: Float, objects: Mapping[str, Float]) -> dict[str, Float]:
+    """c(t) of every space (module docstring): (n_steps,) each, by name (``"joint"`` and the
+    objects').
+
+    Parameters
+    ----------
+    joint : ndarray, shape (n_steps,)
+        The joints' :func:`step_factors`.
+    objects : mapping str -> ndarray, shape (n_steps,)
+        The objects' :func:`step_factors`; none: the joints' own factors alone.
+    """
+    if not objects:
+        return {JOINT: joint}
+    ratio = joint / np.min(np.stack(list(objects.values())), axis=0)
+    widen = np.clip(1.0 / ratio, 1.0, CALIBRATION_MAX)
+    return {
+        JOINT: np.clip(ratio, 1.0, CALIBRATION_MAX),
+        **{k: widen.copy() for k in objects},
+    }
 
 
 def check_calibration(

@@ -4,7 +4,7 @@
 The demonstrations are aligned in time (or not), every one rescaled to ``n_steps`` steps of
 which ``fit_samples`` evenly spaced ones are kept, the data of every space computed
 (:func:`~pbdkit.skill._spaces.space_data`), and one GMM fitted per space, K chosen per space;
-the joint space's GMR covariance is calibrated from its left-out demonstrations.
+the spaces' GMR covariances are calibrated from the left-out demonstrations of every space.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..prob import GMM, SelectionWarning
 from ..reproduction._constraints import JOINT
 from ..reproduction._setup import reach_from_samples
 from ..robots._protocols import KinematicModel, PoseKinematicModel, check_robot
-from ._calibration import step_factors
+from ._calibration import space_factors, step_factors
 from ._provenance import LearnOptions, resolve_task_objects
 from ._spaces import (
     Alignment,
@@ -116,7 +116,7 @@ def encode(
     for k, X in data.items():
         old = None if warm is None else warm.get(k)
         if old is not None:
-            kept = _warm_fit(old, X, groups, n_old, options, space_floor[k], k == JOINT)
+            kept = _warm_fit(old, X, groups, n_old, options, space_floor[k])
             if kept is not None:
                 gmms[k] = kept
                 continue
@@ -131,8 +131,9 @@ def encode(
             # "Choosing K").
             score_dims=None,
             bic_samples_per_sequence=options["bic_samples_per_sequence"],
-            # Calibration widens the joint space only (docs/math.md, "Calibration").
-            loo_residuals=options["calibrate"] and k == JOINT,
+            # Every space's left-out residuals: the joints are calibrated against the objects'
+            # (docs/math.md, "Calibration").
+            loo_residuals=options["calibrate"],
         )
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", SelectionWarning)
@@ -140,11 +141,18 @@ def encode(
         for w in caught:  # said again with the space it is about, at learn's caller
             text = f"space {short(k)}: {w.message}" if w.category is SelectionWarning else w.message
             warnings.warn(text, w.category, stacklevel=3)
-    calibration = {
+    factors = {
         k: step_factors(g.loo_residuals_, steps, len(items), n_steps)
         for k, g in gmms.items()
         if g.loo_residuals_.size
     }
+    # The joints against the best-described object; the objects widened together, never one
+    # on its own (docs/math.md, "Calibration"): that moves the balance between the objects.
+    calibration = (
+        space_factors(factors[JOINT], {k: c for k, c in factors.items() if k != JOINT})
+        if JOINT in factors
+        else {}
+    )
     return Encoding(
         gmms=gmms,
         aligned=alignment,
@@ -163,7 +171,6 @@ def _warm_fit(
     n_old: int,
     options: LearnOptions,
     floor: Float,
-    joint: bool,
 ) -> GMM | None:
     """One space's GMM refitted from ``old``'s responsibilities, its K kept; None where K is
     chosen (``"auto"``) and the data warrant choosing it again."""
@@ -179,7 +186,7 @@ def _warm_fit(
         reg_covar=floor,
         random_state=options["random_state"],
         score_dims=None,
-        loo_residuals=options["calibrate"] and joint,
+        loo_residuals=options["calibrate"],
     )
     gmm._warm = old  # EM starts where the old fit ended (GMM._initial_resp)
     with warnings.catch_warnings():

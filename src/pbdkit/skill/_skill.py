@@ -166,8 +166,7 @@ class Skill(ActiveMixin):
         #: they were aligned in time).
         self.aligned_ = Alignment("no", False) if aligned is None else aligned
         #: The factor each space's GMR covariance is widened by at every step, (n_steps,) per
-        #: space (all ones: as fitted; learning widens the joint space only; ``docs/math.md``,
-        #: "Calibration").
+        #: space (all ones: as fitted; ``docs/math.md``, "Calibration").
         self.calibration_ = check_calibration(
             calibration, [JOINT, *self.object_names], self.n_steps
         )
@@ -342,10 +341,13 @@ class Skill(ActiveMixin):
             :doc:`/alignment`, "In Skill.learn".
         calibrate : bool
             Widen the joint space's GMR covariance where the demonstrations left out one at a
-            time fall outside it (:class:`~pbdkit.prob.GMM`'s ``loo_residuals``; ``docs/math.md``,
-            "Calibration"): True (default) keeps one space's constraint from winning the fusion
-            where its demonstrations disagreed (postures that differ at a grasp); False keeps
-            the covariances EM fitted (the paper's).
+            time fall further outside it than outside the best-described object's space, and
+            the objects' spaces alike where they fall further outside all of those than outside
+            the joints' (:class:`~pbdkit.prob.GMM`'s ``loo_residuals``; ``docs/math.md``,
+            "Calibration"): True (default) keeps the joints' constraint from winning the fusion
+            where the demonstrated postures disagreed (postures that differ at a grasp), and
+            from losing it where the objects' positions disagreed more (the basin's pour);
+            False keeps the covariances EM fitted (the paper's).
 
         Returns
         -------
