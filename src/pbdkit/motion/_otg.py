@@ -400,12 +400,9 @@ def join(
     for d in durations:
         p1, v1, a1 = target.at(t + d)
         rows = np.array([p0, v0, a0, p1, v1, a1], dtype=np.float64)
-        try:
-            traj = _ruckig_plan(rows, d, 0, limits.velocity, limits.acceleration, limits.jerk)
-        except RuntimeError:
+        traj = _lasting(rows, d, limits)
+        if traj is None:
             continue
-        if abs(float(traj.duration) - d) > 1e-9 * max(1.0, d):
-            continue  # it cannot arrive then (too soon, or a blocked duration)
         rows, traj = _onto_target(rows, traj, d, limits)
         if bounds is not None and any(
             e.min < bounds[0][k] - BOUNDS_TOL or e.max > bounds[1][k] + BOUNDS_TOL
@@ -416,6 +413,17 @@ def join(
         motion.append(traj, (rows, d, 0))
         return motion
     return None
+
+
+def _lasting(rows: Float, d: float, limits: MotionLimits) -> Any:
+    """Ruckig's segment from ``rows`` (its input: current and target position, velocity,
+    acceleration, (6, n)) lasting exactly ``d``, or None where it cannot arrive then (too
+    soon, or a blocked duration)."""
+    try:
+        traj = _ruckig_plan(rows, d, 0, limits.velocity, limits.acceleration, limits.jerk)
+    except RuntimeError:
+        return None
+    return traj if abs(float(traj.duration) - d) <= 1e-9 * max(1.0, d) else None
 
 
 def _onto_target(rows: Float, traj: Any, d: float, limits: MotionLimits) -> tuple[Float, Any]:
@@ -431,11 +439,8 @@ def _onto_target(rows: Float, traj: Any, d: float, limits: MotionLimits) -> tupl
         return rows, traj
     again = rows.copy()
     again[3] = rows[3] + err
-    try:
-        better = _ruckig_plan(again, d, 0, limits.velocity, limits.acceleration, limits.jerk)
-    except RuntimeError:
-        return rows, traj
-    if abs(float(better.duration) - d) > 1e-9 * max(1.0, d):
+    better = _lasting(again, d, limits)
+    if better is None:
         return rows, traj
     left = rows[3] - np.asarray(better.at_time(d)[0], dtype=np.float64)
     if float(np.abs(left).max()) >= float(np.abs(err).max()):
